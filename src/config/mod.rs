@@ -1,0 +1,340 @@
+//! The tracker's tunables (`firmware_config/tracker.toml`).
+//!
+//! In: TOML whose every key is optional; an absent key takes the papers' value. Out: a validated
+//! [`TrackerConfig`]. Unknown keys and out-of-range values are errors naming the file and key, so
+//! a typo never silently runs the tracker on a default.
+//!
+//! The defaults here and the shipped `tracker.toml` are the same numbers (a test checks it); the
+//! comments in the TOML file cite the paper section each value comes from.
+
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct EdgeConfig {
+    pub hue_strip_width_px: u32,
+    pub max_edges_per_sensor: u32,
+    pub min_edge_length_deg: f64,
+    pub min_hue_saturation: f64,
+    pub min_hue_value: f64,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct InitialisationConfig {
+    pub search_diameter_m: f64,
+    pub best_edges_per_segment: u32,
+    pub max_samples: u32,
+    pub time_budget_ms: f64,
+    pub simplex_refinement: bool,
+    pub confirm_frames: u32,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MaintenanceConfig {
+    pub angular_gate_deg: f64,
+    pub hue_gate: f64,
+    pub accept_after_frames: u32,
+    pub sample_size: u32,
+    pub success_probability: f64,
+    pub outlier_percent: f64,
+    pub max_samples: u32,
+    pub time_budget_ms: f64,
+    pub constant_velocity_prior: bool,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct VisibilityConfig {
+    pub node_spacing_m: f64,
+    pub min_visible_pixels: u32,
+    pub cube_map_resolution: u32,
+    pub node_heights_m: Vec<f64>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SolverMethod {
+    RThenT,
+    RAndT,
+    Lms,
+    Xi,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LineError {
+    E1,
+    E2,
+    E3,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SolverConfig {
+    pub method: SolverMethod,
+    pub error: LineError,
+    pub max_iterations: u32,
+    pub convergence_rad: f64,
+    pub initial_rotation_samples: u32,
+    pub lms_subset_size: u32,
+    pub lms_success_probability: f64,
+    pub lms_outlier_fraction: f64,
+    pub lms_outlier_threshold: f64,
+    pub degenerate_subset_det: f64,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct NoiseConfig {
+    pub edge_normal_sigma_deg: f64,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MotionConfig {
+    pub upright: bool,
+    pub upright_height_m: f64,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct BudgetConfig {
+    pub frame_ms: f64,
+    pub edges_ms: f64,
+    pub frame_sync_tolerance_ms: f64,
+}
+
+/// Every tunable of the tracker, grouped by the stage that reads it.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TrackerConfig {
+    pub edges: EdgeConfig,
+    pub initialisation: InitialisationConfig,
+    pub maintenance: MaintenanceConfig,
+    pub visibility: VisibilityConfig,
+    pub solver: SolverConfig,
+    pub noise: NoiseConfig,
+    pub motion: MotionConfig,
+    pub budgets: BudgetConfig,
+}
+
+impl Default for EdgeConfig {
+    fn default() -> Self {
+        Self {
+            hue_strip_width_px: 5, // Koch–Teller §4.2.1
+            max_edges_per_sensor: 256,
+            min_edge_length_deg: 2.0,
+            min_hue_saturation: 0.15,
+            min_hue_value: 0.10,
+        }
+    }
+}
+
+impl Default for InitialisationConfig {
+    fn default() -> Self {
+        Self {
+            search_diameter_m: 3.0,    // Koch–Teller §5.3
+            best_edges_per_segment: 3, // Koch–Teller §4.1.2, k = 3
+            max_samples: 5000,
+            time_budget_ms: 1000.0,
+            simplex_refinement: true, // Koch–Teller §4.1.3
+            confirm_frames: 3,
+        }
+    }
+}
+
+impl Default for MaintenanceConfig {
+    fn default() -> Self {
+        Self {
+            angular_gate_deg: 10.0,    // Koch–Teller §4.2.1
+            hue_gate: 0.03,            // Koch–Teller §4.2.1
+            accept_after_frames: 4,    // Koch–Teller §4.2.4, k = 4
+            sample_size: 10,           // Koch–Teller §4.2.4, λ
+            success_probability: 0.95, // Koch–Teller eq. 2
+            outlier_percent: 30.0,     // Koch–Teller Table 1, b
+            max_samples: 1000,
+            time_budget_ms: 15.0,
+            constant_velocity_prior: true,
+        }
+    }
+}
+
+impl Default for VisibilityConfig {
+    fn default() -> Self {
+        Self {
+            node_spacing_m: 1.0,   // Koch–Teller §4.1.1
+            min_visible_pixels: 2, // Koch–Teller §4.3
+            cube_map_resolution: 256,
+            node_heights_m: vec![1.0, 1.5, 2.0],
+        }
+    }
+}
+
+impl Default for SolverConfig {
+    fn default() -> Self {
+        Self {
+            method: SolverMethod::RAndT, // Kumar–Hanson §6: R_and_T beats R_then_T
+            error: LineError::E1,        // Kumar–Hanson eq. 10
+            max_iterations: 50,          // Kumar–Hanson §3.1 step 4
+            convergence_rad: 1e-10,
+            initial_rotation_samples: 24,  // Kumar–Hanson §3.2 (Horn: 12, 24 or 60)
+            lms_subset_size: 3,            // Kumar–Hanson §4
+            lms_success_probability: 0.99, // Kumar–Hanson §4 (Rousseeuw)
+            lms_outlier_fraction: 0.3,     // Kumar–Hanson §4 (Rousseeuw)
+            lms_outlier_threshold: 2.5,    // Rousseeuw & Leroy: |r| > 2.5 σ̂
+            degenerate_subset_det: 0.05,   // Kumar–Hanson §4
+        }
+    }
+}
+
+impl Default for NoiseConfig {
+    fn default() -> Self {
+        Self {
+            edge_normal_sigma_deg: 0.5,
+        } // Koch–Teller §5.1
+    }
+}
+
+impl Default for MotionConfig {
+    fn default() -> Self {
+        Self {
+            upright: false,
+            upright_height_m: 1.2,
+        } // Koch–Teller §5.4
+    }
+}
+
+impl Default for BudgetConfig {
+    fn default() -> Self {
+        Self {
+            frame_ms: 33.0,
+            edges_ms: 10.0,
+            frame_sync_tolerance_ms: 5.0,
+        }
+    }
+}
+
+/// A tracker config that cannot be used: one line naming the file and the key.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{file}: {message}")]
+pub struct ConfigError {
+    pub file: String,
+    pub message: String,
+}
+
+impl TrackerConfig {
+    pub fn load(path: &Path) -> Result<TrackerConfig, ConfigError> {
+        let file = path.display().to_string();
+        let text = std::fs::read_to_string(path).map_err(|e| ConfigError {
+            file: file.clone(),
+            message: format!("cannot read tracker config: {e}"),
+        })?;
+        TrackerConfig::from_toml_str(&text, &file)
+    }
+
+    pub fn from_toml_str(text: &str, file: &str) -> Result<TrackerConfig, ConfigError> {
+        let config: TrackerConfig = toml::from_str(text).map_err(|e| ConfigError {
+            file: file.to_string(),
+            message: crate::rig::one_line(&e.to_string()),
+        })?;
+        config.validate().map_err(|message| ConfigError {
+            file: file.to_string(),
+            message,
+        })?;
+        Ok(config)
+    }
+
+    /// Range checks that serde's types cannot express; the message names the key.
+    pub fn validate(&self) -> Result<(), String> {
+        fn positive(key: &str, v: f64) -> Result<(), String> {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(format!("key '{key}': must be a positive number, found {v}"))
+            }
+        }
+        fn open_unit(key: &str, v: f64) -> Result<(), String> {
+            if v > 0.0 && v < 1.0 {
+                Ok(())
+            } else {
+                Err(format!("key '{key}': must lie strictly between 0 and 1, found {v}"))
+            }
+        }
+        fn at_least(key: &str, v: u32, min: u32) -> Result<(), String> {
+            if v >= min {
+                Ok(())
+            } else {
+                Err(format!("key '{key}': must be at least {min}, found {v}"))
+            }
+        }
+        let (e, i, m, v, s) = (
+            &self.edges,
+            &self.initialisation,
+            &self.maintenance,
+            &self.visibility,
+            &self.solver,
+        );
+        at_least("edges.hue_strip_width_px", e.hue_strip_width_px, 1)?;
+        at_least("edges.max_edges_per_sensor", e.max_edges_per_sensor, 3)?;
+        positive("edges.min_edge_length_deg", e.min_edge_length_deg)?;
+        for (key, x) in [
+            ("edges.min_hue_saturation", e.min_hue_saturation),
+            ("edges.min_hue_value", e.min_hue_value),
+        ] {
+            if !(0.0..1.0).contains(&x) {
+                return Err(format!("key '{key}': must lie in [0, 1), found {x}"));
+            }
+        }
+        positive("initialisation.search_diameter_m", i.search_diameter_m)?;
+        at_least("initialisation.best_edges_per_segment", i.best_edges_per_segment, 1)?;
+        at_least("initialisation.max_samples", i.max_samples, 1)?;
+        positive("initialisation.time_budget_ms", i.time_budget_ms)?;
+        at_least("initialisation.confirm_frames", i.confirm_frames, 1)?;
+        positive("maintenance.angular_gate_deg", m.angular_gate_deg)?;
+        if !(m.hue_gate > 0.0 && m.hue_gate <= 0.5) {
+            return Err(format!(
+                "key 'maintenance.hue_gate': must lie in (0, 0.5] (hue wraps at 1), found {}",
+                m.hue_gate
+            ));
+        }
+        at_least("maintenance.accept_after_frames", m.accept_after_frames, 1)?;
+        at_least("maintenance.sample_size", m.sample_size, 3)?;
+        open_unit("maintenance.success_probability", m.success_probability)?;
+        if !(0.0..100.0).contains(&m.outlier_percent) {
+            return Err(format!(
+                "key 'maintenance.outlier_percent': must lie in [0, 100), found {}",
+                m.outlier_percent
+            ));
+        }
+        at_least("maintenance.max_samples", m.max_samples, 1)?;
+        positive("maintenance.time_budget_ms", m.time_budget_ms)?;
+        positive("visibility.node_spacing_m", v.node_spacing_m)?;
+        at_least("visibility.min_visible_pixels", v.min_visible_pixels, 1)?;
+        at_least("visibility.cube_map_resolution", v.cube_map_resolution, 8)?;
+        if v.node_heights_m.is_empty() || v.node_heights_m.iter().any(|h| !h.is_finite()) {
+            return Err("key 'visibility.node_heights_m': must be a non-empty list of finite heights".into());
+        }
+        at_least("solver.max_iterations", s.max_iterations, 1)?;
+        positive("solver.convergence_rad", s.convergence_rad)?;
+        if ![12, 24, 60].contains(&s.initial_rotation_samples) {
+            return Err(format!(
+                "key 'solver.initial_rotation_samples': must be 12, 24 or 60 (Horn's rotation groups), found {}",
+                s.initial_rotation_samples
+            ));
+        }
+        at_least("solver.lms_subset_size", s.lms_subset_size, 3)?;
+        open_unit("solver.lms_success_probability", s.lms_success_probability)?;
+        open_unit("solver.lms_outlier_fraction", s.lms_outlier_fraction)?;
+        positive("solver.lms_outlier_threshold", s.lms_outlier_threshold)?;
+        positive("solver.degenerate_subset_det", s.degenerate_subset_det)?;
+        positive("noise.edge_normal_sigma_deg", self.noise.edge_normal_sigma_deg)?;
+        positive("motion.upright_height_m", self.motion.upright_height_m)?;
+        positive("budgets.frame_ms", self.budgets.frame_ms)?;
+        positive("budgets.edges_ms", self.budgets.edges_ms)?;
+        positive("budgets.frame_sync_tolerance_ms", self.budgets.frame_sync_tolerance_ms)?;
+        Ok(())
+    }
+}

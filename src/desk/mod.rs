@@ -1,0 +1,5 @@
+//! Offline (desk) work: building models from floor plans, and the other inputs and checks prepared
+//! on a workstation, never on the device path. Compiled only with the `desk` feature (on by
+//! default); the device build (`--no-default-features`) leaves it and its dependencies out.
+
+pub mod floorplan;

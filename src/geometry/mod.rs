@@ -1,0 +1,71 @@
+//! The maths everything else stands on: poses, quaternions in our file order, lenses.
+//!
+//! In: numbers. Out: nalgebra types. This module imports nothing of capture, runtime, publishing
+//! or I/O (DESIGN.md's dependency rule), so the solvers and tests can use it anywhere.
+
+pub mod lens;
+
+pub use lens::{Kb4, Lens, LensError, Pinhole};
+use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
+
+/// A rigid transform `T_a_b` taking coordinates in frame b to frame a: `p_a = R p_b + t`.
+/// The tracker's output is `Pose` = `T_world_rig`; a sensor's mounting is `T_rig_sensor`.
+pub type Pose = Isometry3<f64>;
+
+/// How far from 1 a quaternion read from a file may be before it is an error rather than
+/// rounding in the file's decimal digits.
+pub const UNIT_QUATERNION_TOLERANCE: f64 = 1e-6;
+
+/// Builds a rotation from `[w, x, y, z]`, refusing non-finite values and a norm further than
+/// [`UNIT_QUATERNION_TOLERANCE`] from 1 (then renormalising the rest away).
+pub fn rotation_from_wxyz(q: [f64; 4]) -> Result<UnitQuaternion<f64>, String> {
+    if q.iter().any(|c| !c.is_finite()) {
+        return Err(format!("quaternion {q:?} has a non-finite component"));
+    }
+    let quat = Quaternion::new(q[0], q[1], q[2], q[3]);
+    let norm = quat.norm();
+    if (norm - 1.0).abs() > UNIT_QUATERNION_TOLERANCE {
+        return Err(format!("quaternion {q:?} is not unit (norm {norm:.9})"));
+    }
+    Ok(UnitQuaternion::from_quaternion(quat))
+}
+
+/// `[w, x, y, z]` of a rotation, with w ≥ 0 so that each rotation has one spelling.
+pub fn rotation_to_wxyz(r: &UnitQuaternion<f64>) -> [f64; 4] {
+    let q = r.quaternion();
+    let s = if q.w < 0.0 { -1.0 } else { 1.0 };
+    [s * q.w, s * q.i, s * q.j, s * q.k]
+}
+
+/// A pose from a translation and a `[w, x, y, z]` rotation.
+pub fn pose_from_parts(t: [f64; 3], q_wxyz: [f64; 4]) -> Result<Pose, String> {
+    if t.iter().any(|c| !c.is_finite()) {
+        return Err(format!("translation {t:?} has a non-finite component"));
+    }
+    Ok(Isometry3::from_parts(
+        Translation3::from(Vector3::from(t)),
+        rotation_from_wxyz(q_wxyz)?,
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn quaternion_round_trip_and_validation() {
+        let r = UnitQuaternion::from_euler_angles(0.1, -0.7, 2.9);
+        let back = rotation_from_wxyz(rotation_to_wxyz(&r)).unwrap();
+        assert!(back.angle_to(&r) < 1e-14);
+        assert!(rotation_to_wxyz(&r)[0] >= 0.0);
+        assert!(rotation_from_wxyz([1.0, 0.0, 0.0, 0.1])
+            .unwrap_err()
+            .contains("not unit"));
+        assert!(rotation_from_wxyz([f64::NAN, 0.0, 0.0, 0.0])
+            .unwrap_err()
+            .contains("non-finite"));
+        let p = pose_from_parts([1.0, 2.0, 3.0], [0.0, 0.0, 0.0, 1.0]).unwrap();
+        let x = p * nalgebra::Point3::new(1.0, 0.0, 0.0);
+        assert!((x - nalgebra::Point3::new(0.0, 2.0, 3.0)).norm() < 1e-15);
+    }
+}

@@ -1,0 +1,83 @@
+//! tracker.toml: the shipped file carries exactly the papers' defaults, and mistakes are refused
+//! with the key named.
+
+use omnitrack::config::{SolverMethod, TrackerConfig};
+use std::path::Path;
+
+#[test]
+fn shipped_tracker_toml_is_the_defaults_and_holds_the_papers_values() {
+    let shipped = TrackerConfig::load(Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/firmware_config/tracker.toml"
+    )))
+    .unwrap();
+    let defaults = TrackerConfig::default();
+    assert_eq!(shipped, defaults);
+    assert_eq!(TrackerConfig::from_toml_str("", "empty.toml").unwrap(), defaults);
+    // Koch–Teller §4.2.1, §4.2.4, §4.1.2, §4.1.1, §4.3, §5.1, eq. 2.
+    assert_eq!(shipped.maintenance.angular_gate_deg, 10.0);
+    assert_eq!(shipped.maintenance.hue_gate, 0.03);
+    assert_eq!(shipped.maintenance.accept_after_frames, 4);
+    assert_eq!(shipped.maintenance.sample_size, 10);
+    assert_eq!(shipped.maintenance.success_probability, 0.95);
+    assert_eq!(shipped.edges.hue_strip_width_px, 5);
+    assert_eq!(shipped.initialisation.best_edges_per_segment, 3);
+    assert_eq!(shipped.visibility.node_spacing_m, 1.0);
+    assert_eq!(shipped.visibility.min_visible_pixels, 2);
+    assert_eq!(shipped.noise.edge_normal_sigma_deg, 0.5);
+    assert_eq!(shipped.solver.method, SolverMethod::RAndT);
+}
+
+#[test]
+fn every_key_in_the_shipped_file_cites_its_source() {
+    let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/firmware_config/tracker.toml")).unwrap();
+    for line in text
+        .lines()
+        .filter(|l| l.contains('=') && !l.trim_start().starts_with('#'))
+    {
+        let comment = line.split_once('#').map(|(_, c)| c).unwrap_or("");
+        assert!(
+            ["KT", "KH", "ours", "DESIGN"].iter().any(|s| comment.contains(s)),
+            "no source for: {line}"
+        );
+    }
+}
+
+#[test]
+fn bad_values_name_the_key() {
+    let cases = [
+        ("[maintenance]\nhue_gat = 0.03\n", "unknown field `hue_gat`"),
+        (
+            "[maintenance]\nhue_gate = 0.9\n",
+            "key 'maintenance.hue_gate': must lie in (0, 0.5]",
+        ),
+        (
+            "[maintenance]\nsuccess_probability = 1.0\n",
+            "key 'maintenance.success_probability'",
+        ),
+        (
+            "[maintenance]\nsample_size = 2\n",
+            "key 'maintenance.sample_size': must be at least 3",
+        ),
+        (
+            "[solver]\ninitial_rotation_samples = 13\n",
+            "key 'solver.initial_rotation_samples': must be 12, 24 or 60",
+        ),
+        ("[solver]\nmethod = \"newton\"\n", "unknown variant `newton`"),
+        ("[visibility]\nnode_spacing_m = -1\n", "key 'visibility.node_spacing_m'"),
+        ("[visibility]\nnode_spacing_m = \"one\"\n", "invalid type"),
+        (
+            "[budgets]\nframe_ms = nan\n",
+            "key 'budgets.frame_ms': must be a positive number",
+        ),
+        ("[typo]\n", "unknown field `typo`"),
+    ];
+    for (text, expected) in cases {
+        let e = TrackerConfig::from_toml_str(text, "tracker.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("tracker.toml: "), "{e}");
+        assert!(e.contains(expected), "{e:?} should contain {expected:?}");
+        assert!(!e.contains('\n'), "{e:?}");
+    }
+}
