@@ -4,6 +4,7 @@
 //! visibility) on the line pose solvers of Kumar & Hanson 1989. Module per stage; the maths
 //! (`geometry`) depends on nothing else here.
 
+pub mod capture;
 pub mod config;
 pub mod geometry;
 pub mod model;

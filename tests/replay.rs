@@ -1,0 +1,654 @@
+//! The mock camera: a recording on disk replays frame by frame into preallocated buffers, in frame
+//! order, with its timestamps and pixels intact; every fault of one image or one index row is
+//! counted and survived; a recording that cannot be opened is a one-line error naming the file;
+//! real-time pacing keeps the recorded spacing; and the steady state's allocations are counted.
+
+use image::{GrayAlphaImage, GrayImage, ImageBuffer, Rgb, RgbImage, RgbaImage};
+use omnitrack::capture::{FrameSet, FrameSource, ImageFault, Pacing, ReplaySource, SourceError};
+use omnitrack::rig::Rig;
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+use std::fmt::Write as _;
+use std::path::Path;
+use std::time::Instant;
+use tempfile::TempDir;
+
+// ---------------------------------------------------------------------------------------------
+// Allocation counting: every allocation on a thread whose COUNTING flag is set is counted.
+
+struct CountingAlloc;
+
+thread_local! {
+    static COUNTING: Cell<bool> = const { Cell::new(false) };
+    static ALLOCATIONS: Cell<u64> = const { Cell::new(0) };
+}
+
+fn note_allocation() {
+    let _ = COUNTING.try_with(|on| {
+        if on.get() {
+            let _ = ALLOCATIONS.try_with(|n| n.set(n.get() + 1));
+        }
+    });
+}
+
+unsafe impl GlobalAlloc for CountingAlloc {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        note_allocation();
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
+        note_allocation();
+        unsafe { System.alloc_zeroed(layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        note_allocation();
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: CountingAlloc = CountingAlloc;
+
+/// Allocations made on this thread while running `f`.
+fn count_allocations<T>(f: impl FnOnce() -> T) -> (T, u64) {
+    ALLOCATIONS.with(|n| n.set(0));
+    COUNTING.with(|c| c.set(true));
+    let out = f();
+    COUNTING.with(|c| c.set(false));
+    (out, ALLOCATIONS.with(|n| n.get()))
+}
+
+// ---------------------------------------------------------------------------------------------
+// Recordings.
+
+const T0_NS: u64 = 1_700_000_000_000_000_000;
+const FRAME_SPACING_NS: u64 = 33_000_000;
+
+/// A two-sensor pinhole rig of the given image sizes.
+fn pinhole_rig_toml(sizes: &[(u32, u32)]) -> String {
+    let mut s = String::from("name = \"test-rig\"\n");
+    for (id, (w, h)) in sizes.iter().enumerate() {
+        let _ = write!(
+            s,
+            "\n[[sensors]]\nid = {id}\nresolution = [{w}, {h}]\nmodel = \"pinhole\"\n\
+             intrinsics = [100.0, 100.0, {}, {}]\nrotation_wxyz = [1.0, 0.0, 0.0, 0.0]\n\
+             translation_m = [{}, 0.0, 0.0]\n",
+            (*w as f64 - 1.0) / 2.0,
+            (*h as f64 - 1.0) / 2.0,
+            0.01 * id as f64
+        );
+    }
+    s
+}
+
+/// The pixel every recording here stores at (u, v) of `sensor` in `frame`.
+fn expected_rgb(frame: u64, sensor: usize, u: u32, v: u32) -> [u8; 3] {
+    [
+        (u * 7 + frame as u32 * 13) as u8,
+        (v * 5 + sensor as u32 * 31) as u8,
+        ((u ^ v) + frame as u32 * 3 + sensor as u32) as u8,
+    ]
+}
+
+fn frame_image(frame: u64, sensor: usize, w: u32, h: u32) -> RgbImage {
+    RgbImage::from_fn(w, h, |u, v| Rgb(expected_rgb(frame, sensor, u, v)))
+}
+
+fn timestamp(frame: u64, sensor: usize) -> u64 {
+    // Sensors of one frame differ by a few ms, as on the real rig.
+    T0_NS + frame * FRAME_SPACING_NS + sensor as u64 * 1_500_000
+}
+
+fn image_path(frame: u64, sensor: usize) -> String {
+    format!("sensor{sensor}/{frame:06}.png")
+}
+
+/// A recording of `frames` frames for a rig of these sensor sizes, every image present; index rows
+/// written in reverse order (replay must sort them). Returns the directory.
+fn recording(sizes: &[(u32, u32)], frames: u64) -> TempDir {
+    recording_with_rig(&pinhole_rig_toml(sizes), sizes, frames)
+}
+
+fn recording_with_rig(rig_toml: &str, sizes: &[(u32, u32)], frames: u64) -> TempDir {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path();
+    std::fs::write(root.join("rig.toml"), rig_toml).unwrap();
+    let mut rows = Vec::new();
+    for (sensor, &(w, h)) in sizes.iter().enumerate() {
+        std::fs::create_dir_all(root.join(format!("sensor{sensor}"))).unwrap();
+        for frame in 0..frames {
+            frame_image(frame, sensor, w, h)
+                .save(root.join(image_path(frame, sensor)))
+                .unwrap();
+            rows.push(format!(
+                "{frame},{sensor},{},{}",
+                timestamp(frame, sensor),
+                image_path(frame, sensor)
+            ));
+        }
+    }
+    rows.reverse();
+    write_index(root, &rows);
+    dir
+}
+
+fn write_index(root: &Path, rows: &[String]) {
+    let mut text = String::from("frame,sensor,timestamp_ns,path\n");
+    for r in rows {
+        text.push_str(r);
+        text.push('\n');
+    }
+    std::fs::write(root.join("frames.csv"), text).unwrap();
+}
+
+fn append_index(root: &Path, extra: &str) {
+    let mut text = std::fs::read_to_string(root.join("frames.csv")).unwrap();
+    text.push_str(extra);
+    std::fs::write(root.join("frames.csv"), text).unwrap();
+}
+
+const SMALL: [(u32, u32); 2] = [(16, 12), (20, 10)];
+
+fn open(dir: &TempDir) -> (ReplaySource, FrameSet) {
+    let source = ReplaySource::open(dir.path(), Pacing::AsFastAsPossible).unwrap();
+    let frame = FrameSet::for_rig(source.rig());
+    (source, frame)
+}
+
+fn assert_pixels(frame: &FrameSet, sensor: usize) {
+    let img = frame.sensor(sensor);
+    for v in 0..img.height() {
+        for u in 0..img.width() {
+            assert_eq!(
+                img.rgb(u, v),
+                expected_rgb(frame.sequence, sensor, u, v),
+                "frame {} sensor {sensor} pixel ({u}, {v})",
+                frame.sequence
+            );
+        }
+    }
+}
+
+fn open_err(dir: &Path) -> String {
+    let err: SourceError = ReplaySource::open(dir, Pacing::AsFastAsPossible).unwrap_err();
+    let msg = err.to_string();
+    assert!(!msg.contains('\n'), "one line: {msg}");
+    msg
+}
+
+// ---------------------------------------------------------------------------------------------
+// The good path.
+
+#[test]
+fn delivers_every_frame_in_order_with_timestamps_and_pixels() {
+    let dir = recording(&SMALL, 4);
+    let (mut source, mut frame) = open(&dir);
+    assert_eq!(source.frame_count(), 4);
+    assert_eq!(source.rig().sensors.len(), 2);
+    assert_eq!(frame.sensors().len(), 2);
+    assert_eq!((frame.sensor(1).width(), frame.sensor(1).height()), (20, 10));
+    assert_eq!(frame.sensor(1).pixels().len(), 20 * 10 * 3);
+
+    for expected in 0..4u64 {
+        assert_eq!(source.remaining(), (4 - expected) as usize);
+        assert!(source.next_frame(&mut frame).unwrap());
+        assert_eq!(frame.sequence, expected);
+        assert_eq!(frame.valid_count(), 2);
+        for sensor in 0..2 {
+            let img = frame.sensor(sensor);
+            assert!(img.valid);
+            assert_eq!(img.fault, None);
+            assert_eq!(img.sensor(), sensor);
+            assert_eq!(img.timestamp_ns, timestamp(expected, sensor));
+            assert_pixels(&frame, sensor);
+        }
+        assert_eq!(frame.timestamp_ns(), Some(timestamp(expected, 0)));
+    }
+    assert!(!source.next_frame(&mut frame).unwrap(), "end of stream");
+    assert!(!source.next_frame(&mut frame).unwrap(), "stays ended");
+
+    let stats = source.stats();
+    assert_eq!(stats.frames_delivered, 4);
+    assert_eq!(stats.images_delivered(), 8);
+    assert!(stats.sensors.iter().all(|s| s.delivered == 4 && s.total_faults() == 0));
+    assert_eq!(stats.bad_rows.total(), 0);
+    assert_eq!(stats.warnings_printed + stats.warnings_suppressed, 0);
+    assert_eq!(source.ground_truth(), None);
+    assert_eq!(source.model_path(), None);
+    let line = stats.to_string();
+    assert!(
+        line.starts_with("4 frames, 8/8 images") && !line.contains('\n'),
+        "{line}"
+    );
+
+    source.rewind();
+    assert!(source.next_frame(&mut frame).unwrap());
+    assert_eq!(frame.sequence, 0);
+    assert_pixels(&frame, 1);
+}
+
+#[test]
+fn six_sensor_ladybug_rig_replays_through_a_trait_object() {
+    let rig_path = concat!(env!("CARGO_MANIFEST_DIR"), "/firmware_config/ladybug2.toml");
+    let rig_text = std::fs::read_to_string(rig_path).unwrap();
+    let rig = Rig::load(Path::new(rig_path)).unwrap();
+    let sizes: Vec<(u32, u32)> = rig.sensors.iter().map(|s| (s.width, s.height)).collect();
+    let dir = recording_with_rig(&rig_text, &sizes, 2);
+
+    let mut source: Box<dyn FrameSource> = Box::new(ReplaySource::open(dir.path(), Pacing::AsFastAsPossible).unwrap());
+    assert_eq!(source.rig(), &rig);
+    let mut frame = FrameSet::for_rig(source.rig());
+    let mut n = 0;
+    while source.next_frame(&mut frame).unwrap() {
+        assert_eq!(frame.valid_count(), 6);
+        assert_pixels(&frame, 5);
+        n += 1;
+    }
+    assert_eq!(n, 2);
+    assert_eq!(source.stats().images_delivered(), 12);
+}
+
+#[test]
+fn frame_numbers_with_gaps_keep_their_numbers() {
+    let dir = recording(&SMALL, 5);
+    // Drop frame 2 entirely from the index.
+    let rows: Vec<String> = (0..5u64)
+        .filter(|&f| f != 2)
+        .flat_map(|f| (0..2).map(move |s| format!("{f},{s},{},{}", timestamp(f, s), image_path(f, s))))
+        .collect();
+    write_index(dir.path(), &rows);
+    let (mut source, mut frame) = open(&dir);
+    let mut seen = Vec::new();
+    while source.next_frame(&mut frame).unwrap() {
+        assert_pixels(&frame, 0);
+        seen.push(frame.sequence);
+    }
+    assert_eq!(seen, [0, 1, 3, 4]);
+}
+
+#[test]
+fn ground_truth_and_model_are_found() {
+    let dir = recording(&SMALL, 3);
+    let mut tum = String::from("# timestamp tx ty tz qx qy qz qw\n");
+    for f in 0..3u64 {
+        let t = timestamp(f, 0);
+        let _ = writeln!(
+            tum,
+            "{}.{:09} {} 2.0 1.5 0 0 0 1",
+            t / 1_000_000_000,
+            t % 1_000_000_000,
+            f as f64 * 0.1
+        );
+    }
+    std::fs::write(dir.path().join("groundtruth.tum"), tum).unwrap();
+    std::fs::write(dir.path().join("model.obj"), "v 0 0 0\nv 1 0 0\nl 1 2\n").unwrap();
+
+    let (source, _) = open(&dir);
+    let gt = source.ground_truth().expect("ground truth loaded");
+    assert_eq!(gt.len(), 3);
+    for (f, s) in gt.iter().enumerate() {
+        assert_eq!(s.timestamp_ns, timestamp(f as u64, 0));
+        assert!((s.pose.translation.vector.x - f as f64 * 0.1).abs() < 1e-12);
+        assert_eq!(s.pose.translation.vector.y, 2.0);
+    }
+    assert_eq!(source.model_path(), Some(dir.path().join("model.obj").as_path()));
+}
+
+#[test]
+fn grey_and_rgba_pngs_become_rgb_and_16_bit_is_refused() {
+    let dir = recording(&SMALL, 3);
+    let (w, h) = SMALL[0];
+    let grey = |u: u32, v: u32| (u * 11 + v * 3) as u8;
+    GrayImage::from_fn(w, h, |u, v| image::Luma([grey(u, v)]))
+        .save(dir.path().join(image_path(0, 0)))
+        .unwrap();
+    GrayAlphaImage::from_fn(w, h, |u, v| image::LumaA([grey(u, v), 77]))
+        .save(dir.path().join(image_path(1, 0)))
+        .unwrap();
+    RgbaImage::from_fn(w, h, |u, v| {
+        let [r, g, b] = expected_rgb(2, 0, u, v);
+        image::Rgba([r, g, b, 128])
+    })
+    .save(dir.path().join(image_path(2, 0)))
+    .unwrap();
+    let (w1, h1) = SMALL[1];
+    ImageBuffer::<Rgb<u16>, Vec<u16>>::from_pixel(w1, h1, Rgb([1000, 2000, 3000]))
+        .save(dir.path().join(image_path(1, 1)))
+        .unwrap();
+
+    let (mut source, mut frame) = open(&dir);
+    for f in 0..3u64 {
+        assert!(source.next_frame(&mut frame).unwrap());
+        let img = frame.sensor(0);
+        assert!(img.valid, "frame {f}");
+        for v in 0..h {
+            for u in 0..w {
+                let want = if f < 2 {
+                    [grey(u, v); 3]
+                } else {
+                    expected_rgb(2, 0, u, v)
+                };
+                assert_eq!(img.rgb(u, v), want, "frame {f} ({u}, {v})");
+            }
+        }
+        if f == 1 {
+            assert!(!frame.sensor(1).valid);
+            assert_eq!(frame.sensor(1).fault, Some(ImageFault::WrongFormat));
+        } else {
+            assert_pixels(&frame, 1);
+        }
+    }
+    assert_eq!(source.stats().sensors[0].delivered, 3);
+    assert_eq!(source.stats().sensors[1].wrong_format, 1);
+}
+
+#[test]
+fn real_time_pacing_keeps_the_recorded_spacing() {
+    let dir = recording(&SMALL, 3);
+    let rows: Vec<String> = (0..3u64)
+        .flat_map(|f| {
+            (0..2).map(move |s| format!("{f},{s},{},{}", T0_NS + f * 20_000_000 + s as u64, image_path(f, s)))
+        })
+        .collect();
+    write_index(dir.path(), &rows);
+    let span_ms = 40.0;
+
+    let mut source = ReplaySource::open(dir.path(), Pacing::RealTime).unwrap();
+    let mut frame = FrameSet::for_rig(source.rig());
+    let start = Instant::now();
+    while source.next_frame(&mut frame).unwrap() {}
+    let elapsed_ms = start.elapsed().as_secs_f64() * 1e3;
+    assert_eq!(source.stats().frames_delivered, 3);
+    assert!(
+        elapsed_ms >= span_ms - 2.0,
+        "3 frames 20 ms apart took {elapsed_ms:.1} ms"
+    );
+
+    // As fast as possible does not wait: frames a minute apart come at once.
+    let rows: Vec<String> = (0..3u64)
+        .flat_map(|f| (0..2).map(move |s| format!("{f},{s},{},{}", T0_NS + f * 60_000_000_000, image_path(f, s))))
+        .collect();
+    write_index(dir.path(), &rows);
+    let (mut source, mut frame) = open(&dir);
+    let start = Instant::now();
+    while source.next_frame(&mut frame).unwrap() {}
+    assert!(start.elapsed().as_secs_f64() < 30.0, "no sleeping");
+}
+
+// ---------------------------------------------------------------------------------------------
+// Faults of one image: counted, warned, survived.
+
+#[test]
+fn missing_image_is_counted_and_skipped() {
+    let dir = recording(&SMALL, 3);
+    std::fs::remove_file(dir.path().join(image_path(1, 1))).unwrap();
+    let (mut source, mut frame) = open(&dir);
+    for f in 0..3u64 {
+        assert!(source.next_frame(&mut frame).unwrap());
+        assert_pixels(&frame, 0);
+        let img = frame.sensor(1);
+        if f == 1 {
+            assert!(!img.valid);
+            assert_eq!(img.fault, Some(ImageFault::Missing));
+            assert_eq!(img.timestamp_ns, timestamp(1, 1), "the recorded time is still known");
+        } else {
+            assert!(img.valid);
+            assert_pixels(&frame, 1);
+        }
+    }
+    let stats = source.stats();
+    assert_eq!(stats.frames_delivered, 3);
+    assert_eq!((stats.sensors[1].missing, stats.sensors[1].delivered), (1, 2));
+    assert_eq!(stats.faults(ImageFault::Missing), 1);
+    assert_eq!(stats.warnings_printed, 1);
+}
+
+#[test]
+fn corrupt_pngs_are_counted_and_skipped() {
+    let dir = recording(&SMALL, 3);
+    std::fs::write(
+        dir.path().join(image_path(0, 0)),
+        b"this is not a PNG at all, just garbage bytes",
+    )
+    .unwrap();
+    // A truncated PNG: a valid header, half the data.
+    let good = std::fs::read(dir.path().join(image_path(2, 1))).unwrap();
+    std::fs::write(dir.path().join(image_path(2, 1)), &good[..good.len() / 2]).unwrap();
+    // An empty file.
+    std::fs::write(dir.path().join(image_path(1, 0)), b"").unwrap();
+
+    let (mut source, mut frame) = open(&dir);
+    let mut faults = Vec::new();
+    while source.next_frame(&mut frame).unwrap() {
+        for img in frame.sensors() {
+            if let Some(fault) = img.fault {
+                faults.push((frame.sequence, img.sensor(), fault));
+            } else {
+                assert_pixels(&frame, img.sensor());
+            }
+        }
+    }
+    assert_eq!(
+        faults,
+        [
+            (0, 0, ImageFault::Corrupt),
+            (1, 0, ImageFault::Corrupt),
+            (2, 1, ImageFault::Corrupt)
+        ]
+    );
+    assert_eq!(source.stats().faults(ImageFault::Corrupt), 3);
+    assert_eq!(source.stats().frames_delivered, 3);
+    assert_eq!(source.stats().images_delivered(), 3);
+}
+
+#[test]
+fn wrong_size_png_is_counted_and_skipped() {
+    let dir = recording(&SMALL, 2);
+    frame_image(1, 0, 17, 12)
+        .save(dir.path().join(image_path(1, 0)))
+        .unwrap();
+    let (mut source, mut frame) = open(&dir);
+    assert!(source.next_frame(&mut frame).unwrap());
+    assert_eq!(frame.valid_count(), 2);
+    assert!(source.next_frame(&mut frame).unwrap());
+    assert_eq!(frame.sensor(0).fault, Some(ImageFault::WrongSize));
+    assert!(frame.sensor(1).valid);
+    assert!(!source.next_frame(&mut frame).unwrap());
+    assert_eq!(source.stats().sensors[0].wrong_size, 1);
+}
+
+#[test]
+fn missing_sensor_directory_invalidates_that_sensor_every_frame() {
+    let dir = recording(&SMALL, 3);
+    std::fs::remove_dir_all(dir.path().join("sensor1")).unwrap();
+    let (mut source, mut frame) = open(&dir);
+    let mut n = 0;
+    while source.next_frame(&mut frame).unwrap() {
+        assert_pixels(&frame, 0);
+        assert_eq!(frame.sensor(1).fault, Some(ImageFault::Missing));
+        n += 1;
+    }
+    assert_eq!(n, 3);
+    let stats = source.stats();
+    assert_eq!((stats.sensors[0].delivered, stats.sensors[1].missing), (3, 3));
+    // One warning for the directory at open, plus per-image warnings.
+    assert!(stats.warnings_printed >= 2);
+}
+
+#[test]
+fn a_sensor_without_a_row_is_dropped_not_an_error() {
+    let dir = recording(&SMALL, 3);
+    let rows: Vec<String> = (0..3u64)
+        .flat_map(|f| (0..2).map(move |s| (f, s)))
+        .filter(|&(f, s)| !(f == 1 && s == 0))
+        .map(|(f, s)| format!("{f},{s},{},{}", timestamp(f, s), image_path(f, s)))
+        .collect();
+    write_index(dir.path(), &rows);
+    let (mut source, mut frame) = open(&dir);
+    assert!(source.next_frame(&mut frame).unwrap());
+    assert!(source.next_frame(&mut frame).unwrap());
+    assert_eq!(frame.sequence, 1);
+    let img = frame.sensor(0);
+    assert!(!img.valid);
+    assert_eq!((img.fault, img.timestamp_ns), (Some(ImageFault::Dropped), 0));
+    assert_pixels(&frame, 1);
+    assert_eq!(frame.timestamp_ns(), Some(timestamp(1, 1)));
+    assert!(source.next_frame(&mut frame).unwrap());
+    assert_eq!(frame.valid_count(), 2, "a sensor recovers on the next frame");
+    assert_eq!(source.stats().sensors[0].dropped, 1);
+}
+
+#[test]
+fn repeated_faults_are_warned_a_few_times_then_only_counted() {
+    let dir = recording(&SMALL, 12);
+    for f in 0..12 {
+        std::fs::write(dir.path().join(image_path(f, 0)), b"garbage").unwrap();
+    }
+    let (mut source, mut frame) = open(&dir);
+    while source.next_frame(&mut frame).unwrap() {
+        assert_pixels(&frame, 1);
+    }
+    let stats = source.stats();
+    assert_eq!(stats.sensors[0].corrupt, 12);
+    assert!(
+        stats.warnings_printed >= 1 && stats.warnings_printed < 12,
+        "{}",
+        stats.warnings_printed
+    );
+    assert_eq!(stats.warnings_printed + stats.warnings_suppressed, 12);
+}
+
+#[test]
+fn a_frame_set_of_another_rig_is_refused() {
+    let dir = recording(&SMALL, 1);
+    let (mut source, _) = open(&dir);
+    let other = Rig::from_toml_str(&pinhole_rig_toml(&[(16, 12), (20, 11)]), "other.toml").unwrap();
+    let mut wrong = FrameSet::for_rig(&other);
+    let err = source.next_frame(&mut wrong).unwrap_err();
+    assert!(matches!(err, SourceError::FrameSetMismatch { .. }), "{err}");
+    assert!(err.to_string().contains("test-rig"));
+    let mut right = FrameSet::for_rig(source.rig());
+    assert!(source.next_frame(&mut right).unwrap(), "the source is still usable");
+}
+
+// ---------------------------------------------------------------------------------------------
+// The index: bad rows skipped and counted, unusable files refused.
+
+#[test]
+fn bad_index_rows_of_every_kind_are_skipped_and_counted() {
+    let dir = recording(&SMALL, 2);
+    append_index(
+        dir.path(),
+        "\n\
+         5,0,123\n\
+         5,0,123,sensor0/000000.png,extra\n\
+         x,0,123,sensor0/000000.png\n\
+         5,-1,123,sensor0/000000.png\n\
+         5,0,1.5,sensor0/000000.png\n\
+         5,7,123,sensor0/000000.png\n\
+         1,1,999,sensor0/000000.png\n\
+         5,0,123,\n",
+    );
+    let (mut source, mut frame) = open(&dir);
+    let bad = &source.stats().bad_rows;
+    assert_eq!(bad.field_count, 2);
+    assert_eq!(bad.not_a_number, 3);
+    assert_eq!(bad.unknown_sensor, 1);
+    assert_eq!(bad.duplicate, 1);
+    assert_eq!(bad.empty_path, 1);
+    assert_eq!(bad.total(), 8);
+    assert_eq!(source.frame_count(), 2, "no frame 5 was made from bad rows");
+    while source.next_frame(&mut frame).unwrap() {
+        assert_eq!(frame.valid_count(), 2);
+        assert_pixels(&frame, 0);
+        // The duplicate (1, 1) row came after the original and is the one dropped.
+        assert_pixels(&frame, 1);
+        assert_eq!(frame.sensor(1).timestamp_ns, timestamp(frame.sequence, 1));
+    }
+    assert_eq!(source.stats().frames_delivered, 2);
+}
+
+#[test]
+fn index_with_only_a_header_is_an_empty_stream() {
+    let dir = recording(&SMALL, 1);
+    write_index(dir.path(), &[]);
+    let (mut source, mut frame) = open(&dir);
+    assert_eq!(source.frame_count(), 0);
+    assert!(!source.next_frame(&mut frame).unwrap());
+}
+
+#[test]
+fn missing_or_malformed_files_are_one_line_errors_naming_the_file() {
+    let dir = recording(&SMALL, 1);
+    std::fs::remove_file(dir.path().join("frames.csv")).unwrap();
+    let msg = open_err(dir.path());
+    assert!(msg.contains("frames.csv") && msg.contains("cannot read"), "{msg}");
+
+    std::fs::write(
+        dir.path().join("frames.csv"),
+        "frame;sensor;timestamp_ns;path\n0;0;1;a.png\n",
+    )
+    .unwrap();
+    let msg = open_err(dir.path());
+    assert!(msg.contains("frames.csv:1") && msg.contains("header"), "{msg}");
+
+    std::fs::write(dir.path().join("frames.csv"), "").unwrap();
+    let msg = open_err(dir.path());
+    assert!(msg.contains("frames.csv:1"), "{msg}");
+
+    let dir = recording(&SMALL, 1);
+    std::fs::remove_file(dir.path().join("rig.toml")).unwrap();
+    let msg = open_err(dir.path());
+    assert!(msg.contains("rig.toml"), "{msg}");
+
+    let dir = recording(&SMALL, 1);
+    std::fs::write(dir.path().join("groundtruth.tum"), "0.0 1 2 3 0 0 0\n").unwrap();
+    let msg = open_err(dir.path());
+    assert!(msg.contains("groundtruth.tum:1"), "{msg}");
+
+    let missing = dir.path().join("no-such-recording");
+    let msg = open_err(&missing);
+    assert!(msg.contains("no-such-recording"), "{msg}");
+}
+
+// ---------------------------------------------------------------------------------------------
+// Allocations in the steady state.
+
+/// After the first frame, `next_frame` allocates nothing of its own; the `image` crate's PNG decoder
+/// still allocates its inflate state and row buffers for every image it opens (its API cannot reuse
+/// them). This pins that count: the same small number for every frame, proportional to the number
+/// of sensors, so that a regression (a per-frame `Vec`, a path built per frame) shows up here.
+#[test]
+fn steady_state_allocations_per_frame_are_constant_and_only_the_decoders() {
+    let rig_path = concat!(env!("CARGO_MANIFEST_DIR"), "/firmware_config/ladybug2.toml");
+    let rig_text = std::fs::read_to_string(rig_path).unwrap();
+    let rig = Rig::load(Path::new(rig_path)).unwrap();
+    let sizes: Vec<(u32, u32)> = rig.sensors.iter().map(|s| (s.width, s.height)).collect();
+    let dir = recording_with_rig(&rig_text, &sizes, 6);
+
+    let mut source = ReplaySource::open(dir.path(), Pacing::AsFastAsPossible).unwrap();
+    let mut frame = FrameSet::for_rig(source.rig());
+    assert!(source.next_frame(&mut frame).unwrap(), "warm-up frame");
+
+    let mut counts = Vec::new();
+    loop {
+        let (more, allocations) = count_allocations(|| source.next_frame(&mut frame).unwrap());
+        if !more {
+            assert_eq!(allocations, 0, "end of stream allocates nothing");
+            break;
+        }
+        assert_eq!(frame.valid_count(), 6);
+        counts.push(allocations);
+    }
+    eprintln!("allocations per six-sensor frame after warm-up: {counts:?}");
+    assert_eq!(counts.len(), 5);
+    assert!(counts.iter().all(|&c| c == counts[0]), "constant per frame: {counts:?}");
+    let per_image = counts[0] as f64 / 6.0;
+    assert!(
+        counts[0] % 6 == 0 && per_image <= 16.0,
+        "a few decoder allocations per image: {counts:?}"
+    );
+}
