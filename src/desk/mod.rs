@@ -3,3 +3,7 @@
 //! default); the device build (`--no-default-features`) leaves it and its dependencies out.
 
 pub mod floorplan;
+pub mod observations;
+pub mod recording;
+pub mod render;
+pub mod scenario;

@@ -4,9 +4,11 @@
 //! or I/O (DESIGN.md's dependency rule), so the solvers and tests can use it anywhere.
 
 pub mod lens;
+pub mod observation;
 
 pub use lens::{Kb4, Lens, LensError, Pinhole};
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
+pub use observation::{xi, Correspondence, EdgePlane};
 
 /// A rigid transform `T_a_b` taking coordinates in frame b to frame a: `p_a = R p_b + t`.
 /// The tracker's output is `Pose` = `T_world_rig`; a sensor's mounting is `T_rig_sensor`.

@@ -1,0 +1,199 @@
+//! What the synthetic images look like: the [`Appearance`] switches and the small deterministic
+//! hash, noise and colour helpers behind them.
+
+/// Every image effect of the renderer, each a level that is off at 0 so that a benchmark can
+/// sweep it. `Default` is a moderate, realistic setting; [`Appearance::plain`] turns every
+/// effect off (flat, distinct surface colours only).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Appearance {
+    /// Seeds every random choice (colours, texture, lights, clutter, people, noise).
+    pub seed: u64,
+    /// Saturation of the surface colours, 0 = grey levels only, 1 = default. Hues are spread
+    /// over surfaces by the golden ratio; brightness also differs per surface, so even at 0
+    /// neighbouring surfaces differ.
+    pub colour: f64,
+    /// Amplitude of the procedural surface texture (two octaves of value noise, ~35 cm and
+    /// ~9 cm), as a fraction of brightness. 0 = flat.
+    pub texture: f64,
+    /// Mix between flat colour (0) and the full light model (1): ambient, a headlamp term with
+    /// distance and incidence-angle falloff, and `lights` point lights.
+    pub shading: f64,
+    /// Point lights placed deterministically near the ceiling inside the model's bounds.
+    pub lights: u32,
+    /// Standard deviation of the additive sensor noise, in 8-bit grey levels. 0 = none.
+    pub noise: f64,
+    /// Brightness lost at the corner of the image (quadratic in the off-axis angle). 0 = none.
+    pub vignetting: f64,
+    /// Fraction of the frame interval the shutter is open; sub-frame poses are spread over the
+    /// end of the interval from the previous to the current pose. 0 = no motion blur.
+    pub motion_blur: f64,
+    /// Sub-frame renders averaged when `motion_blur > 0` (cost scales with it).
+    pub motion_blur_samples: u32,
+    /// Amplitude of the global lighting drift over time: brightness varies by about ±this,
+    /// white balance by about ±0.4× this per channel, as smooth functions of time. 0 = none.
+    pub lighting_drift: f64,
+    /// Clutter not in the model (furniture boxes on the floor, shelves against walls, posters on
+    /// walls); 1 = about one furniture box per 12 m² of floor, one shelf per 25 m², one poster
+    /// per 10 m². 0 = none.
+    pub clutter: f64,
+    /// Transient occluders: people (capsules) walking back and forth on straight paths;
+    /// 1 = about one person per 40 m² of floor. 0 = none.
+    pub people: f64,
+}
+
+impl Default for Appearance {
+    fn default() -> Self {
+        Appearance {
+            seed: 1,
+            colour: 1.0,
+            texture: 0.06,
+            shading: 1.0,
+            lights: 4,
+            noise: 2.0,
+            vignetting: 0.3,
+            motion_blur: 0.0,
+            motion_blur_samples: 4,
+            lighting_drift: 0.1,
+            clutter: 1.0,
+            people: 1.0,
+        }
+    }
+}
+
+impl Appearance {
+    /// Every effect off: distinct flat surface colours, nothing else.
+    pub fn plain() -> Self {
+        Appearance {
+            seed: 1,
+            colour: 1.0,
+            texture: 0.0,
+            shading: 0.0,
+            lights: 0,
+            noise: 0.0,
+            vignetting: 0.0,
+            motion_blur: 0.0,
+            motion_blur_samples: 1,
+            lighting_drift: 0.0,
+            clutter: 0.0,
+            people: 0.0,
+        }
+    }
+
+    /// Whether motion blur takes several sub-frame samples.
+    pub fn blur_samples(&self) -> u32 {
+        if self.motion_blur > 0.0 {
+            self.motion_blur_samples.max(1)
+        } else {
+            1
+        }
+    }
+
+    /// Global brightness and per-channel white-balance gain at time `t_s` (seconds).
+    pub fn drift_gain(&self, t_s: f64) -> [f32; 3] {
+        let a = self.lighting_drift;
+        if a == 0.0 {
+            return [1.0; 3];
+        }
+        let ph = |k: u64| (hash64(self.seed ^ 0xD1F7 ^ k) as f64 / u64::MAX as f64) * std::f64::consts::TAU;
+        let w = |period_s: f64| std::f64::consts::TAU / period_s;
+        let brightness = 1.0 + a * (0.7 * (w(17.0) * t_s + ph(0)).sin() + 0.3 * (w(6.1) * t_s + ph(1)).sin());
+        let mut g = [0.0f32; 3];
+        for (c, gc) in g.iter_mut().enumerate() {
+            let wb = 1.0 + 0.4 * a * (w(23.0 + 7.0 * c as f64) * t_s + ph(2 + c as u64)).sin();
+            *gc = (brightness * wb).max(0.0) as f32;
+        }
+        g
+    }
+}
+
+/// SplitMix64 finaliser: a good 64-bit mix.
+#[inline]
+pub fn hash64(mut x: u64) -> u64 {
+    x = x.wrapping_add(0x9E37_79B9_7F4A_7C15);
+    x = (x ^ (x >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    x = (x ^ (x >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    x ^ (x >> 31)
+}
+
+/// A tiny deterministic generator (SplitMix64 stream) for placement decisions.
+#[derive(Debug, Clone)]
+pub struct Rng(u64);
+
+impl Rng {
+    pub fn new(seed: u64) -> Rng {
+        Rng(hash64(seed))
+    }
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        hash64(self.0)
+    }
+    /// Uniform in [0, 1).
+    pub fn unit(&mut self) -> f64 {
+        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+    }
+    pub fn range(&mut self, lo: f64, hi: f64) -> f64 {
+        lo + (hi - lo) * self.unit()
+    }
+}
+
+#[inline]
+fn hash32(x: u32) -> u32 {
+    let mut x = x;
+    x ^= x >> 16;
+    x = x.wrapping_mul(0x7FEB_352D);
+    x ^= x >> 15;
+    x = x.wrapping_mul(0x846C_A68B);
+    x ^ (x >> 16)
+}
+
+#[inline]
+fn lattice(ix: i32, iy: i32, iz: i32, seed: u32) -> f32 {
+    let h = hash32(
+        (ix as u32).wrapping_mul(0x8DA6_B343)
+            ^ (iy as u32).wrapping_mul(0xD816_3841)
+            ^ (iz as u32).wrapping_mul(0xCB1A_B31F)
+            ^ seed,
+    );
+    (h >> 8) as f32 * (1.0 / (1u32 << 24) as f32)
+}
+
+/// Smooth 3D value noise in [0, 1].
+#[inline]
+pub fn value_noise(p: [f32; 3], seed: u32) -> f32 {
+    let f = [p[0].floor(), p[1].floor(), p[2].floor()];
+    let (ix, iy, iz) = (f[0] as i32, f[1] as i32, f[2] as i32);
+    let s = |x: f32| x * x * (3.0 - 2.0 * x);
+    let (u, v, w) = (s(p[0] - f[0]), s(p[1] - f[1]), s(p[2] - f[2]));
+    let lerp = |a: f32, b: f32, t: f32| a + (b - a) * t;
+    let c = |dx: i32, dy: i32, dz: i32| lattice(ix + dx, iy + dy, iz + dz, seed);
+    let x00 = lerp(c(0, 0, 0), c(1, 0, 0), u);
+    let x10 = lerp(c(0, 1, 0), c(1, 1, 0), u);
+    let x01 = lerp(c(0, 0, 1), c(1, 0, 1), u);
+    let x11 = lerp(c(0, 1, 1), c(1, 1, 1), u);
+    lerp(lerp(x00, x10, v), lerp(x01, x11, v), w)
+}
+
+/// Approximately standard-normal noise from a 64-bit hash (sum of four 16-bit uniforms).
+#[inline]
+pub fn gaussian_from_hash(h: u64) -> f32 {
+    let s = (h & 0xFFFF) + ((h >> 16) & 0xFFFF) + ((h >> 32) & 0xFFFF) + (h >> 48);
+    // Mean 2·65535, variance 4·65536²/12.
+    (s as f32 - 131_070.0) * (1.0 / 37_837.2)
+}
+
+/// HSV (all in [0, 1]) to linear RGB in [0, 1].
+pub fn hsv(h: f64, s: f64, v: f64) -> [f32; 3] {
+    let h = h.rem_euclid(1.0) * 6.0;
+    let i = h.floor();
+    let f = h - i;
+    let (p, q, t) = (v * (1.0 - s), v * (1.0 - s * f), v * (1.0 - s * (1.0 - f)));
+    let (r, g, b) = match i as u32 {
+        0 => (v, t, p),
+        1 => (q, v, p),
+        2 => (p, v, t),
+        3 => (p, q, v),
+        4 => (t, p, v),
+        _ => (v, p, q),
+    };
+    [r as f32, g as f32, b as f32]
+}
