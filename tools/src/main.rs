@@ -2,13 +2,22 @@
 //!
 //! `omnitrack-desk extrude PLAN.geojson --out MODEL.obj` extrudes a GeoJSON floor plan
 //! (docs/floorplan.md) into the OBJ building model the tracker loads, and reports how many
-//! faces, vertices and model segments the tracker will see in it. Every error is one line on
-//! stderr and exit code 2, so scripts can tell a bad input from a crash.
+//! faces, vertices and model segments the tracker will see in it.
+//!
+//! `omnitrack-desk render --rig R --model M.obj --trajectory T.tum --out DIR` renders a synthetic
+//! recording (INTERFACES.md layout) of the rig moving along the trajectory through the model.
+//!
+//! Every error is one line on stderr and exit code 2, so scripts can tell a bad input from a
+//! crash.
 
 use clap::error::ErrorKind;
 use clap::{Parser, Subcommand};
 use omnitrack::desk::floorplan;
-use omnitrack::Model;
+use omnitrack::desk::recording::{write_recording, RecordingOptions};
+use omnitrack::desk::render::Appearance;
+use omnitrack::desk::scenario::{Scenario, ScenarioName, UnknownScenario};
+use omnitrack::trajectory::load_tum;
+use omnitrack::{Model, Rig};
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -33,6 +42,90 @@ enum Command {
         #[arg(long, value_name = "MODEL.obj")]
         out: PathBuf,
     },
+    /// Render a recording of one of the paper's scenarios (lab, corridor, handheld): its model,
+    /// a seeded trajectory through it, and the images.
+    Scenario {
+        /// lab, corridor or handheld.
+        name: String,
+        /// Frames to render (at the scenario's frame rate).
+        #[arg(long, default_value_t = 50)]
+        frames: usize,
+        /// The recording directory to create.
+        #[arg(long, value_name = "DIR")]
+        out: PathBuf,
+        /// The rig (default: firmware_config/ladybug2.toml).
+        #[arg(long, value_name = "RIG.toml")]
+        rig: Option<PathBuf>,
+        #[command(flatten)]
+        look: Look,
+    },
+    /// Render a synthetic recording of a rig moving through a model along a trajectory.
+    Render {
+        #[arg(long, value_name = "RIG.toml")]
+        rig: PathBuf,
+        #[arg(long, value_name = "MODEL.obj")]
+        model: PathBuf,
+        /// T_world_rig per frame, TUM format; one recorded frame per line.
+        #[arg(long, value_name = "T.tum")]
+        trajectory: PathBuf,
+        /// The recording directory to create.
+        #[arg(long, value_name = "DIR")]
+        out: PathBuf,
+        #[command(flatten)]
+        look: Look,
+    },
+}
+
+/// Appearance switches: each a level, 0 = off (defaults are moderate and realistic).
+#[derive(clap::Args)]
+struct Look {
+    /// Seed of every random choice (colours, clutter, people, noise).
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Clutter not in the model (furniture, shelves, posters); 1 = default density.
+    #[arg(long)]
+    clutter: Option<f64>,
+    /// People walking through the view; 1 = default density.
+    #[arg(long)]
+    people: Option<f64>,
+    /// Sensor noise σ in grey levels.
+    #[arg(long)]
+    noise: Option<f64>,
+    /// Motion blur: fraction of the frame interval the shutter is open.
+    #[arg(long)]
+    motion_blur: Option<f64>,
+    /// Global lighting drift amplitude.
+    #[arg(long)]
+    lighting_drift: Option<f64>,
+    /// Start from every effect off (flat surface colours) instead of the defaults.
+    #[arg(long)]
+    plain: bool,
+}
+
+impl Look {
+    fn appearance(&self) -> Result<Appearance, String> {
+        let mut a = if self.plain {
+            Appearance::plain()
+        } else {
+            Appearance::default()
+        };
+        a.seed = self.seed;
+        for (name, value, slot) in [
+            ("--clutter", self.clutter, &mut a.clutter),
+            ("--people", self.people, &mut a.people),
+            ("--noise", self.noise, &mut a.noise),
+            ("--motion-blur", self.motion_blur, &mut a.motion_blur),
+            ("--lighting-drift", self.lighting_drift, &mut a.lighting_drift),
+        ] {
+            if let Some(v) = value {
+                if !(v.is_finite() && v >= 0.0) {
+                    return Err(format!("{name} must be a finite level ≥ 0, found {v}"));
+                }
+                *slot = v;
+            }
+        }
+        Ok(a)
+    }
 }
 
 fn main() -> ExitCode {
@@ -97,5 +190,69 @@ fn run(command: Command) -> Result<(), String> {
             eprintln!("{summary}");
             Ok(())
         }
+        Command::Scenario {
+            name,
+            frames,
+            out,
+            rig,
+            look,
+        } => {
+            let name: ScenarioName = name.parse().map_err(|e: UnknownScenario| e.to_string())?;
+            if frames == 0 {
+                return Err("--frames must be at least 1".into());
+            }
+            let rig = match rig {
+                Some(path) => Rig::load(&path).map_err(|e| e.to_string())?,
+                None => Rig::from_toml_str(include_str!("../../firmware_config/ladybug2.toml"), "ladybug2.toml")
+                    .map_err(|e| e.to_string())?,
+            };
+            let scenario = Scenario::get(name);
+            let obj = scenario.model_obj().map_err(|e| e.to_string())?;
+            let trajectory = scenario.trajectory(frames, look.seed);
+            render(&rig, &obj, &trajectory, &out, look.appearance()?)
+        }
+        Command::Render {
+            rig,
+            model,
+            trajectory,
+            out,
+            look,
+        } => {
+            let rig = Rig::load(&rig).map_err(|e| e.to_string())?;
+            let model_name = model.display().to_string();
+            let obj = std::fs::read_to_string(&model).map_err(|e| format!("{model_name}: cannot read: {e}"))?;
+            let trajectory = load_tum(&trajectory).map_err(|e| e.to_string())?;
+            if trajectory.is_empty() {
+                return Err("the trajectory has no poses".into());
+            }
+            render(&rig, &obj, &trajectory, &out, look.appearance()?)
+        }
     }
+}
+
+/// Renders and writes a recording, with progress on stderr.
+fn render(
+    rig: &Rig,
+    obj: &str,
+    trajectory: &omnitrack::trajectory::Trajectory,
+    out: &std::path::Path,
+    appearance: Appearance,
+) -> Result<(), String> {
+    let options = RecordingOptions {
+        appearance,
+        ..RecordingOptions::default()
+    };
+    let summary = write_recording(out, rig, obj, trajectory, &options, |done, total| {
+        eprint!("\rrendering frame {done}/{total}");
+    })
+    .map_err(|e| e.to_string())?;
+    eprintln!(
+        "\r{}: {} frames, {} images in {:.1} s ({:.2} frames/s rendering)",
+        out.display(),
+        summary.frames,
+        summary.images,
+        summary.render_seconds + summary.write_seconds,
+        summary.frames as f64 / summary.render_seconds.max(1e-9)
+    );
+    Ok(())
 }
