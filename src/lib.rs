@@ -9,6 +9,7 @@ pub mod config;
 pub mod geometry;
 pub mod model;
 pub mod rig;
+pub mod solver;
 pub mod trajectory;
 
 #[cfg(feature = "desk")]

@@ -81,3 +81,11 @@ fn bad_values_name_the_key() {
         assert!(!e.contains('\n'), "{e:?}");
     }
 }
+
+#[test]
+fn solver_options_of_the_shipped_config_are_the_solver_defaults() {
+    assert_eq!(
+        TrackerConfig::default().solver_options(),
+        omnitrack::solver::SolverOptions::default()
+    );
+}

@@ -54,22 +54,7 @@ pub struct VisibilityConfig {
     pub node_heights_m: Vec<f64>,
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum SolverMethod {
-    RThenT,
-    RAndT,
-    Lms,
-    Xi,
-}
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum LineError {
-    E1,
-    E2,
-    E3,
-}
+pub use crate::solver::{LineError, Method as SolverMethod};
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -226,6 +211,22 @@ pub struct ConfigError {
 }
 
 impl TrackerConfig {
+    /// The solver tunables of this config.
+    pub fn solver_options(&self) -> crate::solver::SolverOptions {
+        let s = &self.solver;
+        crate::solver::SolverOptions {
+            error: s.error,
+            max_iterations: s.max_iterations,
+            convergence_rad: s.convergence_rad,
+            initial_rotation_samples: s.initial_rotation_samples,
+            lms_success_probability: s.lms_success_probability,
+            lms_outlier_fraction: s.lms_outlier_fraction,
+            lms_outlier_threshold: s.lms_outlier_threshold,
+            degenerate_subset_det: s.degenerate_subset_det,
+            edge_sigma_rad: self.noise.edge_normal_sigma_deg.to_radians(),
+        }
+    }
+
     pub fn load(path: &Path) -> Result<TrackerConfig, ConfigError> {
         let file = path.display().to_string();
         let text = std::fs::read_to_string(path).map_err(|e| ConfigError {

@@ -120,13 +120,13 @@ pub fn observe(
         let centre = rig.sensors[sensor].centre();
         let a = t_world_rig.inverse_transform_point(&seg.a) - centre;
         let b = t_world_rig.inverse_transform_point(&seg.b) - centre;
-        let Some(mut edge) = EdgePlane::from_rays(centre, &a, &b) else {
+        let Some(edge) = EdgePlane::from_rays(centre, &a, &b) else {
             continue;
         };
         let sigma = (noise.edge_sigma_deg.powi(2) + noise.clutter_sigma_deg.powi(2))
             .sqrt()
             .to_radians();
-        edge.normal = tilt(&edge.normal, sigma * gaussian(&mut rng), &mut rng);
+        let edge = edge.with_normal(tilt(&edge.normal, sigma * gaussian(&mut rng), &mut rng));
         out.correspondences.push(Correspondence {
             edge,
             segment: [seg.a, seg.b],

@@ -18,6 +18,9 @@ pub struct EdgePlane {
     pub normal: Unit<Vector3<f64>>,
     /// Optical centre of the sensor that saw the edge, in the rig frame.
     pub centre: Point3<f64>,
+    /// Unit rays (rig frame) from the centre through the edge's two image end points; they lie
+    /// in the plane. Kumar–Hanson's E3 (eq. 12) measures these against the predicted plane.
+    pub ends: [Unit<Vector3<f64>>; 2],
 }
 
 impl EdgePlane {
@@ -29,7 +32,21 @@ impl EdgePlane {
         (norm > 1e-12 * r1.norm() * r2.norm()).then(|| EdgePlane {
             normal: Unit::new_unchecked(n / norm),
             centre,
+            ends: [Unit::new_normalize(*r1), Unit::new_normalize(*r2)],
         })
+    }
+
+    /// The same edge with its plane turned to `normal` (e.g. by noise): the end rays are moved
+    /// into the new plane along the normal, so that they still lie in it.
+    pub fn with_normal(&self, normal: Unit<Vector3<f64>>) -> EdgePlane {
+        let ends = self
+            .ends
+            .map(|r| Unit::new_normalize(r.into_inner() - normal.into_inner() * normal.dot(&r)));
+        EdgePlane {
+            normal,
+            centre: self.centre,
+            ends,
+        }
     }
 
     /// Signed distance (m) of a rig-frame point from the plane.
@@ -136,7 +153,10 @@ mod tests {
         assert!(c.alpha(&pose()) < 1e-12);
         // Tilt the observed plane by 2° about an axis in it.
         let axis = Unit::new_normalize(c.edge.normal.cross(&Vector3::new(0.3, 0.5, 0.8)));
-        c.edge.normal = UnitQuaternion::from_axis_angle(&axis, 2f64.to_radians()) * c.edge.normal;
+        c.edge = c
+            .edge
+            .with_normal(UnitQuaternion::from_axis_angle(&axis, 2f64.to_radians()) * c.edge.normal);
+        assert!(c.edge.ends.iter().all(|r| r.dot(&c.edge.normal).abs() < 1e-15));
         assert!((c.alpha(&pose()) - 2f64.to_radians()).abs() < 1e-9);
         assert!((xi(&[c, c], &pose()) - 2f64.to_radians().powi(2)).abs() < 1e-12);
     }
