@@ -7,6 +7,7 @@
 pub mod capture;
 pub mod config;
 pub mod geometry;
+pub mod lines;
 pub mod model;
 pub mod rig;
 pub mod solver;

@@ -5,6 +5,7 @@
 
 use clap::{Parser, Subcommand};
 use omnitrack::config::TrackerConfig;
+use omnitrack::solver::{self, Method};
 use omnitrack::{Model, Rig};
 use std::io::Write;
 use std::path::PathBuf;
@@ -34,12 +35,40 @@ enum Command {
         #[arg(long)]
         config: Option<PathBuf>,
     },
+    /// Solves one pose T_world_rig from line correspondences and prints it as JSON.
+    Pose {
+        #[arg(long, value_name = "RIG.toml")]
+        rig: PathBuf,
+        /// CSV with header sensor,u1,v1,u2,v2,x1,y1,z1,x2,y2,z2.
+        #[arg(long, value_name = "FILE.csv")]
+        lines: PathBuf,
+        #[arg(long, value_enum, default_value = "r_and_t")]
+        method: MethodArg,
+        /// Starting pose tx,ty,tz,qw,qx,qy,qz (without it the solvers search rotation space).
+        #[arg(long, value_name = "tx,ty,tz,qw,qx,qy,qz", allow_hyphen_values = true)]
+        guess: Option<String>,
+        /// Tracker config whose [solver] and [noise] tunables to use (default: the papers' values).
+        #[arg(long, value_name = "tracker.toml")]
+        config: Option<PathBuf>,
+    },
     /// Prints the model segments of an OBJ as CSV: x1,y1,z1,x2,y2,z2,faces (OBJ face numbers,
     /// space-separated; empty for a free `l` segment).
     Segments {
         #[arg(long)]
         model: PathBuf,
     },
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum MethodArg {
+    #[value(name = "r_and_t")]
+    RAndT,
+    #[value(name = "r_then_t")]
+    RThenT,
+    #[value(name = "lms")]
+    Lms,
+    #[value(name = "xi")]
+    Xi,
 }
 
 fn main() -> ExitCode {
@@ -104,6 +133,33 @@ fn run(command: Command) -> Result<(), String> {
             }
             Ok(())
         }
+        Command::Pose {
+            rig,
+            lines,
+            method,
+            guess,
+            config,
+        } => {
+            let guess = guess.as_deref().map(parse_guess).transpose()?;
+            let rig = Rig::load(&rig).map_err(|e| e.to_string())?;
+            let options = match config {
+                Some(path) => TrackerConfig::load(&path).map_err(|e| e.to_string())?.solver_options(),
+                None => TrackerConfig::default().solver_options(),
+            };
+            let name = lines.display().to_string();
+            let text = std::fs::read_to_string(&lines).map_err(|e| format!("{name}: cannot read: {e}"))?;
+            let correspondences = omnitrack::lines::parse_lines(&text, &name, &rig).map_err(|e| e.to_string())?;
+            let method = match method {
+                MethodArg::RAndT => Method::RAndT,
+                MethodArg::RThenT => Method::RThenT,
+                MethodArg::Lms => Method::Lms,
+                MethodArg::Xi => Method::Xi,
+            };
+            let solution = solver::solve(method, &correspondences, guess.as_ref(), &options, 0)
+                .map_err(|e| format!("{name}: no pose: {e}"))?;
+            println!("{}", pose_json(&solution));
+            Ok(())
+        }
         Command::Segments { model } => {
             let m = Model::load(&model).map_err(|e| e.to_string())?;
             let mut out = std::io::BufWriter::new(std::io::stdout().lock());
@@ -132,6 +188,49 @@ fn run(command: Command) -> Result<(), String> {
             write(&mut out).map_err(|e| format!("cannot write to standard output: {e}"))
         }
     }
+}
+
+/// `tx,ty,tz,qw,qx,qy,qz` (INTERFACES.md order) to a pose.
+fn parse_guess(text: &str) -> Result<omnitrack::Pose, String> {
+    let v: Vec<f64> = text
+        .split(',')
+        .map(|f| f.trim().parse::<f64>().ok().filter(|x| x.is_finite()))
+        .collect::<Option<_>>()
+        .ok_or_else(|| format!("--guess '{text}': expected 7 finite numbers tx,ty,tz,qw,qx,qy,qz"))?;
+    if v.len() != 7 {
+        return Err(format!(
+            "--guess '{text}': expected 7 numbers tx,ty,tz,qw,qx,qy,qz, found {}",
+            v.len()
+        ));
+    }
+    omnitrack::geometry::pose_from_parts([v[0], v[1], v[2]], [v[3], v[4], v[5], v[6]])
+        .map_err(|e| format!("--guess '{text}': {e}"))
+}
+
+/// A JSON number; JSON has no NaN or infinity, so those become null.
+fn json_number(x: f64) -> String {
+    if x.is_finite() {
+        format!("{x:?}")
+    } else {
+        "null".into()
+    }
+}
+
+/// The JSON object INTERFACES.md specifies for `omnitrack pose`.
+fn pose_json(s: &solver::Solution) -> String {
+    let list = |xs: &mut dyn Iterator<Item = f64>| xs.map(json_number).collect::<Vec<_>>().join(",");
+    let t = s.pose.translation.vector;
+    let q = omnitrack::geometry::rotation_to_wxyz(&s.pose.rotation);
+    let inliers: Vec<String> = s.inliers.iter().map(|i| i.to_string()).collect();
+    format!(
+        "{{\"position\":[{}],\"rotation_wxyz\":[{}],\"covariance\":[{}],\"inliers\":[{}],\"xi_rad2\":{},\"iterations\":{}}}",
+        list(&mut t.iter().copied()),
+        list(&mut q.iter().copied()),
+        list(&mut s.covariance.transpose().iter().copied()),
+        inliers.join(","),
+        json_number(s.xi_rad2),
+        s.iterations
+    )
 }
 
 fn lens_name(lens: &omnitrack::geometry::Lens) -> &'static str {

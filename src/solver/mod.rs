@@ -109,3 +109,44 @@ pub enum SolveError {
     #[error("no subset gave a usable pose")]
     NoSolution,
 }
+
+pub mod consensus;
+pub mod covariance;
+pub mod horn;
+pub mod kumar_hanson;
+pub mod lms;
+pub mod points;
+pub mod sampling;
+pub mod simplex;
+
+pub use consensus::{ConsensusError, ConsensusOutcome, ConsensusSampler, SamplingBudget, StopReason};
+pub use covariance::{covariance, covariance_mixed};
+pub use kumar_hanson::{line_residuals, r_and_t, r_then_t, LineResiduals};
+pub use lms::{med_r_and_t, med_r_and_t_landmarks};
+pub use points::{r_and_t_mixed, PointObservation};
+pub use sampling::sample_count;
+pub use simplex::{minimise_xi, minimise_xi_upright, xi_solve, SimplexOptions};
+
+/// One entry point for every method (`omnitrack pose --method`, the tracker). `Xi` needs a
+/// starting pose for its simplex: the guess, or else R_and_T's from Horn's rotation samples.
+/// `seed` drives Med_R_and_T's random subsets.
+pub fn solve(
+    method: Method,
+    c: &[Correspondence],
+    guess: Option<&Pose>,
+    o: &SolverOptions,
+    seed: u64,
+) -> Result<Solution, SolveError> {
+    match method {
+        Method::RThenT => r_then_t(c, guess, o),
+        Method::RAndT => r_and_t(c, guess, o),
+        Method::Lms => med_r_and_t(c, guess, o, seed),
+        Method::Xi => {
+            let start = match guess {
+                Some(g) => *g,
+                None => r_and_t(c, None, o)?.pose,
+            };
+            xi_solve(c, &start, o, &SimplexOptions::default())
+        }
+    }
+}

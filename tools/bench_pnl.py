@@ -1,0 +1,438 @@
+#!/usr/bin/env python3
+"""PnL benchmark: omnitrack's line pose solver (Kumar & Hanson 1989) against PoseLib, one command.
+
+    python3 tools/bench_pnl.py            # full protocol, 500 trials per cell (~ a few minutes)
+    python3 tools/bench_pnl.py --quick    # 50 trials per cell
+    python3 tools/bench_pnl.py --trials 100 --method r_and_t --seed 7
+
+What it does, in order:
+ 1. Creates (or reuses) the venv tools/.venv-bench, installs numpy and PoseLib (PyPI package
+    `poselib`, the official pybind11 bindings) into it, and re-runs itself inside it.
+ 2. Generates the PnL protocol data (seeded): pinhole f = 800 px, 640x480, principal point at
+    the centre; per trial a random camera pose and n 3D segments whose end points are at depth
+    4-8 m and project inside the image (2D length >= MIN_LEN_PX); Gaussian noise of sigma = 1 or
+    5 px on each 2D end point coordinate; n = 6, 10, 20, 30; 0 / 30 / 50 % outliers (round(f*n)
+    of the 2D segments replaced by random segments inside the image).
+ 3. Runs PoseLib's estimate_absolute_pose_pnpl with lines only (no points), ransac option
+    max_epipolar_error = 4 px (the line threshold of the pnpl estimator; PoseLib's other options
+    left at their defaults), timing each call with time.perf_counter_ns around the call only.
+ 4. Builds and runs our Rust runner (tools/src/bin/pnl_bench.rs, omnitrack::solver::med_r_and_t
+    or r_and_t) on the identical data, passed as JSON lines; the runner times each solver call
+    with std::time::Instant around the call only.
+ 5. Prints, per cell, both methods side by side, and writes tools/bench_pnl_results.md.
+
+Error definitions (both methods compared in T_camera_world = (R, t), x_cam = R X_world + t; the
+world origin is the centroid of the scene's end points, so |t_true| is the camera-to-scene
+distance):
+  rotation error     = angle of R_est R_true^T (degrees)
+  translation error  = |t_est - t_true| / |t_true| (percent)
+  failure            = no result, or rotation error > 5 deg, or translation error > 10 %
+  medians            = over all trials of the cell; a trial with no result counts as +inf
+  time               = median microseconds per call
+  ratios             = PoseLib / ours (time ratio > 1: ours faster; error ratio > 1: ours more
+                       accurate)
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import math
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+import venv
+from pathlib import Path
+
+TOOLS = Path(__file__).resolve().parent
+REPO = TOOLS.parent
+VENV = TOOLS / ".venv-bench"
+RESULTS_MD = TOOLS / "bench_pnl_results.md"
+PACKAGES = ["numpy", "poselib"]
+
+FOCAL, WIDTH, HEIGHT = 800.0, 640, 480
+CX, CY = WIDTH / 2.0, HEIGHT / 2.0
+DEPTH = (4.0, 8.0)
+MIN_LEN_PX = 20.0  # shorter 2D segments (before noise) are redrawn: their direction is noise
+NOISES = [1.0, 5.0]
+NS = [6, 10, 20, 30]
+OUTLIERS = [0.0, 0.3, 0.5]
+POSELIB_RANSAC = {"max_epipolar_error": 4.0}
+ROT_FAIL_DEG, TRANS_FAIL_PCT = 5.0, 10.0
+RUNNER = REPO / "target" / "release" / "pnl_bench"
+
+
+# --------------------------------------------------------------------------------------------
+# 1. The venv
+# --------------------------------------------------------------------------------------------
+
+
+def venv_python() -> Path:
+    return VENV / ("Scripts/python.exe" if os.name == "nt" else "bin/python")
+
+
+def in_bench_venv() -> bool:
+    return Path(sys.prefix).resolve() == VENV.resolve()
+
+
+def ensure_venv_and_reexec() -> None:
+    """Create tools/.venv-bench if needed, install the packages, and re-run this script in it."""
+    py = venv_python()
+    if not py.exists():
+        print(f"[bench] creating venv {VENV}", flush=True)
+        venv.EnvBuilder(with_pip=True, clear=False).create(VENV)
+    check = subprocess.run([str(py), "-c", "import numpy, poselib"], capture_output=True)
+    if check.returncode != 0:
+        print(f"[bench] pip install {' '.join(PACKAGES)} into {VENV}", flush=True)
+        r = subprocess.run([str(py), "-m", "pip", "install", "--quiet", "--upgrade", "pip"])
+        r = subprocess.run([str(py), "-m", "pip", "install", "--quiet", "--only-binary=poselib", *PACKAGES])
+        if r.returncode != 0:
+            v = f"{sys.version_info.major}.{sys.version_info.minor}"
+            sys.exit(
+                f"[bench] error: could not install {PACKAGES} from PyPI. PoseLib ships binary wheels "
+                f"(package `poselib`) only for some Python versions/platforms; if there is none for "
+                f"Python {v} on {platform.machine()} {platform.system()}, run this script with a "
+                f"Python that has one (e.g. `python3.11 tools/bench_pnl.py`) after deleting {VENV}."
+            )
+    os.execv(str(py), [str(py), str(Path(__file__).resolve()), *sys.argv[1:]])
+
+
+# --------------------------------------------------------------------------------------------
+# 2. Data
+# --------------------------------------------------------------------------------------------
+
+
+def random_rotation(rng):
+    import numpy as np
+
+    q = rng.normal(size=4)
+    q /= np.linalg.norm(q)
+    w, x, y, z = q
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def random_segment_px(rng):
+    """Two pixel end points uniform in the image, at least MIN_LEN_PX apart."""
+    import numpy as np
+
+    while True:
+        a = rng.uniform([0.0, 0.0], [WIDTH, HEIGHT])
+        b = rng.uniform([0.0, 0.0], [WIDTH, HEIGHT])
+        if np.linalg.norm(a - b) >= MIN_LEN_PX:
+            return a, b
+
+
+def make_trial(rng, n: int, noise: float, outlier_frac: float):
+    """One trial: returns (uv1, uv2, X1, X2, R_cw, t_cw, is_outlier)."""
+    import numpy as np
+
+    uv1 = np.empty((n, 2))
+    uv2 = np.empty((n, 2))
+    Xc1 = np.empty((n, 3))
+    Xc2 = np.empty((n, 3))
+    for i in range(n):
+        a, b = random_segment_px(rng)
+        da, db = rng.uniform(*DEPTH, size=2)
+        uv1[i], uv2[i] = a, b
+        Xc1[i] = np.array([(a[0] - CX) / FOCAL, (a[1] - CY) / FOCAL, 1.0]) * da
+        Xc2[i] = np.array([(b[0] - CX) / FOCAL, (b[1] - CY) / FOCAL, 1.0]) * db
+    # Random pose: world origin at the scene centroid, random orientation of the world axes.
+    c0 = np.vstack([Xc1, Xc2]).mean(axis=0)
+    R_wc = random_rotation(rng)
+    X1 = (Xc1 - c0) @ R_wc.T
+    X2 = (Xc2 - c0) @ R_wc.T
+    R_cw, t_cw = R_wc.T, c0  # x_cam = R_cw X_world + t_cw
+    uv1 = uv1 + rng.normal(0.0, noise, uv1.shape)
+    uv2 = uv2 + rng.normal(0.0, noise, uv2.shape)
+    n_out = int(round(outlier_frac * n))
+    out_idx = rng.choice(n, size=n_out, replace=False) if n_out else np.array([], dtype=int)
+    is_out = np.zeros(n, dtype=bool)
+    for i in out_idx:
+        uv1[i], uv2[i] = random_segment_px(rng)
+        is_out[i] = True
+    return uv1, uv2, X1, X2, R_cw, t_cw, is_out
+
+
+# --------------------------------------------------------------------------------------------
+# 3. / 4. Methods
+# --------------------------------------------------------------------------------------------
+
+
+def rot_err_deg(R_est, R_true) -> float:
+    import numpy as np
+
+    c = (np.trace(R_est @ R_true.T) - 1.0) / 2.0
+    return math.degrees(math.acos(max(-1.0, min(1.0, c))))
+
+
+def trans_err_pct(t_est, t_true) -> float:
+    import numpy as np
+
+    return 100.0 * float(np.linalg.norm(t_est - t_true) / np.linalg.norm(t_true))
+
+
+def run_poselib(trials, max_seconds: float):
+    import numpy as np
+    import poselib
+
+    cam = {"model": "PINHOLE", "width": WIDTH, "height": HEIGHT, "params": [FOCAL, FOCAL, CX, CY]}
+    p2 = np.zeros((0, 2))
+    p3 = np.zeros((0, 3))
+    out = []
+    start = time.time()
+    for k, tr in enumerate(trials):
+        if time.time() - start > max_seconds:
+            sys.exit(
+                f"[bench] error: PoseLib is too slow: only {k} of {len(trials)} trials in {max_seconds:.0f} s. "
+                f"Use --trials N or raise --max-seconds."
+            )
+        uv1, uv2, X1, X2 = tr["uv1"], tr["uv2"], tr["X1"], tr["X2"]
+        ransac = dict(POSELIB_RANSAC, seed=int(tr["seed"] % (2**31)))
+        t0 = time.perf_counter_ns()
+        try:
+            pose, info = poselib.estimate_absolute_pose_pnpl(p2, p3, uv1, uv2, X1, X2, cam, ransac, {})
+            ok = True
+        except Exception as e:  # noqa: BLE001 - any failure of the library is a failure
+            ok, pose, info = False, None, str(e)
+        us = (time.perf_counter_ns() - t0) / 1e3
+        if ok and not (np.all(np.isfinite(pose.R)) and np.all(np.isfinite(pose.t))):
+            ok = False
+        if ok and info.get("num_inliers", 0) == 0:
+            ok = False  # PoseLib returns an identity pose when RANSAC found nothing
+        out.append({"ok": ok, "us": us, "R": pose.R if ok else None, "t": pose.t if ok else None})
+        if (k + 1) % 1000 == 0:
+            print(f"[bench]   poselib {k + 1}/{len(trials)}", flush=True)
+    return out
+
+
+def build_runner() -> None:
+    print("[bench] cargo build --release -p omnitrack-tools --bin pnl_bench", flush=True)
+    r = subprocess.run(["cargo", "build", "--release", "-p", "omnitrack-tools", "--bin", "pnl_bench"], cwd=REPO)
+    if r.returncode != 0:
+        sys.exit(
+            "[bench] error: the Rust runner did not build. If the errors are `no med_r_and_t in solver`, "
+            "the solver (omnitrack::solver::med_r_and_t / r_and_t) is not written yet."
+        )
+
+
+def run_ours(trials, method: str, runner: Path, max_seconds: float):
+    import numpy as np
+
+    with tempfile.TemporaryDirectory(prefix="bench_pnl_") as d:
+        inp, outp = Path(d) / "trials.jsonl", Path(d) / "results.jsonl"
+        with inp.open("w") as f:
+            for tr in trials:
+                lines = np.hstack([tr["uv1"], tr["uv2"], tr["X1"], tr["X2"]])
+                rec = {"id": tr["id"], "seed": tr["seed"], "K": [FOCAL, FOCAL, CX, CY], "lines": lines.tolist()}
+                f.write(json.dumps(rec) + "\n")
+        try:
+            r = subprocess.run(
+                [str(runner), "--input", str(inp), "--output", str(outp), "--method", method], timeout=max_seconds
+            )
+        except subprocess.TimeoutExpired:
+            sys.exit(
+                f"[bench] error: ours ({method}) is too slow: {len(trials)} trials did not finish in "
+                f"{max_seconds:.0f} s (> {1e3 * max_seconds / len(trials):.1f} ms per call). Use --trials N "
+                f"or raise --max-seconds."
+            )
+        if r.returncode != 0:
+            sys.exit(f"[bench] error: {runner.name} exited with {r.returncode}")
+        by_id = {}
+        with outp.open() as f:
+            for line in f:
+                rec = json.loads(line)
+                by_id[rec["id"]] = rec
+    out = []
+    for tr in trials:
+        rec = by_id.get(tr["id"])
+        if rec is None or not rec["ok"]:
+            out.append({"ok": False, "us": rec["us"] if rec else float("nan"), "R": None, "t": None})
+            continue
+        # The runner reports T_world_camera; compare in T_camera_world like PoseLib.
+        R_wc = np.array(rec["t_world_camera"]["R"]).reshape(3, 3)
+        c = np.array(rec["t_world_camera"]["t"])
+        R_cw = R_wc.T
+        t_cw = -R_cw @ c
+        ok = bool(np.all(np.isfinite(R_cw)) and np.all(np.isfinite(t_cw)))
+        out.append({"ok": ok, "us": rec["us"], "R": R_cw, "t": t_cw})
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# 5. Statistics and the table
+# --------------------------------------------------------------------------------------------
+
+
+def cell_stats(trials, results):
+    import numpy as np
+
+    rot, tra, fail, us = [], [], 0, []
+    for tr, res in zip(trials, results):
+        us.append(res["us"])
+        if not res["ok"]:
+            rot.append(math.inf)
+            tra.append(math.inf)
+            fail += 1
+            continue
+        re = rot_err_deg(res["R"], tr["R_cw"])
+        te = trans_err_pct(res["t"], tr["t_cw"])
+        rot.append(re)
+        tra.append(te)
+        if not (re <= ROT_FAIL_DEG and te <= TRANS_FAIL_PCT):
+            fail += 1
+    return {
+        "rot": float(np.median(rot)),
+        "tra": float(np.median(tra)),
+        "fail": 100.0 * fail / len(trials),
+        "us": float(np.nanmedian(us)),
+    }
+
+
+def ratio(a: float, b: float) -> str:
+    if not (math.isfinite(a) and math.isfinite(b)) or b == 0:
+        return "-"
+    return f"{a / b:.2f}"
+
+
+def fmt(x: float, nd: int) -> str:
+    return f"{x:.{nd}f}" if math.isfinite(x) else "inf"
+
+
+HEADER = (
+    "| σ px | n | out % | rot° PL | rot° ours | rot ratio | t% PL | t% ours | t ratio "
+    "| fail% PL | fail% ours | µs PL | µs ours | time ratio |"
+)
+
+
+def table_rows(rows):
+    lines = [HEADER, "|" + "---|" * 14]
+    for (noise, n, of), pl, us_ in rows:
+        lines.append(
+            f"| {noise:g} | {n} | {of * 100:.0f} | {fmt(pl['rot'], 3)} | {fmt(us_['rot'], 3)} "
+            f"| {ratio(pl['rot'], us_['rot'])} | {fmt(pl['tra'], 2)} | {fmt(us_['tra'], 2)} "
+            f"| {ratio(pl['tra'], us_['tra'])} | {pl['fail']:.1f} | {us_['fail']:.1f} "
+            f"| {pl['us']:.0f} | {us_['us']:.0f} | {ratio(pl['us'], us_['us'])} |"
+        )
+    return lines
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--trials", type=int, default=500, help="trials per cell (default 500)")
+    ap.add_argument("--quick", action="store_true", help="50 trials per cell")
+    ap.add_argument("--seed", type=int, default=20260101, help="data seed")
+    ap.add_argument("--method", choices=["lms", "r_and_t"], default="lms", help="our solver")
+    ap.add_argument("--runner", type=Path, default=None, help="use this pnl_bench binary, skip the build")
+    ap.add_argument(
+        "--max-seconds", type=float, default=420.0, help="give up on a method that takes longer than this (default 420)"
+    )
+    ap.add_argument("--no-md", action="store_true", help="do not write tools/bench_pnl_results.md")
+    args = ap.parse_args()
+    if not in_bench_venv():
+        ensure_venv_and_reexec()
+    import numpy as np
+    import poselib
+
+    trials_per_cell = 50 if args.quick else args.trials
+    if args.runner is None:
+        build_runner()
+    runner = args.runner or RUNNER
+
+    rng = np.random.default_rng(args.seed)
+    cells, trials = [], []
+    for noise in NOISES:
+        for n in NS:
+            for of in OUTLIERS:
+                start = len(trials)
+                for _ in range(trials_per_cell):
+                    uv1, uv2, X1, X2, R_cw, t_cw, is_out = make_trial(rng, n, noise, of)
+                    trials.append(
+                        {"id": len(trials), "seed": int(rng.integers(0, 2**63 - 1)), "uv1": uv1, "uv2": uv2,
+                         "X1": X1, "X2": X2, "R_cw": R_cw, "t_cw": t_cw, "is_out": is_out}
+                    )
+                cells.append(((noise, n, of), start, len(trials)))
+    print(f"[bench] {len(trials)} trials ({trials_per_cell} per cell, {len(cells)} cells), seed {args.seed}",
+          flush=True)
+
+    t0 = time.time()
+    print(f"[bench] ours ({args.method}) ...", flush=True)
+    ours = run_ours(trials, args.method, runner, args.max_seconds)
+    t_ours = time.time() - t0
+    t0 = time.time()
+    print(f"[bench] PoseLib {poselib.__version__ if hasattr(poselib, '__version__') else ''} ...", flush=True)
+    pl = run_poselib(trials, args.max_seconds)
+    t_pl = time.time() - t0
+    print(f"[bench] wall time: ours {t_ours:.1f} s (incl. JSON I/O), PoseLib {t_pl:.1f} s", flush=True)
+    full = 2 * 4 * 3 * 500
+    for name, t in (("ours", t_ours), ("PoseLib", t_pl)):
+        if t / len(trials) * full > 300:
+            print(f"[bench] note: {name} would take ~{t / len(trials) * full / 60:.1f} min on the full protocol")
+
+    rows = []
+    for key, a, b in cells:
+        rows.append((key, cell_stats(trials[a:b], pl[a:b]), cell_stats(trials[a:b], ours[a:b])))
+    table = table_rows(rows)
+    print()
+    print("\n".join(table))
+
+    try:
+        from importlib.metadata import version
+
+        pl_version = version("poselib")
+    except Exception:  # noqa: BLE001
+        pl_version = "?"
+    nproc = os.cpu_count()
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    method_name = {"lms": "Med_R_and_T (least median of squares + R_and_T)", "r_and_t": "R_and_T (no guess)"}
+    md = [
+        "# PnL benchmark: omnitrack vs PoseLib",
+        "",
+        f"Generated by `python3 tools/bench_pnl.py{' --quick' if args.quick else ''}"
+        f"{'' if args.quick or args.trials == 500 else f' --trials {args.trials}'}"
+        f"{'' if args.method == 'lms' else ' --method ' + args.method}` on "
+        f"{datetime.datetime.now().strftime('%Y-%m-%d %H:%M')}; machine: {cpu}, nproc = {nproc}, "
+        f"{platform.system()} {platform.machine()}, Python {platform.python_version()}, "
+        f"PoseLib {pl_version}, numpy {np.__version__}.",
+        "",
+        f"Data: pinhole f = {FOCAL:g} px, {WIDTH}×{HEIGHT}, principal point at the centre; random camera pose; "
+        f"3D segments with end points at depth {DEPTH[0]:g}–{DEPTH[1]:g} m projecting inside the image "
+        f"(2D length ≥ {MIN_LEN_PX:g} px); Gaussian noise σ on each 2D end point coordinate; outliers = 2D "
+        f"segment replaced by a random segment in the image; {trials_per_cell} trials per cell, seed {args.seed}.",
+        "",
+        f"PL = PoseLib `estimate_absolute_pose_pnpl` (lines only, ransac_opt {POSELIB_RANSAC}, other "
+        f"options default). Ours = `omnitrack::solver::{'med_r_and_t' if args.method == 'lms' else 'r_and_t'}` "
+        f"— {method_name[args.method]}, `SolverOptions::default()`, via `tools/src/bin/pnl_bench.rs`.",
+        "",
+        "rot° = median rotation error (deg); t% = median |t_est − t_true| / |t_true| in T_camera_world, i.e. "
+        "relative to the camera-to-scene-centroid distance (%); medians over all trials, no result = ∞. "
+        f"fail% = no result, or rotation error > {ROT_FAIL_DEG:g}°, or translation error > {TRANS_FAIL_PCT:g} %. "
+        "µs = median time per call (the call only). Ratios are PoseLib / ours: time ratio > 1 means ours is "
+        "faster, error ratio > 1 means ours is more accurate.",
+        "",
+        *table,
+        "",
+    ]
+    if not args.no_md:
+        RESULTS_MD.write_text("\n".join(md))
+        print(f"\n[bench] wrote {RESULTS_MD.relative_to(REPO)}")
+
+
+if __name__ == "__main__":
+    main()
