@@ -141,13 +141,13 @@ fn normal_quantile(p: f64) -> f64 {
     }
 }
 
-/// Robust σ from the `k`-th smallest (1-based) of `n` squared line errors when about a fraction
-/// `epsilon` are outliers: those k are the k/((1 − ε) n) quantile of the inliers' |error|. At
-/// Rousseeuw's median rank with few outliers this is close to [`robust_sigma`]; with many it does
-/// not inflate as the median does once half the lines are wrong.
-fn order_statistic_sigma(kth_squared: f64, k: usize, n: usize, epsilon: f64) -> f64 {
-    let inliers = ((1.0 - epsilon.clamp(0.0, 0.95)) * n as f64).max(k as f64);
-    let quantile = (k as f64 / inliers).clamp(0.25, 0.95);
+/// Robust σ from the `k`-th smallest (1-based) of `n` squared line errors, read as the k/n
+/// quantile of |error|. When some of the n are outliers this overestimates σ (the k smallest are
+/// then a lower quantile of the inliers), never underestimates it, so the first rejection is
+/// loose rather than throwing good lines away; the refits in `finish` then tighten σ from the
+/// inliers. Unlike the median, the k-th statistic stays inside the inliers up to ε = 1 − k/n.
+fn order_statistic_sigma(kth_squared: f64, k: usize, n: usize) -> f64 {
+    let quantile = (k as f64 / n.max(1) as f64).clamp(0.25, 0.95);
     kth_squared.max(0.0).sqrt() / normal_quantile(0.5 + 0.5 * quantile)
 }
 
@@ -201,19 +201,20 @@ impl Search<'_> {
             }
             seen[count] = q;
             count += 1;
+            // Three lines fix the rotation exactly (three constraints, three unknowns) and eq. 9
+            // then fixes the translation, so the subset's pose needs no R_and_T polish before it
+            // is scored: only the winner is refined, on all its inliers.
             let Some(s) = translation_stage(sub, &q) else {
                 continue;
             };
-            if let Ok(r) = refine(sub, q, s, o) {
-                self.consider(r.q, r.s);
-            }
+            self.consider(q, s);
         }
     }
 
     /// Steps 3–4: outliers from the least-median pose, then R_and_T on the inliers. The scale
     /// comes from the same order statistic that was minimised (with the default ε this is the
-    /// paper's median rule); the rejection and refit are repeated with σ re-estimated from the
-    /// inliers until the inlier set stops changing (at most 4 passes), so that an outlier that
+    /// paper's median rule); the rejection and refit are repeated with σ re-estimated (by the
+    /// same median rule) over the inliers until the inlier set stops changing (at most 4 passes), so that an outlier that
     /// slipped under the first, robust but loose, threshold is caught once the fit is clean.
     fn finish(mut self) -> Result<Solution, SolveError> {
         let (_, q, s) = self.best.ok_or(SolveError::NoSolution)?;
@@ -234,7 +235,7 @@ impl Search<'_> {
             let med = *self.errors.select_nth_unstable_by(n / 2, f64::total_cmp).1;
             robust_sigma(med, n)
         } else {
-            order_statistic_sigma(kth, k + 1, n, o.lms_outlier_fraction)
+            order_statistic_sigma(kth, k + 1, n)
         }
         .max(floor);
         let mut pose = pose_of(&q, &s);
@@ -257,8 +258,12 @@ impl Search<'_> {
             let fitted = r_and_t(&kept, Some(&pose), o)?;
             pose = fitted.pose;
             let (fq, fs) = unknowns_of(&pose);
-            let sum: f64 = kept.iter().map(|l| line_error_of(l, &fq, &fs, o.error)).sum();
-            sigma = (sum / (kept.len() as f64 - 3.0).max(1.0)).sqrt().max(floor);
+            // The paper's median scale again, now over the current inliers at the refitted pose:
+            // robust to the few outliers a loose first threshold may have let in.
+            let mut errs: Vec<f64> = kept.iter().map(|l| line_error_of(l, &fq, &fs, o.error)).collect();
+            let mid = errs.len() / 2;
+            let med = *errs.select_nth_unstable_by(mid, f64::total_cmp).1;
+            sigma = robust_sigma(med, kept.len()).max(floor);
             sol = Some(fitted);
         }
         let mut sol = sol.ok_or(SolveError::NoSolution)?;

@@ -1,0 +1,137 @@
+//! Hue signature of an edge (Koch–Teller §4.2.1): circular hue statistics of two strips, one on
+//! each side of the edge, in the wrapped hue space [0, 1).
+
+/// Entries of the cosine / sine table over the hue circle.
+pub(crate) const HUE_STEPS: usize = 1024;
+
+/// Hue mean and variance on both sides of an edge. "Left" is the side of the direction
+/// (v2 − v1, −(u2 − u1)) when walking on the image from end 1 to end 2 (v down), as in the
+/// `omnitrack edges` CSV.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HueSignature {
+    /// Circular mean hue in [0, 1), or NaN when no pixel of the strip had a meaningful hue.
+    pub left_mean: f32,
+    /// Circular variance in hue units²: −2 ln R̄ / (2π)², the variance of the wrapped normal
+    /// distribution with the strip's mean resultant length R̄ (≈ the ordinary variance of the
+    /// hue for tight distributions, unbounded for uniform ones). NaN when nothing was kept.
+    pub left_var: f32,
+    pub right_mean: f32,
+    pub right_var: f32,
+    /// Fraction of the strip's pixels bright and saturated enough for hue to mean something.
+    pub left_kept: f32,
+    pub right_kept: f32,
+}
+
+/// Running sums of one strip.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub(crate) struct HueAcc {
+    pub cos: f32,
+    pub sin: f32,
+    pub kept: u32,
+    pub total: u32,
+}
+
+impl HueAcc {
+    #[inline]
+    pub fn add(&mut self, other: &HueAcc) {
+        self.cos += other.cos;
+        self.sin += other.sin;
+        self.kept += other.kept;
+        self.total += other.total;
+    }
+
+    /// (mean, variance, kept fraction).
+    pub fn stats(&self) -> (f32, f32, f32) {
+        let kept = if self.total > 0 { self.kept as f32 / self.total as f32 } else { 0.0 };
+        if self.kept == 0 {
+            return (f32::NAN, f32::NAN, kept);
+        }
+        let tau = std::f32::consts::TAU;
+        let mut mean = self.sin.atan2(self.cos) / tau;
+        if mean < 0.0 {
+            mean += 1.0;
+        }
+        if mean >= 1.0 {
+            mean -= 1.0;
+        }
+        let r = ((self.cos * self.cos + self.sin * self.sin).sqrt() / self.kept as f32).clamp(1e-12, 1.0);
+        let var = -2.0 * r.ln() / (tau * tau);
+        (mean, var.max(0.0), kept)
+    }
+}
+
+/// Converts RGB to a hue index in [0, HUE_STEPS) when the pixel is bright and saturated enough.
+#[derive(Debug, Clone)]
+pub(crate) struct HueTable {
+    cos: Box<[f32]>,
+    sin: Box<[f32]>,
+    /// Minimum max(r, g, b) in grey levels.
+    min_value: u16,
+    /// Minimum saturation (max − min) / max, × 1024.
+    min_sat_1024: u32,
+}
+
+impl HueTable {
+    pub fn new(min_saturation: f64, min_value: f64) -> HueTable {
+        let tau = std::f64::consts::TAU;
+        let angle = |k: usize| tau * k as f64 / HUE_STEPS as f64;
+        HueTable {
+            cos: (0..HUE_STEPS).map(|k| angle(k).cos() as f32).collect(),
+            sin: (0..HUE_STEPS).map(|k| angle(k).sin() as f32).collect(),
+            min_value: (min_value.clamp(0.0, 1.0) * 255.0).ceil() as u16,
+            min_sat_1024: (min_saturation.clamp(0.0, 1.0) * 1024.0).ceil() as u32,
+        }
+    }
+
+    /// Hue of one pixel as an index on the circle, or `None` if too dark or unsaturated.
+    #[inline]
+    pub fn index(&self, rgb: [u8; 3]) -> Option<usize> {
+        let [r, g, b] = rgb.map(i32::from);
+        let max = r.max(g).max(b);
+        let min = r.min(g).min(b);
+        let delta = max - min;
+        if (max as u16) < self.min_value.max(1) || delta == 0 || (delta as u32) * 1024 < self.min_sat_1024 * max as u32
+        {
+            return None;
+        }
+        // Sector formula of HSV; h6 in [-1, 5).
+        let h6 = if max == r {
+            (g - b) as f32 / delta as f32
+        } else if max == g {
+            2.0 + (b - r) as f32 / delta as f32
+        } else {
+            4.0 + (r - g) as f32 / delta as f32
+        };
+        let k = (h6 * (HUE_STEPS as f32 / 6.0)).round() as i32;
+        Some(k.rem_euclid(HUE_STEPS as i32) as usize)
+    }
+
+    #[inline]
+    pub fn accumulate(&self, acc: &mut HueAcc, rgb: [u8; 3]) {
+        acc.total += 1;
+        if let Some(k) = self.index(rgb) {
+            acc.kept += 1;
+            acc.cos += self.cos[k];
+            acc.sin += self.sin[k];
+        }
+    }
+}
+
+/// HSV hue in [0, 1) of an RGB pixel (no thresholds), for tests and tools.
+pub fn hue_of(rgb: [u8; 3]) -> Option<f64> {
+    let [r, g, b] = rgb.map(f64::from);
+    let max = r.max(g).max(b);
+    let min = r.min(g).min(b);
+    let d = max - min;
+    if d == 0.0 {
+        return None;
+    }
+    let h6 = if max == r {
+        (g - b) / d
+    } else if max == g {
+        2.0 + (b - r) / d
+    } else {
+        4.0 + (r - g) / d
+    };
+    Some((h6 / 6.0).rem_euclid(1.0))
+}
