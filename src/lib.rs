@@ -6,12 +6,14 @@
 
 pub mod capture;
 pub mod config;
+pub mod edges;
 pub mod geometry;
 pub mod lines;
 pub mod model;
 pub mod rig;
 pub mod solver;
 pub mod trajectory;
+pub mod visibility;
 
 #[cfg(feature = "desk")]
 pub mod desk;

@@ -1,0 +1,383 @@
+//! Edge and hue extraction for the rig's sensors (Koch–Teller §4.2, §4.2.1).
+//!
+//! In: a [`FrameSet`] (one RGB8 image per sensor). Out: per sensor, at most
+//! `EdgeConfig::max_edges_per_sensor` [`Edge`]s (the strongest), each the plane through its
+//! sensor's optical centre that contains a straight 3D edge (rig frame), its pixel and ray end
+//! points, angular length, strength and [`HueSignature`].
+//!
+//! Per sensor: grey image → integer Sobel gradients → non-maximum suppression → edgels linked
+//! into chains (same polarity, direction within ~45°) → sub-pixel edgels (parabola across the
+//! gradient) unprojected to unit rays through a per-pixel ray table built at start-up → planes
+//! fitted to the rays (smallest eigenvector of Σ r rᵀ), chains split where they bend off a great
+//! circle and neighbouring collinear pieces merged, also across chains → hue strips on both
+//! sides. Fisheye curvature costs nothing: rays, not pixels, are fitted.
+//!
+//! Memory is fixed: every buffer is sized in [`EdgeDetector::new`] from the rig (resolution) and
+//! the [`EdgeConfig`] (edges per sensor); [`EdgeDetector::detect`] allocates nothing. Sensors are
+//! spread over a persistent pool of worker threads (the calling thread works too) fed through
+//! bounded crossbeam channels.
+
+mod hue;
+mod sensor;
+
+pub use hue::{hue_of, HueSignature};
+pub use sensor::SensorStats;
+
+use crate::capture::{FrameSet, SensorImage};
+use crate::config::EdgeConfig;
+use crate::geometry::EdgePlane;
+use crate::rig::Rig;
+use crossbeam::channel::{bounded, Receiver, Sender};
+use hue::HueTable;
+use nalgebra::Point2;
+use sensor::Workspace;
+use std::fmt::Write as _;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
+
+/// One observed straight edge of one sensor image.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Edge {
+    /// Sensor id.
+    pub sensor: u8,
+    /// Plane through the sensor's centre containing the edge, rig frame; `ends` are the unit
+    /// rays of the two end points (in the plane); the normal is oriented as ends[0] × ends[1].
+    pub plane: EdgePlane,
+    /// Pixel positions of the two ends on the image as it is (on the curved fisheye edge).
+    pub px: [Point2<f64>; 2],
+    /// Angle between the end rays (rad).
+    pub length_rad: f64,
+    /// Sum of the edgels' Sobel magnitudes / 4 ≈ contrast (grey levels) × length (edgels).
+    pub strength: f32,
+    pub hue: HueSignature,
+    /// Edgels the plane was fitted to.
+    pub edgels: u32,
+    /// RMS angle (rad) of the edgels' rays off the fitted plane.
+    pub rms_rad: f32,
+}
+
+/// Tuning of the detector beyond [`EdgeConfig`]; `Default` is what the benchmarks measured.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EdgeParams {
+    /// Minimum L1 Sobel magnitude |gx| + |gy| of an edgel (a step of h grey levels gives ≈ 4h).
+    pub gradient_threshold: u16,
+    /// Chains shorter than this (edgels) are dropped.
+    pub min_chain_edgels: usize,
+    /// A chain is split where a ray deviates more than this (rad) from the great circle of the
+    /// piece's end rays; pieces are merged when all their rays stay within it.
+    pub split_tolerance_rad: f64,
+    /// Pieces of different chains merge when their normals agree within this (rad)…
+    pub merge_angle_rad: f64,
+    /// …and the angular gap between them is at most this (rad).
+    pub merge_gap_rad: f64,
+    /// Distance (px) from the edge to the first pixel of each hue strip.
+    pub hue_strip_offset_px: f32,
+    /// At most this many positions along an edge are sampled for hue (evenly spread).
+    pub hue_samples_per_edge: usize,
+    /// Threads working on a frame, the calling thread included (0: available cores, at most 2).
+    pub threads: usize,
+}
+
+impl Default for EdgeParams {
+    fn default() -> Self {
+        EdgeParams {
+            gradient_threshold: 40,
+            min_chain_edgels: 10,
+            split_tolerance_rad: 0.2f64.to_radians(),
+            merge_angle_rad: 0.5f64.to_radians(),
+            merge_gap_rad: 3.0f64.to_radians(),
+            hue_strip_offset_px: 2.0,
+            hue_samples_per_edge: 48,
+            threads: 0,
+        }
+    }
+}
+
+/// A frame's images, handed to the workers as a raw pointer: `detect` does not return before
+/// every worker has reported that it is done with them.
+#[derive(Clone, Copy)]
+struct Job {
+    images: *const SensorImage,
+    count: usize,
+}
+
+// SAFETY: the pointer is only dereferenced while `EdgeDetector::detect` holds the borrow of the
+// frame and waits for every worker's completion message; `SensorImage` is `Sync`.
+unsafe impl Send for Job {}
+
+struct Shared {
+    workspaces: Box<[Mutex<Workspace>]>,
+    next: AtomicUsize,
+}
+
+impl Shared {
+    /// Takes sensors off the shared counter until none is left.
+    fn work(&self, job: Job) {
+        loop {
+            let k = self.next.fetch_add(1, Ordering::Relaxed);
+            if k >= self.workspaces.len() {
+                break;
+            }
+            let mut ws = self.workspaces[k].lock().unwrap_or_else(|e| e.into_inner());
+            if k < job.count {
+                // SAFETY: see `Job`.
+                let img = unsafe { &*job.images.add(k) };
+                ws.run(img);
+            } else {
+                ws.edges.clear();
+            }
+        }
+    }
+}
+
+struct Worker {
+    jobs: Option<Sender<Job>>,
+    handle: Option<JoinHandle<()>>,
+}
+
+/// Edge + hue extraction for every sensor of a rig, on buffers allocated once.
+pub struct EdgeDetector {
+    shared: Arc<Shared>,
+    workers: Vec<Worker>,
+    done: Receiver<()>,
+    all: Vec<Edge>,
+    /// all[offsets[k]..offsets[k + 1]] are sensor k's edges.
+    offsets: Vec<usize>,
+    stats: Vec<SensorStats>,
+}
+
+impl EdgeDetector {
+    /// Sizes every buffer from the rig and the config, with default [`EdgeParams`].
+    pub fn new(rig: &Rig, config: &EdgeConfig) -> EdgeDetector {
+        Self::with_params(rig, config, EdgeParams::default())
+    }
+
+    pub fn with_params(rig: &Rig, config: &EdgeConfig, params: EdgeParams) -> EdgeDetector {
+        let hue = Arc::new(HueTable::new(config.min_hue_saturation, config.min_hue_value));
+        let mut tables: Vec<(crate::geometry::Lens, u32, u32, Arc<[[f32; 3]]>)> = Vec::new();
+        let max_edges = config.max_edges_per_sensor as usize;
+        let workspaces: Box<[Mutex<Workspace>]> = rig
+            .sensors
+            .iter()
+            .map(|s| {
+                let rays = match tables.iter().find(|t| t.0 == s.lens && t.1 == s.width && t.2 == s.height) {
+                    Some(t) => t.3.clone(),
+                    None => {
+                        let t = sensor::ray_table(s);
+                        tables.push((s.lens, s.width, s.height, t.clone()));
+                        t
+                    }
+                };
+                Mutex::new(Workspace::new(
+                    s,
+                    rays,
+                    hue.clone(),
+                    params,
+                    config.hue_strip_width_px as usize,
+                    max_edges,
+                    config.min_edge_length_deg,
+                ))
+            })
+            .collect();
+        let n = workspaces.len();
+        let shared = Arc::new(Shared {
+            workspaces,
+            next: AtomicUsize::new(0),
+        });
+        let threads = if params.threads == 0 {
+            std::thread::available_parallelism().map_or(1, |p| p.get()).min(2)
+        } else {
+            params.threads
+        }
+        .clamp(1, n.max(1));
+        let (done_tx, done) = bounded::<()>(threads);
+        let workers = (1..threads)
+            .map(|k| {
+                let (tx, rx) = bounded::<Job>(1);
+                let shared = shared.clone();
+                let done_tx = done_tx.clone();
+                let handle = std::thread::Builder::new()
+                    .name(format!("edges-{k}"))
+                    .spawn(move || {
+                        while let Ok(job) = rx.recv() {
+                            shared.work(job);
+                            if done_tx.send(()).is_err() {
+                                break;
+                            }
+                        }
+                    })
+                    .expect("spawn an edge worker thread");
+                Worker {
+                    jobs: Some(tx),
+                    handle: Some(handle),
+                }
+            })
+            .collect();
+        EdgeDetector {
+            shared,
+            workers,
+            done,
+            all: Vec::with_capacity(n * max_edges),
+            offsets: vec![0; n + 1],
+            stats: vec![SensorStats::default(); n],
+        }
+    }
+
+    /// Number of threads working on a frame (the caller's included).
+    pub fn threads(&self) -> usize {
+        self.workers.len() + 1
+    }
+
+    /// Detects the edges of every sensor of the frame; returns them all, sensor by sensor,
+    /// strongest first within a sensor. Invalid images, images of the wrong size and sensors
+    /// missing from the frame yield no edges. Allocates nothing.
+    pub fn detect(&mut self, frame: &FrameSet) -> &[Edge] {
+        let images = frame.sensors();
+        let job = Job {
+            images: images.as_ptr(),
+            count: images.len(),
+        };
+        self.shared.next.store(0, Ordering::Relaxed);
+        let mut sent = 0;
+        for w in &self.workers {
+            if let Some(tx) = &w.jobs {
+                if tx.send(job).is_ok() {
+                    sent += 1;
+                }
+            }
+        }
+        self.shared.work(job);
+        for _ in 0..sent {
+            // A worker that died (panicked) drops its sender only after it stopped touching the
+            // frame, so returning afterwards is still sound.
+            if self.done.recv().is_err() {
+                panic!("an edge worker thread died");
+            }
+        }
+        self.collect();
+        &self.all
+    }
+
+    /// Detects the edges of one sensor image on the calling thread.
+    pub fn detect_sensor(&mut self, image: &SensorImage) -> &[Edge] {
+        let k = image.sensor();
+        assert!(k < self.shared.workspaces.len(), "sensor {k} is not in the rig");
+        {
+            let mut ws = self.shared.workspaces[k].lock().unwrap_or_else(|e| e.into_inner());
+            ws.run(image);
+        }
+        self.collect();
+        self.sensor_edges(k)
+    }
+
+    fn collect(&mut self) {
+        self.all.clear();
+        for (k, ws) in self.shared.workspaces.iter().enumerate() {
+            let ws = ws.lock().unwrap_or_else(|e| e.into_inner());
+            self.offsets[k] = self.all.len();
+            self.all.extend_from_slice(&ws.edges);
+            self.stats[k] = ws.stats;
+        }
+        let n = self.shared.workspaces.len();
+        self.offsets[n] = self.all.len();
+    }
+
+    /// Edges of the last detection.
+    pub fn edges(&self) -> &[Edge] {
+        &self.all
+    }
+
+    /// Sensor `k`'s edges of the last detection.
+    pub fn sensor_edges(&self, k: usize) -> &[Edge] {
+        &self.all[self.offsets[k]..self.offsets[k + 1]]
+    }
+
+    /// Sensor `k`'s counters of the last detection.
+    pub fn sensor_stats(&self, k: usize) -> SensorStats {
+        self.stats[k]
+    }
+}
+
+impl Drop for EdgeDetector {
+    fn drop(&mut self) {
+        for w in &mut self.workers {
+            w.jobs = None;
+        }
+        for w in &mut self.workers {
+            if let Some(h) = w.handle.take() {
+                let _ = h.join();
+            }
+        }
+    }
+}
+
+/// Header of the `omnitrack edges` CSV (INTERFACES.md), then our extra columns.
+pub const EDGES_CSV_HEADER: &str = "u1,v1,u2,v2,hue_left_mean,hue_left_var,hue_right_mean,hue_right_var,\
+sensor,length_deg,strength,nx,ny,nz,hue_left_kept,hue_right_kept";
+
+/// The `omnitrack edges` CSV of some edges (header line included). Hue means are in [0, 1) or
+/// `NaN` for a strip without any pixel of meaningful hue; the normal is in the rig frame.
+pub fn edges_csv(edges: &[Edge]) -> String {
+    let mut s = String::with_capacity(64 + edges.len() * 160);
+    s.push_str(EDGES_CSV_HEADER);
+    s.push('\n');
+    for e in edges {
+        let n = e.plane.normal;
+        let h = &e.hue;
+        let _ = writeln!(
+            s,
+            "{:.3},{:.3},{:.3},{:.3},{:.5},{:.6},{:.5},{:.6},{},{:.4},{:.1},{:.7},{:.7},{:.7},{:.3},{:.3}",
+            e.px[0].x,
+            e.px[0].y,
+            e.px[1].x,
+            e.px[1].y,
+            h.left_mean,
+            h.left_var,
+            h.right_mean,
+            h.right_var,
+            e.sensor,
+            e.length_rad.to_degrees(),
+            e.strength,
+            n.x,
+            n.y,
+            n.z,
+            h.left_kept,
+            h.right_kept
+        );
+    }
+    s
+}
+
+/// `omnitrack edges --rig R --sensor K IMAGE`: loads the image, checks it against the rig's
+/// sensor and returns the CSV; errors are one line naming the file.
+pub fn edges_csv_for_image(rig: &Rig, config: &EdgeConfig, sensor: usize, path: &std::path::Path) -> Result<String, String> {
+    let shown = path.display();
+    let Some(s) = rig.sensors.get(sensor) else {
+        return Err(format!(
+            "--sensor {sensor}: rig {:?} has sensors 0..{}",
+            rig.name,
+            rig.sensors.len().saturating_sub(1)
+        ));
+    };
+    let img = image::open(path).map_err(|e| format!("{shown}: cannot read image: {e}"))?.to_rgb8();
+    if img.width() != s.width || img.height() != s.height {
+        return Err(format!(
+            "{shown}: image is {}x{}, sensor {sensor} of rig {:?} is {}x{}",
+            img.width(),
+            img.height(),
+            rig.name,
+            s.width,
+            s.height
+        ));
+    }
+    let mut si = SensorImage::new(sensor, s.width, s.height);
+    si.pixels_mut().copy_from_slice(img.as_raw());
+    si.set_valid(0);
+    let params = EdgeParams {
+        threads: 1,
+        ..EdgeParams::default()
+    };
+    let mut det = EdgeDetector::with_params(rig, config, params);
+    Ok(edges_csv(det.detect_sensor(&si)))
+}

@@ -1,0 +1,839 @@
+//! Building the visibility table on the CPU (desk only): node validity, an exact software
+//! cube-map rasteriser (face ids + perspective-correct depth) per node, Koch–Teller's segment
+//! rule (Figure 9), optional merging with neighbour nodes, parallel over nodes with rayon.
+//!
+//! **Valid nodes** (free space inside the building). From the node, 26 rays (the directions
+//! of a 3×3×3 stencil) are cast against the model. The node is valid when
+//! 1. the rays straight down and straight up hit a face from its visible side (the floor below,
+//!    the ceiling above: the model's faces are counter-clockwise about their visible side);
+//! 2. at least 13 of the 26 rays hit a face (the others may leave through open doors and
+//!    windows, so rooms with openings keep their nodes, while a point outside the building
+//!    loses them: nothing below it, or most rays escape);
+//! 3. at most 10 % of the hits see a face from behind (a point inside a wall or a slab sees the
+//!    inside of the solid's faces);
+//! 4. no face is nearer than `clearance_m` (exact point–triangle distance; default 0.2 m).
+//!
+//! **Per valid node**: all triangles whose bounding box comes within `max_range_m` are
+//! rasterised into six `res × res` cube faces (pixel centres, 1/z interpolated linearly in
+//! screen space, near-plane clipping). Visible faces are the ids left in the buffers. A
+//! candidate segment (bounding a visible face, or a free `l` segment) is rasterised per cube
+//! face (clipped to the face's frustum, one sample per pixel along its major axis); a sample
+//! passes when the surface at that pixel or one of its 8 neighbours is one of the segment's own
+//! faces, or when the segment is not farther than the farthest surface in that 3×3
+//! neighbourhood (relative tolerance 1e-3) — the neighbourhood absorbs the half-pixel offset
+//! between a pixel centre and a segment that lies exactly on its faces' borders. A segment with
+//! at least `min_visible_pixels` passing pixels is visible (the paper's rule is 2).
+
+use super::{segment_vertex_ids, RawTable, TableHeader, VisibilityTable, FORMAT_VERSION, NO_NODE};
+use crate::config::VisibilityConfig;
+use crate::desk::render::bvh::{Ray, Triangle, TriangleBvh};
+use crate::desk::render::triangulate_polygon;
+use crate::model::Model;
+use nalgebra::{Point3, Vector3};
+use rayon::prelude::*;
+use std::path::Path;
+use std::time::Instant;
+
+/// How to build a table.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BuildOptions {
+    pub spacing_m: f64,
+    /// Node layers above the model's lowest point.
+    pub heights_m: Vec<f64>,
+    pub cube_map_resolution: u32,
+    pub min_visible_pixels: u32,
+    /// Triangles whose bounding box is farther than this from a node are not rendered.
+    pub max_range_m: f64,
+    /// Minimum distance from a valid node to any face.
+    pub clearance_m: f64,
+    /// Union each node's set with those of its grid neighbours (±1 in x, y and layer) that it
+    /// can see.
+    pub merge_neighbours: bool,
+    /// Show a progress bar on standard error.
+    pub progress: bool,
+}
+
+/// Default maximum range of the visibility render, metres.
+pub const DEFAULT_MAX_RANGE_M: f64 = 40.0;
+
+impl BuildOptions {
+    pub fn from_config(c: &VisibilityConfig) -> BuildOptions {
+        BuildOptions {
+            spacing_m: c.node_spacing_m,
+            heights_m: c.node_heights_m.clone(),
+            cube_map_resolution: c.cube_map_resolution,
+            min_visible_pixels: c.min_visible_pixels,
+            max_range_m: DEFAULT_MAX_RANGE_M,
+            clearance_m: 0.2,
+            merge_neighbours: false,
+            progress: false,
+        }
+    }
+}
+
+impl Default for BuildOptions {
+    fn default() -> Self {
+        BuildOptions::from_config(&VisibilityConfig::default())
+    }
+}
+
+/// A model triangle in f64 with its face.
+#[derive(Debug, Clone, Copy)]
+struct Tri {
+    p: [[f64; 3]; 3],
+    face: u32,
+}
+
+/// Everything the per-node work shares.
+pub struct Scene<'m> {
+    model: &'m Model,
+    tris: Vec<Tri>,
+    /// Per triangle: bounding box min, max.
+    boxes: Vec<([f64; 3], [f64; 3])>,
+    bvh: TriangleBvh,
+    /// Per face: unit normal.
+    normals: Vec<[f64; 3]>,
+}
+
+impl<'m> Scene<'m> {
+    pub fn new(model: &'m Model) -> Scene<'m> {
+        let mut tris = Vec::new();
+        for (fi, face) in model.faces.iter().enumerate() {
+            let corners: Vec<Point3<f64>> = face.vertices.iter().map(|&v| model.vertices[v as usize]).collect();
+            for t in triangulate_polygon(&corners, &face.normal) {
+                let p = t.map(|i| [corners[i].x, corners[i].y, corners[i].z]);
+                let area = cross(sub(p[1], p[0]), sub(p[2], p[0]));
+                if dot(area, area) > 1e-20 {
+                    tris.push(Tri { p, face: fi as u32 });
+                }
+            }
+        }
+        let boxes = tris
+            .iter()
+            .map(|t| {
+                let mut lo = t.p[0];
+                let mut hi = t.p[0];
+                for q in &t.p[1..] {
+                    for k in 0..3 {
+                        lo[k] = lo[k].min(q[k]);
+                        hi[k] = hi[k].max(q[k]);
+                    }
+                }
+                (lo, hi)
+            })
+            .collect();
+        let f32t: Vec<Triangle> = tris
+            .iter()
+            .map(|t| {
+                let p = t.p.map(|q| q.map(|c| c as f32));
+                Triangle::new(p[0], p[1], p[2])
+            })
+            .collect();
+        let payload: Vec<u32> = tris.iter().map(|t| t.face).collect();
+        let bvh = TriangleBvh::build(&f32t, &payload);
+        let normals = model
+            .faces
+            .iter()
+            .map(|f| [f.normal.x, f.normal.y, f.normal.z])
+            .collect();
+        Scene {
+            model,
+            tris,
+            boxes,
+            bvh,
+            normals,
+        }
+    }
+
+    /// Closest hit from `o` along unit `d`: (face, distance).
+    pub fn cast(&self, o: &Point3<f64>, d: &Vector3<f64>, t_max: f64) -> Option<(u32, f64)> {
+        let ray = Ray::new([o.x as f32, o.y as f32, o.z as f32], [d.x as f32, d.y as f32, d.z as f32]);
+        self.bvh
+            .closest(&ray, 1e-4, t_max as f32)
+            .map(|(f, t)| (f, t as f64))
+    }
+
+    /// Whether the straight path from `a` to `b` crosses no face.
+    pub fn clear_line(&self, a: &Point3<f64>, b: &Point3<f64>) -> bool {
+        let d = b - a;
+        let len = d.norm();
+        if len < 1e-9 {
+            return true;
+        }
+        self.cast(a, &(d / len), len - 1e-4).is_none()
+    }
+
+    /// The node-validity rule of the module doc.
+    pub fn is_free(&self, p: &Point3<f64>, clearance_m: f64) -> bool {
+        let mut hits = 0;
+        let mut back = 0;
+        for i in -1..=1i32 {
+            for j in -1..=1i32 {
+                for k in -1..=1i32 {
+                    if (i, j, k) == (0, 0, 0) {
+                        continue;
+                    }
+                    let d = Vector3::new(i as f64, j as f64, k as f64).normalize();
+                    let hit = self.cast(p, &d, 1e6);
+                    let front = hit.map(|(f, _)| {
+                        let n = self.normals[f as usize];
+                        n[0] * d.x + n[1] * d.y + n[2] * d.z < 0.0
+                    });
+                    if (i, j) == (0, 0) && front != Some(true) {
+                        return false; // floor below, ceiling above
+                    }
+                    if let Some(front) = front {
+                        hits += 1;
+                        if !front {
+                            back += 1;
+                        }
+                    }
+                }
+            }
+        }
+        if hits < 13 || back * 10 > hits {
+            return false;
+        }
+        let c = [p.x, p.y, p.z];
+        let r2 = clearance_m * clearance_m;
+        for (t, (lo, hi)) in self.tris.iter().zip(&self.boxes) {
+            if box_dist2(&c, lo, hi) < r2 && point_triangle_dist2(c, &t.p) < r2 {
+                return false;
+            }
+        }
+        true
+    }
+}
+
+#[inline]
+fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+#[inline]
+fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+#[inline]
+fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+
+#[inline]
+fn box_dist2(c: &[f64; 3], lo: &[f64; 3], hi: &[f64; 3]) -> f64 {
+    let mut d2 = 0.0;
+    for k in 0..3 {
+        let d = (lo[k] - c[k]).max(c[k] - hi[k]).max(0.0);
+        d2 += d * d;
+    }
+    d2
+}
+
+/// Squared distance from `p` to triangle `t` (Ericson, Real-Time Collision Detection 5.1.5).
+fn point_triangle_dist2(p: [f64; 3], t: &[[f64; 3]; 3]) -> f64 {
+    let (a, b, c) = (t[0], t[1], t[2]);
+    let ab = sub(b, a);
+    let ac = sub(c, a);
+    let ap = sub(p, a);
+    let d1 = dot(ab, ap);
+    let d2 = dot(ac, ap);
+    let closest = |q: [f64; 3]| {
+        let d = sub(p, q);
+        dot(d, d)
+    };
+    let lerp = |x: [f64; 3], y: [f64; 3], s: f64| [x[0] + s * y[0], x[1] + s * y[1], x[2] + s * y[2]];
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return closest(a);
+    }
+    let bp = sub(p, b);
+    let d3 = dot(ab, bp);
+    let d4 = dot(ac, bp);
+    if d3 >= 0.0 && d4 <= d3 {
+        return closest(b);
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        return closest(lerp(a, ab, d1 / (d1 - d3)));
+    }
+    let cp = sub(p, c);
+    let d5 = dot(ab, cp);
+    let d6 = dot(ac, cp);
+    if d6 >= 0.0 && d5 <= d6 {
+        return closest(c);
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        return closest(lerp(a, ac, d2 / (d2 - d6)));
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
+        let w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+        return closest(lerp(b, sub(c, b), w));
+    }
+    let denom = 1.0 / (va + vb + vc);
+    let v = vb * denom;
+    let w = vc * denom;
+    closest([
+        a[0] + ab[0] * v + ac[0] * w,
+        a[1] + ab[1] * v + ac[1] * w,
+        a[2] + ab[2] * v + ac[2] * w,
+    ])
+}
+
+const NEAR: f64 = 1e-3;
+
+/// Cube face `f`: (major axis, sign, u axis, v axis).
+#[inline]
+fn cube_axes(f: usize) -> (usize, f64, usize, usize) {
+    let a = f / 2;
+    let s = if f % 2 == 0 { 1.0 } else { -1.0 };
+    (a, s, (a + 1) % 3, (a + 2) % 3)
+}
+
+/// A worker's cube map: per face, `res²` pixels of 1/z (0 = nothing) and face id.
+pub struct CubeMap {
+    res: usize,
+    inv_z: Vec<f32>,
+    id: Vec<u32>,
+    /// Per model face: the node stamp at which it was last seen.
+    face_stamp: Vec<u32>,
+    stamp: u32,
+    poly: Vec<[f64; 3]>,
+    clipped: Vec<[f64; 3]>,
+}
+
+impl CubeMap {
+    pub fn new(res: usize, faces: usize) -> CubeMap {
+        CubeMap {
+            res,
+            inv_z: vec![0.0; 6 * res * res],
+            id: vec![u32::MAX; 6 * res * res],
+            face_stamp: vec![0; faces],
+            stamp: 0,
+            poly: Vec::with_capacity(8),
+            clipped: Vec::with_capacity(8),
+        }
+    }
+
+    /// Renders the scene around `eye`; returns the visible faces (sorted) and segments (sorted).
+    pub fn visibility(&mut self, scene: &Scene, eye: &Point3<f64>, opts: &BuildOptions) -> (Vec<u32>, Vec<u32>) {
+        self.inv_z.fill(0.0);
+        self.id.fill(u32::MAX);
+        let e = [eye.x, eye.y, eye.z];
+        let r2 = opts.max_range_m * opts.max_range_m;
+        for (t, (lo, hi)) in scene.tris.iter().zip(&scene.boxes) {
+            if box_dist2(&e, lo, hi) > r2 {
+                continue;
+            }
+            let q = t.p.map(|p| sub(p, e));
+            for f in 0..6 {
+                self.raster_triangle(f, &q, t.face);
+            }
+        }
+        self.stamp = self.stamp.wrapping_add(1);
+        if self.stamp == 0 {
+            self.face_stamp.fill(0);
+            self.stamp = 1;
+        }
+        let mut faces = Vec::new();
+        for &id in &self.id {
+            if id != u32::MAX && self.face_stamp[id as usize] != self.stamp {
+                self.face_stamp[id as usize] = self.stamp;
+                faces.push(id);
+            }
+        }
+        faces.sort_unstable();
+        let mut segments = Vec::new();
+        for (si, seg) in scene.model.segments.iter().enumerate() {
+            let candidate = if seg.faces.is_empty() {
+                let d = point_segment_dist2(e, [seg.a.x, seg.a.y, seg.a.z], [seg.b.x, seg.b.y, seg.b.z]);
+                d <= r2
+            } else {
+                seg.faces.iter().any(|&f| self.face_stamp[f as usize] == self.stamp)
+            };
+            if candidate && self.segment_visible(&e, seg, opts.min_visible_pixels) {
+                segments.push(si as u32);
+            }
+        }
+        (faces, segments)
+    }
+
+    fn raster_triangle(&mut self, f: usize, q: &[[f64; 3]; 3], face: u32) {
+        let (a, s, ua, va) = cube_axes(f);
+        let v = q.map(|p| [p[ua], p[va], s * p[a]]);
+        // Outside the frustum when all vertices are beyond one of its planes.
+        if v.iter().all(|p| p[2] <= NEAR)
+            || v.iter().all(|p| p[0] > p[2])
+            || v.iter().all(|p| -p[0] > p[2])
+            || v.iter().all(|p| p[1] > p[2])
+            || v.iter().all(|p| -p[1] > p[2])
+        {
+            return;
+        }
+        if v.iter().all(|p| p[2] > NEAR) {
+            self.raster_clipped(f, v, face);
+            return;
+        }
+        // Clip the polygon against z = NEAR.
+        self.poly.clear();
+        self.poly.extend_from_slice(&v);
+        self.clipped.clear();
+        for i in 0..3 {
+            let (p, n) = (self.poly[i], self.poly[(i + 1) % 3]);
+            let (ip, inn) = (p[2] > NEAR, n[2] > NEAR);
+            if ip {
+                self.clipped.push(p);
+            }
+            if ip != inn {
+                let t = (NEAR - p[2]) / (n[2] - p[2]);
+                self.clipped
+                    .push([p[0] + t * (n[0] - p[0]), p[1] + t * (n[1] - p[1]), NEAR]);
+            }
+        }
+        for i in 1..self.clipped.len().saturating_sub(1) {
+            let tri = [self.clipped[0], self.clipped[i], self.clipped[i + 1]];
+            self.raster_clipped(f, tri, face);
+        }
+    }
+
+    /// Rasterises a triangle in face coordinates (x, y, z > 0) at pixel centres.
+    fn raster_clipped(&mut self, f: usize, v: [[f64; 3]; 3], face: u32) {
+        let res = self.res as f64;
+        let half = 0.5 * res;
+        let s = v.map(|p| {
+            let w = 1.0 / p[2];
+            [(p[0] * w + 1.0) * half, (p[1] * w + 1.0) * half, w]
+        });
+        let area = (s[1][0] - s[0][0]) * (s[2][1] - s[0][1]) - (s[2][0] - s[0][0]) * (s[1][1] - s[0][1]);
+        if area == 0.0 || !area.is_finite() {
+            return;
+        }
+        let min_x = s.iter().map(|p| p[0]).fold(f64::INFINITY, f64::min);
+        let max_x = s.iter().map(|p| p[0]).fold(f64::NEG_INFINITY, f64::max);
+        let min_y = s.iter().map(|p| p[1]).fold(f64::INFINITY, f64::min);
+        let max_y = s.iter().map(|p| p[1]).fold(f64::NEG_INFINITY, f64::max);
+        // Pixel centres c + 0.5 inside [min, max].
+        let x0 = (min_x - 0.5).ceil().max(0.0);
+        let x1 = (max_x - 0.5).floor().min(res - 1.0);
+        let y0 = (min_y - 0.5).ceil().max(0.0);
+        let y1 = (max_y - 0.5).floor().min(res - 1.0);
+        if x0 > x1 || y0 > y1 {
+            return;
+        }
+        let inv_area = 1.0 / area;
+        // Edge functions e_i(x, y) = A_i x + B_i y + C_i, normalised so that they are the
+        // barycentric weights of the opposite vertex.
+        let edge = |a: [f64; 3], b: [f64; 3]| {
+            let ea = (a[1] - b[1]) * inv_area;
+            let eb = (b[0] - a[0]) * inv_area;
+            let ec = (a[0] * b[1] - a[1] * b[0]) * inv_area;
+            (ea, eb, ec)
+        };
+        let e0 = edge(s[1], s[2]);
+        let e1 = edge(s[2], s[0]);
+        let e2 = edge(s[0], s[1]);
+        // 1/z as a plane over the screen.
+        let wa = e0.0 * s[0][2] + e1.0 * s[1][2] + e2.0 * s[2][2];
+        let wb = e0.1 * s[0][2] + e1.1 * s[1][2] + e2.1 * s[2][2];
+        let wc = e0.2 * s[0][2] + e1.2 * s[1][2] + e2.2 * s[2][2];
+        let base = f * self.res * self.res;
+        let (x0, x1, y0, y1) = (x0 as usize, x1 as usize, y0 as usize, y1 as usize);
+        const EPS: f64 = -1e-9;
+        for y in y0..=y1 {
+            let py = y as f64 + 0.5;
+            let row = base + y * self.res;
+            let r0 = e0.1 * py + e0.2;
+            let r1 = e1.1 * py + e1.2;
+            let r2 = e2.1 * py + e2.2;
+            let rw = wb * py + wc;
+            // The span of x where all three edge functions are ≥ 0 (each is linear in x).
+            let mut lo = x0 as f64 + 0.5;
+            let mut hi = x1 as f64 + 0.5;
+            for (a, r) in [(e0.0, r0), (e1.0, r1), (e2.0, r2)] {
+                if a > 0.0 {
+                    lo = lo.max((EPS - r) / a);
+                } else if a < 0.0 {
+                    hi = hi.min((EPS - r) / a);
+                } else if r < EPS {
+                    lo = f64::INFINITY;
+                }
+            }
+            if lo > hi {
+                continue;
+            }
+            let xa = ((lo - 0.5).ceil().max(x0 as f64)) as usize;
+            let xb = ((hi - 0.5).floor().min(x1 as f64)) as isize;
+            if xb < xa as isize {
+                continue;
+            }
+            for x in xa..=xb as usize {
+                let w = (wa * (x as f64 + 0.5) + rw) as f32;
+                let i = row + x;
+                if w > self.inv_z[i] {
+                    self.inv_z[i] = w;
+                    self.id[i] = face;
+                }
+            }
+        }
+    }
+
+    /// Koch–Teller's rule: at least `min_pixels` pixels of the segment pass the depth test.
+    fn segment_visible(&self, e: &[f64; 3], seg: &crate::model::Segment, min_pixels: u32) -> bool {
+        let pa = sub([seg.a.x, seg.a.y, seg.a.z], *e);
+        let pb = sub([seg.b.x, seg.b.y, seg.b.z], *e);
+        let res = self.res as f64;
+        let half = 0.5 * res;
+        let mut passed = 0u32;
+        for f in 0..6 {
+            let (a, s, ua, va) = cube_axes(f);
+            let p = [pa[ua], pa[va], s * pa[a]];
+            let q = [pb[ua], pb[va], s * pb[a]];
+            // Clip t ∈ [0, 1] to z ≥ NEAR, |x| ≤ z, |y| ≤ z (each plane g(t) ≥ 0, g linear).
+            let (mut t0, mut t1) = (0.0f64, 1.0f64);
+            let planes = [
+                (p[2] - NEAR, q[2] - NEAR),
+                (p[2] - p[0], q[2] - q[0]),
+                (p[2] + p[0], q[2] + q[0]),
+                (p[2] - p[1], q[2] - q[1]),
+                (p[2] + p[1], q[2] + q[1]),
+            ];
+            let mut empty = false;
+            for (g0, g1) in planes {
+                if g0 < 0.0 && g1 < 0.0 {
+                    empty = true;
+                    break;
+                }
+                if g0 < 0.0 {
+                    t0 = t0.max(g0 / (g0 - g1));
+                } else if g1 < 0.0 {
+                    t1 = t1.min(g0 / (g0 - g1));
+                }
+            }
+            if empty || t0 >= t1 {
+                continue;
+            }
+            let at = |t: f64| {
+                let c = [p[0] + t * (q[0] - p[0]), p[1] + t * (q[1] - p[1]), p[2] + t * (q[2] - p[2])];
+                let w = 1.0 / c[2];
+                [(c[0] * w + 1.0) * half, (c[1] * w + 1.0) * half, w]
+            };
+            let (s0, s1) = (at(t0), at(t1));
+            let steps = (s1[0] - s0[0]).abs().max((s1[1] - s0[1]).abs()).ceil().max(1.0) as usize;
+            let base = f * self.res * self.res;
+            let mut last = usize::MAX;
+            for k in 0..=steps {
+                let u = k as f64 / steps as f64;
+                let x = s0[0] + u * (s1[0] - s0[0]);
+                let y = s0[1] + u * (s1[1] - s0[1]);
+                let w = s0[2] + u * (s1[2] - s0[2]);
+                let ix = (x.floor().max(0.0) as usize).min(self.res - 1);
+                let iy = (y.floor().max(0.0) as usize).min(self.res - 1);
+                let pix = iy * self.res + ix;
+                if pix == last {
+                    continue;
+                }
+                if self.sample_passes(base, ix, iy, w, &seg.faces) {
+                    last = pix;
+                    passed += 1;
+                    if passed >= min_pixels {
+                        return true;
+                    }
+                }
+            }
+        }
+        false
+    }
+
+    #[inline]
+    fn sample_passes(&self, base: usize, ix: usize, iy: usize, w: f64, faces: &[u32]) -> bool {
+        let mut min_w = f32::INFINITY;
+        let (xa, xb) = (ix.saturating_sub(1), (ix + 1).min(self.res - 1));
+        let (ya, yb) = (iy.saturating_sub(1), (iy + 1).min(self.res - 1));
+        for y in ya..=yb {
+            for x in xa..=xb {
+                let i = base + y * self.res + x;
+                let id = self.id[i];
+                if id != u32::MAX && faces.contains(&id) {
+                    return true;
+                }
+                min_w = min_w.min(self.inv_z[i]);
+            }
+        }
+        // Not farther than the farthest surface around (1/z: not smaller), 1e-3 relative.
+        w * (1.0 + 1e-3) >= min_w as f64
+    }
+}
+
+fn point_segment_dist2(p: [f64; 3], a: [f64; 3], b: [f64; 3]) -> f64 {
+    let ab = sub(b, a);
+    let t = (dot(sub(p, a), ab) / dot(ab, ab).max(1e-300)).clamp(0.0, 1.0);
+    let c = [a[0] + t * ab[0], a[1] + t * ab[1], a[2] + t * ab[2]];
+    let d = sub(p, c);
+    dot(d, d)
+}
+
+/// The node grid over a model's bounds.
+fn grid(model: &Model, opts: &BuildOptions) -> ([f64; 3], [u32; 3]) {
+    let (lo, hi) = model
+        .bounds()
+        .unwrap_or((Point3::origin(), Point3::origin()));
+    let s = opts.spacing_m;
+    let n = |a: f64, b: f64| (((b - a) / s).ceil().max(1.0)) as u32;
+    let (nx, ny) = (n(lo.x, hi.x), n(lo.y, hi.y));
+    // Centre the nodes: the grid spans (n·s) around the bounds' centre.
+    let ox = 0.5 * (lo.x + hi.x) - 0.5 * (nx as f64 - 1.0) * s;
+    let oy = 0.5 * (lo.y + hi.y) - 0.5 * (ny as f64 - 1.0) * s;
+    ([ox, oy, lo.z], [nx, ny, opts.heights_m.len() as u32])
+}
+
+/// Summary of a build, for logs and the benchmark.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BuildStats {
+    pub cells: usize,
+    pub nodes: usize,
+    pub seconds_nodes: f64,
+    pub seconds_render: f64,
+    pub mean_faces: f64,
+    pub mean_segments: f64,
+}
+
+/// Builds the raw per-node sets (the table before packing); `model_path` is recorded in the
+/// header. Parallel over nodes on the current rayon pool.
+pub fn build_raw(model: &Model, model_path: &str, opts: &BuildOptions) -> (RawTable, BuildStats) {
+    assert!(opts.spacing_m > 0.0 && !opts.heights_m.is_empty() && opts.cube_map_resolution > 0);
+    let mut heights = opts.heights_m.clone();
+    heights.sort_by(f64::total_cmp);
+    let opts = &BuildOptions {
+        heights_m: heights.clone(),
+        ..opts.clone()
+    };
+    let t0 = Instant::now();
+    let scene = Scene::new(model);
+    let (origin, dims) = grid(model, opts);
+    let (nx, ny, nz) = (dims[0] as usize, dims[1] as usize, dims[2] as usize);
+    let cells = nx * ny * nz;
+    let pos = |c: usize| {
+        let (i, j, k) = (c % nx, (c / nx) % ny, c / (nx * ny));
+        Point3::new(
+            origin[0] + i as f64 * opts.spacing_m,
+            origin[1] + j as f64 * opts.spacing_m,
+            origin[2] + heights[k],
+        )
+    };
+    let valid: Vec<bool> = (0..cells)
+        .into_par_iter()
+        .map(|c| scene.is_free(&pos(c), opts.clearance_m))
+        .collect();
+    let node_cell: Vec<u32> = (0..cells).filter(|&c| valid[c]).map(|c| c as u32).collect();
+    let mut cell_node = vec![NO_NODE; cells];
+    for (n, &c) in node_cell.iter().enumerate() {
+        cell_node[c as usize] = n as u32;
+    }
+    let seconds_nodes = t0.elapsed().as_secs_f64();
+
+    let t1 = Instant::now();
+    let bar = if opts.progress {
+        let bar = indicatif::ProgressBar::with_draw_target(
+            Some(node_cell.len() as u64),
+            indicatif::ProgressDrawTarget::stderr(),
+        );
+        bar.set_style(
+            indicatif::ProgressStyle::with_template("visibility {bar:40} {pos}/{len} nodes, {elapsed} (eta {eta})")
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        );
+        bar
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
+    let res = opts.cube_map_resolution as usize;
+    let sets: Vec<(Vec<u32>, Vec<u32>)> = node_cell
+        .par_iter()
+        .map_init(
+            || CubeMap::new(res, model.faces.len()),
+            |cube, &c| {
+                let r = cube.visibility(&scene, &pos(c as usize), opts);
+                bar.inc(1);
+                r
+            },
+        )
+        .collect();
+    bar.finish_and_clear();
+    let (mut node_faces, mut node_segments): (Vec<Vec<u32>>, Vec<Vec<u32>>) = sets.into_iter().unzip();
+
+    if opts.merge_neighbours {
+        let merged: Vec<(Vec<u32>, Vec<u32>)> = node_cell
+            .par_iter()
+            .map(|&c| {
+                let c = c as usize;
+                let (i, j, k) = ((c % nx) as i64, ((c / nx) % ny) as i64, (c / (nx * ny)) as i64);
+                let me = cell_node[c] as usize;
+                let mut f = node_faces[me].clone();
+                let mut s = node_segments[me].clone();
+                let here = pos(c);
+                for (di, dj, dk) in [(1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1)] {
+                    let (a, b, d) = (i + di, j + dj, k + dk);
+                    if a < 0 || b < 0 || d < 0 || a >= nx as i64 || b >= ny as i64 || d >= nz as i64 {
+                        continue;
+                    }
+                    let nc = (d as usize * ny + b as usize) * nx + a as usize;
+                    let other = cell_node[nc];
+                    if other == NO_NODE || !scene.clear_line(&here, &pos(nc)) {
+                        continue;
+                    }
+                    f.extend_from_slice(&node_faces[other as usize]);
+                    s.extend_from_slice(&node_segments[other as usize]);
+                }
+                f.sort_unstable();
+                f.dedup();
+                s.sort_unstable();
+                s.dedup();
+                (f, s)
+            })
+            .collect();
+        (node_faces, node_segments) = merged.into_iter().unzip();
+    }
+    let seconds_render = t1.elapsed().as_secs_f64();
+
+    // Every cell: the nearest valid node (rings of growing Chebyshev radius in x, y over all
+    // layers, stopping once the ring is farther than the best so far).
+    let nearest: Vec<u32> = (0..cells)
+        .into_par_iter()
+        .map(|c| {
+            if cell_node[c] != NO_NODE || node_cell.is_empty() {
+                return cell_node[c];
+            }
+            let (i, j) = ((c % nx) as i64, ((c / nx) % ny) as i64);
+            let p = pos(c);
+            let mut best = (f64::INFINITY, NO_NODE);
+            for r in 1..=(nx.max(ny) as i64) {
+                if (r as f64 - 1.0) * opts.spacing_m > best.0.sqrt() {
+                    break;
+                }
+                for b in (j - r)..=(j + r) {
+                    for a in (i - r)..=(i + r) {
+                        if (a - i).abs() != r && (b - j).abs() != r {
+                            continue;
+                        }
+                        if a < 0 || b < 0 || a >= nx as i64 || b >= ny as i64 {
+                            continue;
+                        }
+                        for k in 0..nz {
+                            let nc = (k * ny + b as usize) * nx + a as usize;
+                            if cell_node[nc] != NO_NODE {
+                                let d2 = (pos(nc) - p).norm_squared();
+                                if d2 < best.0 {
+                                    best = (d2, cell_node[nc]);
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+            // Same column, other layers.
+            let (i, j) = (i as usize, j as usize);
+            for k in 0..nz {
+                let nc = (k * ny + j) * nx + i;
+                if cell_node[nc] != NO_NODE {
+                    let d2 = (pos(nc) - p).norm_squared();
+                    if d2 < best.0 {
+                        best = (d2, cell_node[nc]);
+                    }
+                }
+            }
+            best.1
+        })
+        .collect();
+
+    let n = node_cell.len().max(1) as f64;
+    let stats = BuildStats {
+        cells,
+        nodes: node_cell.len(),
+        seconds_nodes,
+        seconds_render,
+        mean_faces: node_faces.iter().map(Vec::len).sum::<usize>() as f64 / n,
+        mean_segments: node_segments.iter().map(Vec::len).sum::<usize>() as f64 / n,
+    };
+    let header = TableHeader {
+        format_version: FORMAT_VERSION,
+        model_hash: super::model_hash(model),
+        model_path: model_path.to_string(),
+        vertex_count: model.vertices.len() as u32,
+        face_count: model.faces.len() as u32,
+        segment_count: model.segments.len() as u32,
+        origin,
+        dims,
+        spacing_m: opts.spacing_m,
+        heights_m: heights,
+        cube_map_resolution: opts.cube_map_resolution,
+        min_visible_pixels: opts.min_visible_pixels,
+        max_range_m: opts.max_range_m,
+        merged_neighbours: opts.merge_neighbours,
+        node_count: node_cell.len() as u32,
+    };
+    let raw = RawTable {
+        header,
+        cell_node: nearest,
+        node_cell,
+        node_faces,
+        node_segments,
+        segment_vertices: segment_vertex_ids(model),
+    };
+    (raw, stats)
+}
+
+/// Builds a packed table.
+pub fn build_table(model: &Model, model_path: &str, opts: &BuildOptions) -> VisibilityTable {
+    VisibilityTable::from_raw(build_raw(model, model_path, opts).0)
+}
+
+/// `omnitrack visibility build --model M --out V [--spacing-m S]`: loads the model, builds the
+/// table with `config` (spacing overridden by `spacing_m`), with a progress bar on standard
+/// error, and writes it. Returns the one-line summary to log.
+pub fn run_build(
+    model_path: &Path,
+    out: &Path,
+    spacing_m: Option<f64>,
+    config: &VisibilityConfig,
+) -> Result<String, super::VisibilityError> {
+    let model = Model::load(model_path).map_err(|e| super::VisibilityError::Invalid {
+        file: model_path.display().to_string(),
+        message: format!("cannot use model: {}", e.message),
+    })?;
+    let mut opts = BuildOptions::from_config(config);
+    if let Some(s) = spacing_m {
+        if !(s.is_finite() && s > 0.0) {
+            return Err(super::VisibilityError::Invalid {
+                file: out.display().to_string(),
+                message: format!("--spacing-m {s} must be a positive number of metres"),
+            });
+        }
+        opts.spacing_m = s;
+    }
+    if opts.heights_m.is_empty() || opts.cube_map_resolution == 0 {
+        return Err(super::VisibilityError::Invalid {
+            file: out.display().to_string(),
+            message: "[visibility] needs node_heights_m and a cube_map_resolution > 0".into(),
+        });
+    }
+    opts.progress = true;
+    let recorded = std::fs::canonicalize(model_path).unwrap_or_else(|_| model_path.to_path_buf());
+    let start = Instant::now();
+    let (raw, stats) = build_raw(&model, &recorded.display().to_string(), &opts);
+    let table = VisibilityTable::from_raw(raw);
+    table.save(out)?;
+    let bytes = std::fs::metadata(out).map(|m| m.len()).unwrap_or(0);
+    Ok(format!(
+        "{}: {} valid nodes of {} grid cells, {:.0} faces and {:.0} segments visible per node on average, {} distinct sets, {:.1} MB, built in {:.1} s",
+        out.display(),
+        stats.nodes,
+        stats.cells,
+        stats.mean_faces,
+        stats.mean_segments,
+        table.set_count(),
+        bytes as f64 / 1e6,
+        start.elapsed().as_secs_f64()
+    ))
+}
