@@ -85,8 +85,9 @@ fn main() -> ExitCode {
 fn run(command: Command) -> Result<(), String> {
     match command {
         Command::Demo => Err(
-            "demo is not available yet: it waits for the synthetic recordings (issue 3), \
-             the pose solvers (4), edge extraction (5), the visibility table (6) and the tracker (7)"
+            "demo is not available yet: it waits for edge and hue extraction (issue 5), the visibility \
+             table (6) and the tracker (7); synthetic recordings and the pose solvers are in (try \
+             `omnitrack-desk scenario lab` and `omnitrack pose`)"
                 .into(),
         ),
         Command::Check { rig, model, config } => {

@@ -413,6 +413,45 @@ fn med_r_and_t_survives_45_percent_outliers() {
     assert!(r < 0.5f64.to_radians() && t < 0.05, "landmarks: {r} rad {t} m");
 }
 
+#[test]
+fn med_r_and_t_reaches_past_lms_breakdown_at_50_percent_outliers_when_told_to_expect_them() {
+    // Plain LMS breaks down at 50 %: half the lines wrong leaves the median among the outliers.
+    // With lms_outlier_fraction = 0.5 the solver minimises a lower order statistic instead.
+    let sensors = rig();
+    for seed in 0..10 {
+        let mut rng = SmallRng::seed_from_u64(100 + seed);
+        let truth = random_pose(&mut rng);
+        let n = 30;
+        let outliers = 15;
+        let mut c: Vec<_> = scene(&mut rng, &sensors, &truth, n)
+            .iter()
+            .map(|l| perturb(&mut rng, l, 0.1f64.to_radians()))
+            .collect();
+        let first = c[0].segment;
+        for i in 0..outliers {
+            c[i].segment = if i + 1 < outliers { c[i + 1].segment } else { first };
+        }
+        let o = SolverOptions {
+            lms_outlier_fraction: 0.5,
+            lms_success_probability: 0.999,
+            ..SolverOptions::default()
+        };
+        let sol = med_r_and_t(&c, None, &o, seed).unwrap();
+        let (r, t) = errors(&sol.pose, &truth);
+        assert!(
+            r < 0.5f64.to_radians() && t < 0.05,
+            "seed {seed}: {:.3}° {:.3} m",
+            r.to_degrees(),
+            t
+        );
+        assert!(
+            sol.inliers.iter().all(|&i| i >= outliers),
+            "seed {seed}: an outlier was kept"
+        );
+        assert!(sol.inliers.len() >= n - outliers - 2, "seed {seed}: inliers rejected");
+    }
+}
+
 // ---------------------------------------------------------------------------------------------
 // §5 covariance against the empirical covariance
 

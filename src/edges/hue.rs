@@ -42,7 +42,11 @@ impl HueAcc {
 
     /// (mean, variance, kept fraction).
     pub fn stats(&self) -> (f32, f32, f32) {
-        let kept = if self.total > 0 { self.kept as f32 / self.total as f32 } else { 0.0 };
+        let kept = if self.total > 0 {
+            self.kept as f32 / self.total as f32
+        } else {
+            0.0
+        };
         if self.kept == 0 {
             return (f32::NAN, f32::NAN, kept);
         }

@@ -161,7 +161,10 @@ impl EdgeDetector {
             .sensors
             .iter()
             .map(|s| {
-                let rays = match tables.iter().find(|t| t.0 == s.lens && t.1 == s.width && t.2 == s.height) {
+                let rays = match tables
+                    .iter()
+                    .find(|t| t.0 == s.lens && t.1 == s.width && t.2 == s.height)
+                {
                     Some(t) => t.3.clone(),
                     None => {
                         let t = sensor::ray_table(s);
@@ -351,7 +354,12 @@ pub fn edges_csv(edges: &[Edge]) -> String {
 
 /// `omnitrack edges --rig R --sensor K IMAGE`: loads the image, checks it against the rig's
 /// sensor and returns the CSV; errors are one line naming the file.
-pub fn edges_csv_for_image(rig: &Rig, config: &EdgeConfig, sensor: usize, path: &std::path::Path) -> Result<String, String> {
+pub fn edges_csv_for_image(
+    rig: &Rig,
+    config: &EdgeConfig,
+    sensor: usize,
+    path: &std::path::Path,
+) -> Result<String, String> {
     let shown = path.display();
     let Some(s) = rig.sensors.get(sensor) else {
         return Err(format!(
@@ -360,7 +368,9 @@ pub fn edges_csv_for_image(rig: &Rig, config: &EdgeConfig, sensor: usize, path: 
             rig.sensors.len().saturating_sub(1)
         ));
     };
-    let img = image::open(path).map_err(|e| format!("{shown}: cannot read image: {e}"))?.to_rgb8();
+    let img = image::open(path)
+        .map_err(|e| format!("{shown}: cannot read image: {e}"))?
+        .to_rgb8();
     if img.width() != s.width || img.height() != s.height {
         return Err(format!(
             "{shown}: image is {}x{}, sensor {sensor} of rig {:?} is {}x{}",

@@ -168,7 +168,12 @@ impl Workspace {
             let r0 = &self.grey[(v - 1) * w..v * w];
             let r1 = &self.grey[v * w..(v + 1) * w];
             let r2 = &self.grey[(v + 1) * w..(v + 2) * w];
-            for (((s, d), (&a, &b)), &c) in self.col_sum.iter_mut().zip(self.col_diff.iter_mut()).zip(r0.iter().zip(r1)).zip(r2)
+            for (((s, d), (&a, &b)), &c) in self
+                .col_sum
+                .iter_mut()
+                .zip(self.col_diff.iter_mut())
+                .zip(r0.iter().zip(r1))
+                .zip(r2)
             {
                 *s = a as i16 + 2 * b as i16 + c as i16;
                 *d = c as i16 - a as i16;
@@ -306,7 +311,13 @@ impl Workspace {
                     continue;
                 }
                 self.stats.chains += 1;
-                self.load_chain(bwd.iter().rev().copied().chain(std::iter::once(i as u32)).chain(fwd.iter().copied()));
+                self.load_chain(
+                    bwd.iter()
+                        .rev()
+                        .copied()
+                        .chain(std::iter::once(i as u32))
+                        .chain(fwd.iter().copied()),
+                );
                 self.fit_chain(rgb);
             }
         }
@@ -334,7 +345,11 @@ impl Workspace {
             let ma = self.mag[(i as isize - off) as usize] as f32;
             let mb = self.mag[(i as isize + off) as usize] as f32;
             let denom = ma - 2.0 * m0 + mb;
-            let s = if denom < 0.0 { (0.5 * (ma - mb) / denom).clamp(-0.5, 0.5) } else { 0.0 };
+            let s = if denom < 0.0 {
+                (0.5 * (ma - mb) / denom).clamp(-0.5, 0.5)
+            } else {
+                0.0
+            };
             let x = (i % w) as f32 + s * du as f32;
             let y = (i / w) as f32 + s * dv as f32;
             let Some(r) = self.ray_at(x, y) else { continue };
@@ -576,7 +591,8 @@ impl Workspace {
             if k == 0 {
                 self.cands.clear();
             } else {
-                self.cands.select_nth_unstable_by(k - 1, |a, b| b.strength.total_cmp(&a.strength));
+                self.cands
+                    .select_nth_unstable_by(k - 1, |a, b| b.strength.total_cmp(&a.strength));
                 self.cands.truncate(k);
             }
         }

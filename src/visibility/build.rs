@@ -147,10 +147,11 @@ impl<'m> Scene<'m> {
 
     /// Closest hit from `o` along unit `d`: (face, distance).
     pub fn cast(&self, o: &Point3<f64>, d: &Vector3<f64>, t_max: f64) -> Option<(u32, f64)> {
-        let ray = Ray::new([o.x as f32, o.y as f32, o.z as f32], [d.x as f32, d.y as f32, d.z as f32]);
-        self.bvh
-            .closest(&ray, 1e-4, t_max as f32)
-            .map(|(f, t)| (f, t as f64))
+        let ray = Ray::new(
+            [o.x as f32, o.y as f32, o.z as f32],
+            [d.x as f32, d.y as f32, d.z as f32],
+        );
+        self.bvh.closest(&ray, 1e-4, t_max as f32).map(|(f, t)| (f, t as f64))
     }
 
     /// Whether the straight path from `a` to `b` crosses no face.
@@ -516,7 +517,11 @@ impl CubeMap {
                 continue;
             }
             let at = |t: f64| {
-                let c = [p[0] + t * (q[0] - p[0]), p[1] + t * (q[1] - p[1]), p[2] + t * (q[2] - p[2])];
+                let c = [
+                    p[0] + t * (q[0] - p[0]),
+                    p[1] + t * (q[1] - p[1]),
+                    p[2] + t * (q[2] - p[2]),
+                ];
                 let w = 1.0 / c[2];
                 [(c[0] * w + 1.0) * half, (c[1] * w + 1.0) * half, w]
             };
@@ -577,9 +582,7 @@ fn point_segment_dist2(p: [f64; 3], a: [f64; 3], b: [f64; 3]) -> f64 {
 
 /// The node grid over a model's bounds.
 fn grid(model: &Model, opts: &BuildOptions) -> ([f64; 3], [u32; 3]) {
-    let (lo, hi) = model
-        .bounds()
-        .unwrap_or((Point3::origin(), Point3::origin()));
+    let (lo, hi) = model.bounds().unwrap_or((Point3::origin(), Point3::origin()));
     let s = opts.spacing_m;
     let n = |a: f64, b: f64| (((b - a) / s).ceil().max(1.0)) as u32;
     let (nx, ny) = (n(lo.x, hi.x), n(lo.y, hi.y));

@@ -222,7 +222,11 @@ fn delta_encode(ids: &[u32]) -> Vec<u32> {
 fn delta_decode(deltas: &[u32], out: &mut Vec<u32>) -> Option<()> {
     let mut prev = 0u32;
     for (i, &d) in deltas.iter().enumerate() {
-        let x = if i == 0 { d } else { prev.checked_add(d)?.checked_add(1)? };
+        let x = if i == 0 {
+            d
+        } else {
+            prev.checked_add(d)?.checked_add(1)?
+        };
         out.push(x);
         prev = x;
     }
@@ -268,7 +272,10 @@ impl VisibilityTable {
     fn from_parts(header: TableHeader, body: TableBody) -> Result<VisibilityTable, String> {
         let cells = header.dims.iter().map(|&d| d as usize).product::<usize>();
         if body.cell_node.len() != cells {
-            return Err(format!("{} grid cells stored, header says {cells}", body.cell_node.len()));
+            return Err(format!(
+                "{} grid cells stored, header says {cells}",
+                body.cell_node.len()
+            ));
         }
         let nodes = header.node_count as usize;
         if body.node_cell.len() != nodes || body.node_set.len() != nodes {
@@ -337,7 +344,8 @@ impl VisibilityTable {
         };
         for i in 0..sets {
             let (a, b) = (self.set_start[i], self.set_start[i + 1]);
-            body.set_faces.push(delta_encode(&self.faces[a[0] as usize..b[0] as usize]));
+            body.set_faces
+                .push(delta_encode(&self.faces[a[0] as usize..b[0] as usize]));
             body.set_segments
                 .push(delta_encode(&self.segments[a[1] as usize..b[1] as usize]));
         }
@@ -556,12 +564,17 @@ pub fn query_json(table: &VisibilityTable, model: &Model, at: &Point3<f64>) -> S
     }
     out.push_str("],\"segments\":[");
     for (i, &s) in set.segments.iter().enumerate() {
-        let Some(seg) = model.segments.get(s as usize) else { continue };
+        let Some(seg) = model.segments.get(s as usize) else {
+            continue;
+        };
         if i > 0 {
             out.push(',');
         }
         out.push('[');
-        for (k, c) in [seg.a.x, seg.a.y, seg.a.z, seg.b.x, seg.b.y, seg.b.z].into_iter().enumerate() {
+        for (k, c) in [seg.a.x, seg.a.y, seg.a.z, seg.b.x, seg.b.y, seg.b.z]
+            .into_iter()
+            .enumerate()
+        {
             if k > 0 {
                 out.push(',');
             }
@@ -571,7 +584,9 @@ pub fn query_json(table: &VisibilityTable, model: &Model, at: &Point3<f64>) -> S
     }
     out.push_str("],\"vertices\":[");
     for (i, &v) in set.vertices.iter().enumerate() {
-        let Some(p) = model.vertices.get(v as usize) else { continue };
+        let Some(p) = model.vertices.get(v as usize) else {
+            continue;
+        };
         if i > 0 {
             out.push(',');
         }
@@ -585,7 +600,9 @@ pub fn query_json(table: &VisibilityTable, model: &Model, at: &Point3<f64>) -> S
 pub fn parse_point(text: &str) -> Result<Point3<f64>, String> {
     let parts: Vec<&str> = text.split(',').map(str::trim).collect();
     if parts.len() != 3 {
-        return Err(format!("--at {text:?}: expected x,y,z (three numbers separated by commas)"));
+        return Err(format!(
+            "--at {text:?}: expected x,y,z (three numbers separated by commas)"
+        ));
     }
     let mut c = [0.0; 3];
     for (k, p) in parts.iter().enumerate() {

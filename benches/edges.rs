@@ -1,0 +1,431 @@
+//! Edge + hue extraction: accuracy on rendered frames of the synthetic scenarios and speed of a
+//! whole six-sensor frame, beside OpenCV's LSD and FastLineDetector on the same images.
+//!
+//! Run: `cargo bench --bench edges` (needs the `desk` feature, on by default). Options after
+//! `--`: `--quick` (fewer frames), `--no-opencv` (skip tools/bench_edges.py).
+//!
+//! Accuracy. Ground truth per sensor image: the model segments, sampled every centimetre, each
+//! sample kept when it projects onto the image (3 px from the border) and the first hit of the
+//! ray from the sensor's centre is the sample itself (± 2 cm: the renderer's scene includes
+//! clutter, so clutter occludes); contiguous runs longer than 30 px are the visible segments.
+//! A visible segment is recalled when one detected edge of that sensor has a plane normal within
+//! 1° of the segment's plane (through the same sensor centre) and covers ≥ 50 % of the run's
+//! angular extent along that plane. Normal error: angle between the planes of the best match.
+//! "edges on model" is the fraction of detected edges that lie (≤ 1°, any overlap) on a visible
+//! model segment; the rest are clutter, people, texture or noise.
+//!
+//! Speed: `EdgeDetector::detect` on whole six-sensor frames (2 threads, the calling one
+//! included; also 1 thread), p50/p99/max over repeated passes; the first frames are written as
+//! PNGs and tools/bench_edges.py times OpenCV on them in the same invocation.
+
+#[cfg(feature = "desk")]
+mod bench {
+    use nalgebra::{Point3, Vector3};
+    use omnitrack::capture::FrameSet;
+    use omnitrack::config::EdgeConfig;
+    use omnitrack::desk::render::{Appearance, FrameSpec, Renderer};
+    use omnitrack::desk::scenario::{Scenario, ScenarioName};
+    use omnitrack::edges::{Edge, EdgeDetector, EdgeParams};
+    use omnitrack::geometry::Pose;
+    use omnitrack::{Model, Rig};
+    use std::path::{Path, PathBuf};
+    use std::time::Instant;
+
+    fn percentile(sorted: &[f64], q: f64) -> f64 {
+        if sorted.is_empty() {
+            return f64::NAN;
+        }
+        sorted[((sorted.len() - 1) as f64 * q).round() as usize]
+    }
+
+    /// A visible run of a model segment in one sensor.
+    struct Truth {
+        sensor: usize,
+        normal: Vector3<f64>,
+        /// First and last visible sample rays (rig frame, from the sensor centre).
+        r1: Vector3<f64>,
+        r2: Vector3<f64>,
+    }
+
+    fn ground_truth(model: &Model, rig: &Rig, renderer: &Renderer, pose: &Pose, out: &mut Vec<Truth>) {
+        out.clear();
+        let inv = pose.inverse();
+        for (k, s) in rig.sensors.iter().enumerate() {
+            let c_rig = s.centre();
+            let c_world = pose * c_rig;
+            let (w, h) = (s.width as f64, s.height as f64);
+            for seg in &model.segments {
+                let (a, b) = (inv * seg.a, inv * seg.b);
+                let normal = (a - c_rig).cross(&(b - c_rig));
+                if normal.norm() < 1e-9 {
+                    continue;
+                }
+                let normal = normal.normalize();
+                let n = ((seg.length() / 0.01).ceil() as usize).clamp(20, 4000);
+                let mut run: Option<(Vector3<f64>, Vector3<f64>, f64, nalgebra::Point2<f64>)> = None;
+                let mut flush = |run: &mut Option<(Vector3<f64>, Vector3<f64>, f64, nalgebra::Point2<f64>)>| {
+                    if let Some((r1, r2, len, _)) = run.take() {
+                        if len > 30.0 {
+                            out.push(Truth {
+                                sensor: k,
+                                normal,
+                                r1,
+                                r2,
+                            });
+                        }
+                    }
+                };
+                for i in 0..=n {
+                    let t = i as f64 / n as f64;
+                    let p_rig = a + (b - a) * t;
+                    let p_world: Point3<f64> = seg.a + (seg.b - seg.a) * t;
+                    let visible = s.project_from_rig(&p_rig).filter(|px| {
+                        px.x >= 3.0 && px.y >= 3.0 && px.x <= w - 4.0 && px.y <= h - 4.0 && {
+                            let d = p_world - c_world;
+                            let dist = d.norm();
+                            match renderer.cast(&c_world, &(d / dist)) {
+                                Some(hit) => hit.t >= dist - 0.02,
+                                None => true,
+                            }
+                        }
+                    });
+                    match (visible, run.as_mut()) {
+                        (Some(px), Some(r)) if (px - r.3).norm() < 20.0 => {
+                            r.2 += (px - r.3).norm();
+                            r.1 = (p_rig - c_rig).normalize();
+                            r.3 = px;
+                        }
+                        (Some(px), _) => {
+                            flush(&mut run);
+                            let r = (p_rig - c_rig).normalize();
+                            run = Some((r, r, 0.0, px));
+                        }
+                        (None, _) => flush(&mut run),
+                    }
+                }
+                flush(&mut run);
+            }
+        }
+    }
+
+    /// Angular interval of rays r1, r2 along the plane with normal n, from reference e1.
+    fn interval(n: &Vector3<f64>, e1: &Vector3<f64>, r1: &Vector3<f64>, r2: &Vector3<f64>) -> (f64, f64) {
+        let e2 = n.cross(e1);
+        let a = |r: &Vector3<f64>| r.dot(&e2).atan2(r.dot(e1));
+        let (x, y) = (a(r1), a(r2));
+        (x.min(y), x.max(y))
+    }
+
+    #[derive(Default)]
+    struct Score {
+        truths: usize,
+        recalled: usize,
+        errors_deg: Vec<f64>,
+        edges: usize,
+        edges_on_model: usize,
+        sensor_frames: usize,
+    }
+
+    fn score(truths: &[Truth], edges: &[Edge], s: &mut Score) {
+        let cos1 = 1f64.to_radians().cos();
+        s.edges += edges.len();
+        for t in truths {
+            let e1 = t.r1;
+            let ti = interval(&t.normal, &e1, &t.r1, &t.r2);
+            let tlen = (ti.1 - ti.0).max(1e-9);
+            let mut best: Option<f64> = None;
+            for e in edges.iter().filter(|e| e.sensor as usize == t.sensor) {
+                let c = e.plane.normal.dot(&t.normal).abs();
+                if c < cos1 {
+                    continue;
+                }
+                let ei = interval(&t.normal, &e1, &e.plane.ends[0], &e.plane.ends[1]);
+                let overlap = (ti.1.min(ei.1) - ti.0.max(ei.0)).max(0.0);
+                if overlap >= 0.5 * tlen {
+                    let err = c.min(1.0).acos().to_degrees();
+                    best = Some(best.map_or(err, |b: f64| b.min(err)));
+                }
+            }
+            s.truths += 1;
+            if let Some(err) = best {
+                s.recalled += 1;
+                s.errors_deg.push(err);
+            }
+        }
+        for e in edges {
+            let on = truths.iter().any(|t| {
+                t.sensor == e.sensor as usize && e.plane.normal.dot(&t.normal).abs() >= cos1 && {
+                    let ti = interval(&t.normal, &t.r1, &t.r1, &t.r2);
+                    let ei = interval(&t.normal, &t.r1, &e.plane.ends[0], &e.plane.ends[1]);
+                    ti.1.min(ei.1) > ti.0.max(ei.0)
+                }
+            });
+            s.edges_on_model += on as usize;
+        }
+    }
+
+    fn to_frameset(rig: &Rig, images: &[image::RgbImage], frame: &mut FrameSet) {
+        for (k, img) in images.iter().enumerate().take(rig.sensors.len()) {
+            let si = frame.sensor_mut(k);
+            si.pixels_mut().copy_from_slice(img.as_raw());
+            si.set_valid(k as u64);
+        }
+    }
+
+    struct Setup {
+        name: String,
+        scenario: ScenarioName,
+        appearance: Appearance,
+    }
+
+    fn setups() -> Vec<Setup> {
+        let d = Appearance::default;
+        let mk = |name: &str, scenario, appearance| Setup {
+            name: name.to_string(),
+            scenario,
+            appearance,
+        };
+        vec![
+            mk("lab default", ScenarioName::Lab, d()),
+            mk("lab plain (all effects off)", ScenarioName::Lab, Appearance::plain()),
+            mk(
+                "lab clutter 0",
+                ScenarioName::Lab,
+                Appearance {
+                    clutter: 0.0,
+                    people: 0.0,
+                    ..d()
+                },
+            ),
+            mk(
+                "lab clutter 2, people 2",
+                ScenarioName::Lab,
+                Appearance {
+                    clutter: 2.0,
+                    people: 2.0,
+                    ..d()
+                },
+            ),
+            mk(
+                "lab clutter 4, people 4",
+                ScenarioName::Lab,
+                Appearance {
+                    clutter: 4.0,
+                    people: 4.0,
+                    ..d()
+                },
+            ),
+            mk("lab noise 0", ScenarioName::Lab, Appearance { noise: 0.0, ..d() }),
+            mk("lab noise 5", ScenarioName::Lab, Appearance { noise: 5.0, ..d() }),
+            mk("lab noise 10", ScenarioName::Lab, Appearance { noise: 10.0, ..d() }),
+            mk(
+                "lab dim: drift 0.3, vignetting 0.7",
+                ScenarioName::Lab,
+                Appearance {
+                    lighting_drift: 0.3,
+                    vignetting: 0.7,
+                    ..d()
+                },
+            ),
+            mk(
+                "lab flat light (shading 0)",
+                ScenarioName::Lab,
+                Appearance { shading: 0.0, ..d() },
+            ),
+            mk(
+                "lab grey (colour 0)",
+                ScenarioName::Lab,
+                Appearance { colour: 0.0, ..d() },
+            ),
+            mk(
+                "lab motion blur 0.5",
+                ScenarioName::Lab,
+                Appearance {
+                    motion_blur: 0.5,
+                    ..d()
+                },
+            ),
+            mk("corridor default", ScenarioName::Corridor, d()),
+            mk("handheld default", ScenarioName::Handheld, d()),
+        ]
+    }
+
+    fn root() -> PathBuf {
+        PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+    }
+
+    pub fn main() {
+        let args: Vec<String> = std::env::args().collect();
+        let quick = args.iter().any(|a| a == "--quick");
+        let opencv = !args.iter().any(|a| a == "--no-opencv");
+        let rig = Rig::load(&root().join("firmware_config/ladybug2.toml")).expect("rig");
+        let config = EdgeConfig::default();
+        let frames_per_setup = if quick { 3 } else { 8 };
+        let traj_len = 400;
+
+        println!(
+            "# omnitrack edges benchmark (rig {}, {} sensors)",
+            rig.name,
+            rig.sensors.len()
+        );
+        println!("config: {config:?}");
+        println!("params: {:?}", EdgeParams::default());
+        println!();
+        println!("## Accuracy ({frames_per_setup} frames per row, visible model segments > 30 px)");
+        println!();
+        println!(
+            "| setup | visible segs | recall | median normal err (°) | p90 err (°) | edges/sensor | edges on model |"
+        );
+        println!("| --- | ---: | ---: | ---: | ---: | ---: | ---: |");
+        let mut detector = EdgeDetector::new(&rig, &config);
+        let mut frame = FrameSet::for_rig(&rig);
+        let mut truths = Vec::new();
+        let mut speed_frames: Vec<Vec<image::RgbImage>> = Vec::new();
+        for setup in setups() {
+            let scenario = Scenario::get(setup.scenario);
+            let model = Model::from_obj_str(&scenario.model_obj().expect("model"), "scenario").expect("model");
+            let traj = scenario.trajectory(traj_len, 7);
+            let keep: Vec<Point3<f64>> = traj.iter().map(|s| Point3::from(s.pose.translation.vector)).collect();
+            let renderer = Renderer::new(&model, &rig, setup.appearance.clone(), &keep);
+            let mut sc = Score::default();
+            for f in 0..frames_per_setup {
+                let k = 5 + f * (traj_len - 10) / frames_per_setup;
+                let spec = FrameSpec {
+                    index: k as u64,
+                    timestamp_ns: traj[k].timestamp_ns,
+                    pose: traj[k].pose,
+                    previous: Some(traj[k - 1]),
+                };
+                let images = renderer.render_frame(&spec);
+                to_frameset(&rig, &images, &mut frame);
+                let edges = detector.detect(&frame);
+                ground_truth(&model, &rig, &renderer, &traj[k].pose, &mut truths);
+                score(&truths, edges, &mut sc);
+                sc.sensor_frames += rig.sensors.len();
+                if setup.name == "lab default" {
+                    speed_frames.push(images);
+                }
+            }
+            sc.errors_deg.sort_by(f64::total_cmp);
+            println!(
+                "| {} | {} | {:.1} % | {:.4} | {:.4} | {:.1} | {:.1} % |",
+                setup.name,
+                sc.truths,
+                100.0 * sc.recalled as f64 / sc.truths.max(1) as f64,
+                percentile(&sc.errors_deg, 0.5),
+                percentile(&sc.errors_deg, 0.9),
+                sc.edges as f64 / sc.sensor_frames.max(1) as f64,
+                100.0 * sc.edges_on_model as f64 / sc.edges.max(1) as f64
+            );
+        }
+
+        // Speed.
+        let dir = root().join("target/bench-edges/frames");
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).expect("create the PNG directory");
+        for (f, images) in speed_frames.iter().enumerate() {
+            for (k, img) in images.iter().enumerate() {
+                img.save(dir.join(format!("frame{f:03}_s{k}.png")))
+                    .expect("write a PNG");
+            }
+        }
+        let frames: Vec<FrameSet> = speed_frames
+            .iter()
+            .map(|images| {
+                let mut fs = FrameSet::for_rig(&rig);
+                to_frameset(&rig, images, &mut fs);
+                fs
+            })
+            .collect();
+        let passes = if quick { 60 } else { 300 };
+        println!();
+        println!(
+            "## Speed: whole six-sensor frame, lab default appearance, {} distinct frames, {passes} passes",
+            frames.len()
+        );
+        println!();
+        println!("| detector | threads | p50 ms | p99 ms | max ms | edges/frame |");
+        println!("| --- | ---: | ---: | ---: | ---: | ---: |");
+        let mut ours_p50 = f64::NAN;
+        for threads in [2usize, 1] {
+            let params = EdgeParams {
+                threads,
+                ..EdgeParams::default()
+            };
+            let mut det = EdgeDetector::with_params(&rig, &config, params);
+            for fs in &frames {
+                det.detect(fs); // warm-up
+            }
+            let mut ms = Vec::with_capacity(passes);
+            let mut count = 0usize;
+            for p in 0..passes {
+                let fs = &frames[p % frames.len()];
+                let t = Instant::now();
+                let n = det.detect(fs).len();
+                ms.push(t.elapsed().as_secs_f64() * 1e3);
+                count += n;
+            }
+            ms.sort_by(f64::total_cmp);
+            if threads == 2 {
+                ours_p50 = percentile(&ms, 0.5);
+            }
+            println!(
+                "| omnitrack EdgeDetector (edges + hue) | {} | {:.3} | {:.3} | {:.3} | {:.1} |",
+                det.threads(),
+                percentile(&ms, 0.5),
+                percentile(&ms, 0.99),
+                ms[ms.len() - 1],
+                count as f64 / passes as f64
+            );
+        }
+        if opencv {
+            run_opencv(&dir, ours_p50);
+        }
+        println!();
+        println!("PNG frames: {}", dir.display());
+    }
+
+    fn run_opencv(dir: &Path, ours_p50: f64) {
+        let script = root().join("tools/bench_edges.py");
+        let out = std::process::Command::new("python3")
+            .arg(&script)
+            .arg(dir)
+            .arg("--repeats")
+            .arg("5")
+            .output();
+        let out = match out {
+            Ok(o) if o.status.success() => o,
+            Ok(o) => {
+                println!("(OpenCV run failed: {})", String::from_utf8_lossy(&o.stderr).trim());
+                return;
+            }
+            Err(e) => {
+                println!("(OpenCV run failed: {e})");
+                return;
+            }
+        };
+        for line in String::from_utf8_lossy(&out.stdout).lines() {
+            let Ok(v) = serde_json::from_str::<serde_json::Value>(line) else {
+                continue;
+            };
+            let name = v["detector"].as_str().unwrap_or("?");
+            let p50 = v["p50_ms"].as_f64().unwrap_or(f64::NAN);
+            println!(
+                "| OpenCV {} (grey, cv2.setNumThreads(2)) | 2 | {:.3} | {:.3} | {:.3} | {:.1} |",
+                if name == "lsd" { "LSD" } else { "FastLineDetector" },
+                p50,
+                v["p99_ms"].as_f64().unwrap_or(f64::NAN),
+                v["max_ms"].as_f64().unwrap_or(f64::NAN),
+                v["lines_per_frame"].as_f64().unwrap_or(f64::NAN),
+            );
+            println!("|   ratio {name} p50 / ours p50 | | {:.1}× | | | |", p50 / ours_p50);
+        }
+    }
+}
+
+fn main() {
+    #[cfg(feature = "desk")]
+    bench::main();
+    #[cfg(not(feature = "desk"))]
+    eprintln!("the edges benchmark needs the `desk` feature");
+}
