@@ -7,7 +7,7 @@
 //! Accuracy. Ground truth per sensor image: the model segments, sampled every centimetre, each
 //! sample kept when it projects onto the image (3 px from the border) and the first hit of the
 //! ray from the sensor's centre is the sample itself (± 2 cm: the renderer's scene includes
-//! clutter, so clutter occludes); contiguous runs longer than 30 px are the visible segments.
+//! clutter, so clutter occludes; so do the people at the frame time); contiguous runs longer than 30 px are the visible segments.
 //! A visible segment is recalled when one detected edge of that sensor has a plane normal within
 //! 1° of the segment's plane (through the same sensor centre) and covers ≥ 50 % of the run's
 //! angular extent along that plane. Normal error: angle between the planes of the best match.
@@ -23,7 +23,7 @@ mod bench {
     use nalgebra::{Point3, Vector3};
     use omnitrack::capture::FrameSet;
     use omnitrack::config::EdgeConfig;
-    use omnitrack::desk::render::{Appearance, FrameSpec, Renderer};
+    use omnitrack::desk::render::{Appearance, FrameSpec, Ray, Renderer};
     use omnitrack::desk::scenario::{Scenario, ScenarioName};
     use omnitrack::edges::{Edge, EdgeDetector, EdgeParams};
     use omnitrack::geometry::Pose;
@@ -38,6 +38,9 @@ mod bench {
         sorted[((sorted.len() - 1) as f64 * q).round() as usize]
     }
 
+    /// A run being collected: first and last ray, pixel length, last pixel.
+    type Run = Option<(Vector3<f64>, Vector3<f64>, f64, nalgebra::Point2<f64>)>;
+
     /// A visible run of a model segment in one sensor.
     struct Truth {
         sensor: usize,
@@ -47,8 +50,9 @@ mod bench {
         r2: Vector3<f64>,
     }
 
-    fn ground_truth(model: &Model, rig: &Rig, renderer: &Renderer, pose: &Pose, out: &mut Vec<Truth>) {
+    fn ground_truth(model: &Model, rig: &Rig, renderer: &Renderer, pose: &Pose, t_s: f64, out: &mut Vec<Truth>) {
         out.clear();
+        let (people, _) = renderer.scene().people_at(t_s);
         let inv = pose.inverse();
         for (k, s) in rig.sensors.iter().enumerate() {
             let c_rig = s.centre();
@@ -62,8 +66,8 @@ mod bench {
                 }
                 let normal = normal.normalize();
                 let n = ((seg.length() / 0.01).ceil() as usize).clamp(20, 4000);
-                let mut run: Option<(Vector3<f64>, Vector3<f64>, f64, nalgebra::Point2<f64>)> = None;
-                let mut flush = |run: &mut Option<(Vector3<f64>, Vector3<f64>, f64, nalgebra::Point2<f64>)>| {
+                let mut run: Run = None;
+                let mut flush = |run: &mut Run| {
                     if let Some((r1, r2, len, _)) = run.take() {
                         if len > 30.0 {
                             out.push(Truth {
@@ -83,10 +87,19 @@ mod bench {
                         px.x >= 3.0 && px.y >= 3.0 && px.x <= w - 4.0 && px.y <= h - 4.0 && {
                             let d = p_world - c_world;
                             let dist = d.norm();
-                            match renderer.cast(&c_world, &(d / dist)) {
+                            let dir = d / dist;
+                            let by_scene = match renderer.cast(&c_world, &dir) {
                                 Some(hit) => hit.t >= dist - 0.02,
                                 None => true,
-                            }
+                            };
+                            let ray = Ray::new(
+                                [c_world.x as f32, c_world.y as f32, c_world.z as f32],
+                                [dir.x as f32, dir.y as f32, dir.z as f32],
+                            );
+                            by_scene
+                                && !people
+                                    .iter()
+                                    .any(|p| p.intersect(&ray, 1e-4, (dist - 0.02) as f32).is_some())
                         }
                     });
                     match (visible, run.as_mut()) {
@@ -124,6 +137,9 @@ mod bench {
         edges: usize,
         edges_on_model: usize,
         sensor_frames: usize,
+        /// Misses with no edge plane within 1° at all / with only pieces overlapping < 50 %.
+        missed_no_plane: usize,
+        missed_fragmented: usize,
     }
 
     fn score(truths: &[Truth], edges: &[Edge], s: &mut Score) {
@@ -134,6 +150,7 @@ mod bench {
             let ti = interval(&t.normal, &e1, &t.r1, &t.r2);
             let tlen = (ti.1 - ti.0).max(1e-9);
             let mut best: Option<f64> = None;
+            let mut any_plane = false;
             for e in edges.iter().filter(|e| e.sensor as usize == t.sensor) {
                 let c = e.plane.normal.dot(&t.normal).abs();
                 if c < cos1 {
@@ -141,6 +158,7 @@ mod bench {
                 }
                 let ei = interval(&t.normal, &e1, &e.plane.ends[0], &e.plane.ends[1]);
                 let overlap = (ti.1.min(ei.1) - ti.0.max(ei.0)).max(0.0);
+                any_plane |= overlap > 0.0;
                 if overlap >= 0.5 * tlen {
                     let err = c.min(1.0).acos().to_degrees();
                     best = Some(best.map_or(err, |b: f64| b.min(err)));
@@ -150,6 +168,10 @@ mod bench {
             if let Some(err) = best {
                 s.recalled += 1;
                 s.errors_deg.push(err);
+            } else if any_plane {
+                s.missed_fragmented += 1;
+            } else {
+                s.missed_no_plane += 1;
             }
         }
         for e in edges {
@@ -250,6 +272,32 @@ mod bench {
         ]
     }
 
+    /// `EdgeParams::default()`, with overrides from EDGES_THRESHOLD, EDGES_SPLIT_DEG,
+    /// EDGES_MERGE_DEG, EDGES_GAP_DEG, EDGES_MIN_CHAIN (for tuning sweeps).
+    fn params() -> EdgeParams {
+        let get = |k: &str| std::env::var(k).ok().and_then(|v| v.parse::<f64>().ok());
+        let mut p = EdgeParams::default();
+        if let Some(v) = get("EDGES_THRESHOLD") {
+            p.gradient_threshold = v as u16;
+        }
+        if let Some(v) = get("EDGES_SPLIT_DEG") {
+            p.split_tolerance_rad = v.to_radians();
+        }
+        if let Some(v) = get("EDGES_MERGE_DEG") {
+            p.merge_angle_rad = v.to_radians();
+        }
+        if let Some(v) = get("EDGES_GAP_DEG") {
+            p.merge_gap_rad = v.to_radians();
+        }
+        if let Some(v) = get("EDGES_SMOOTH") {
+            p.smooth = v != 0.0;
+        }
+        if let Some(v) = get("EDGES_MIN_CHAIN") {
+            p.min_chain_edgels = v as usize;
+        }
+        p
+    }
+
     fn root() -> PathBuf {
         PathBuf::from(env!("CARGO_MANIFEST_DIR"))
     }
@@ -269,19 +317,23 @@ mod bench {
             rig.sensors.len()
         );
         println!("config: {config:?}");
-        println!("params: {:?}", EdgeParams::default());
+        println!("params: {:?}", params());
         println!();
         println!("## Accuracy ({frames_per_setup} frames per row, visible model segments > 30 px)");
         println!();
         println!(
-            "| setup | visible segs | recall | median normal err (°) | p90 err (°) | edges/sensor | edges on model |"
+            "| setup | visible segs | recall | median normal err (°) | p90 err (°) | edges/sensor | edges on model | missed: no plane / fragmented |"
         );
-        println!("| --- | ---: | ---: | ---: | ---: | ---: | ---: |");
-        let mut detector = EdgeDetector::new(&rig, &config);
+        println!("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |");
+        let mut detector = EdgeDetector::with_params(&rig, &config, params());
         let mut frame = FrameSet::for_rig(&rig);
         let mut truths = Vec::new();
         let mut speed_frames: Vec<Vec<image::RgbImage>> = Vec::new();
+        let only = std::env::var("EDGES_BENCH_ONLY").ok();
         for setup in setups() {
+            if only.as_ref().is_some_and(|o| !setup.name.contains(o.as_str())) && setup.name != "lab default" {
+                continue;
+            }
             let scenario = Scenario::get(setup.scenario);
             let model = Model::from_obj_str(&scenario.model_obj().expect("model"), "scenario").expect("model");
             let traj = scenario.trajectory(traj_len, 7);
@@ -299,8 +351,40 @@ mod bench {
                 let images = renderer.render_frame(&spec);
                 to_frameset(&rig, &images, &mut frame);
                 let edges = detector.detect(&frame);
-                ground_truth(&model, &rig, &renderer, &traj[k].pose, &mut truths);
+                ground_truth(
+                    &model,
+                    &rig,
+                    &renderer,
+                    &traj[k].pose,
+                    traj[k].timestamp_ns as f64 * 1e-9,
+                    &mut truths,
+                );
                 score(&truths, edges, &mut sc);
+                if f == 0 && std::env::var("EDGES_DEBUG").is_ok() {
+                    for (k, image) in images.iter().enumerate() {
+                        let mut img = image.clone();
+                        let s = &rig.sensors[k];
+                        let mut arc = |r1: &Vector3<f64>, r2: &Vector3<f64>, col: [u8; 3]| {
+                            for i in 0..=200 {
+                                let t = i as f64 / 200.0;
+                                let r = (r1 * (1.0 - t) + r2 * t).normalize();
+                                if let Some(px) = s.project_from_rig(&(s.centre() + r)) {
+                                    let (u, v) = (px.x.round() as u32, px.y.round() as u32);
+                                    if u < img.width() && v < img.height() {
+                                        img.put_pixel(u, v, image::Rgb(col));
+                                    }
+                                }
+                            }
+                        };
+                        for t in truths.iter().filter(|t| t.sensor == k) {
+                            arc(&t.r1, &t.r2, [255, 0, 0]);
+                        }
+                        for e in edges.iter().filter(|e| e.sensor as usize == k) {
+                            arc(&e.plane.ends[0], &e.plane.ends[1], [0, 255, 0]);
+                        }
+                        let _ = img.save(format!("/tmp/edges_debug_{}_s{k}.png", setup.name.replace(' ', "_")));
+                    }
+                }
                 sc.sensor_frames += rig.sensors.len();
                 if setup.name == "lab default" {
                     speed_frames.push(images);
@@ -308,14 +392,16 @@ mod bench {
             }
             sc.errors_deg.sort_by(f64::total_cmp);
             println!(
-                "| {} | {} | {:.1} % | {:.4} | {:.4} | {:.1} | {:.1} % |",
+                "| {} | {} | {:.1} % | {:.4} | {:.4} | {:.1} | {:.1} % | {} / {} |",
                 setup.name,
                 sc.truths,
                 100.0 * sc.recalled as f64 / sc.truths.max(1) as f64,
                 percentile(&sc.errors_deg, 0.5),
                 percentile(&sc.errors_deg, 0.9),
                 sc.edges as f64 / sc.sensor_frames.max(1) as f64,
-                100.0 * sc.edges_on_model as f64 / sc.edges.max(1) as f64
+                100.0 * sc.edges_on_model as f64 / sc.edges.max(1) as f64,
+                sc.missed_no_plane,
+                sc.missed_fragmented
             );
         }
 
@@ -348,10 +434,7 @@ mod bench {
         println!("| --- | ---: | ---: | ---: | ---: | ---: |");
         let mut ours_p50 = f64::NAN;
         for threads in [2usize, 1] {
-            let params = EdgeParams {
-                threads,
-                ..EdgeParams::default()
-            };
+            let params = EdgeParams { threads, ..params() };
             let mut det = EdgeDetector::with_params(&rig, &config, params);
             for fs in &frames {
                 det.detect(fs); // warm-up

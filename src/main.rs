@@ -51,6 +51,18 @@ enum Command {
         #[arg(long, value_name = "tracker.toml")]
         config: Option<PathBuf>,
     },
+    /// Prints the detected edges of one sensor image as CSV (INTERFACES.md).
+    Edges {
+        #[arg(long, value_name = "RIG.toml")]
+        rig: PathBuf,
+        #[arg(long)]
+        sensor: usize,
+        /// Tracker config whose [edges] section to use (default: the papers' values).
+        #[arg(long, value_name = "tracker.toml")]
+        config: Option<PathBuf>,
+        #[arg(value_name = "IMAGE.png")]
+        image: PathBuf,
+    },
     /// Prints the model segments of an OBJ as CSV: x1,y1,z1,x2,y2,z2,faces (OBJ face numbers,
     /// space-separated; empty for a free `l` segment).
     Segments {
@@ -160,6 +172,22 @@ fn run(command: Command) -> Result<(), String> {
                 .map_err(|e| format!("{name}: no pose: {e}"))?;
             println!("{}", pose_json(&solution));
             Ok(())
+        }
+        Command::Edges {
+            rig,
+            sensor,
+            config,
+            image,
+        } => {
+            let rig = Rig::load(&rig).map_err(|e| e.to_string())?;
+            let edges = match config {
+                Some(p) => TrackerConfig::load(&p).map_err(|e| e.to_string())?.edges,
+                None => omnitrack::config::EdgeConfig::default(),
+            };
+            let csv = omnitrack::edges::edges_csv_for_image(&rig, &edges, sensor, &image)?;
+            let mut out = std::io::stdout().lock();
+            out.write_all(csv.as_bytes())
+                .map_err(|e| format!("cannot write to standard output: {e}"))
         }
         Command::Segments { model } => {
             let m = Model::load(&model).map_err(|e| e.to_string())?;

@@ -106,8 +106,9 @@ impl HueTable {
         } else {
             4.0 + (r - g) as f32 / delta as f32
         };
-        let k = (h6 * (HUE_STEPS as f32 / 6.0)).round() as i32;
-        Some(k.rem_euclid(HUE_STEPS as i32) as usize)
+        // h6 ≥ −1, so the shifted value is positive and truncation rounds it.
+        let k = (h6 * (HUE_STEPS as f32 / 6.0) + (HUE_STEPS as f32 + 0.5)) as usize;
+        Some(k % HUE_STEPS)
     }
 
     #[inline]

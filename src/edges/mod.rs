@@ -36,6 +36,9 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 
+/// Unit ray (sensor frame) of every pixel of a lens, shared by the sensors that use the lens.
+type RayTable = Arc<[[f32; 3]]>;
+
 /// One observed straight edge of one sensor image.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Edge {
@@ -48,7 +51,7 @@ pub struct Edge {
     pub px: [Point2<f64>; 2],
     /// Angle between the end rays (rad).
     pub length_rad: f64,
-    /// Sum of the edgels' Sobel magnitudes / 4 ≈ contrast (grey levels) × length (edgels).
+    /// Sum of the edgels' gradient magnitudes / 64 ≈ contrast (grey levels) × length (edgels).
     pub strength: f32,
     pub hue: HueSignature,
     /// Edgels the plane was fitted to.
@@ -60,8 +63,12 @@ pub struct Edge {
 /// Tuning of the detector beyond [`EdgeConfig`]; `Default` is what the benchmarks measured.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct EdgeParams {
-    /// Minimum L1 Sobel magnitude |gx| + |gy| of an edgel (a step of h grey levels gives ≈ 4h).
+    /// Minimum L1 gradient magnitude |gx| + |gy| of an edgel: Sobel of the binomially smoothed
+    /// grey image ×16 (a step of h grey levels gives ≈ 4h·16 = 64h across its peak).
     pub gradient_threshold: u16,
+    /// Smooth each channel by the binomial [1 2 1]² before the Sobel (a 5×5 derivative: steadier
+    /// directions and sub-pixel positions, but edges closer than ~3 px blend into one).
+    pub smooth: bool,
     /// Chains shorter than this (edgels) are dropped.
     pub min_chain_edgels: usize,
     /// A chain is split where a ray deviates more than this (rad) from the great circle of the
@@ -82,11 +89,12 @@ pub struct EdgeParams {
 impl Default for EdgeParams {
     fn default() -> Self {
         EdgeParams {
-            gradient_threshold: 40,
+            gradient_threshold: 640,
+            smooth: true,
             min_chain_edgels: 10,
             split_tolerance_rad: 0.2f64.to_radians(),
-            merge_angle_rad: 0.5f64.to_radians(),
-            merge_gap_rad: 3.0f64.to_radians(),
+            merge_angle_rad: 1.5f64.to_radians(),
+            merge_gap_rad: 10.0f64.to_radians(),
             hue_strip_offset_px: 2.0,
             hue_samples_per_edge: 48,
             threads: 0,
@@ -131,6 +139,15 @@ impl Shared {
     }
 }
 
+/// Crossbeam sets up a thread-local context (and std a thread-local destructor list) the first
+/// time a thread really blocks on a channel, which allocates. Frames usually arrive while the
+/// threads are still spinning, so that first block could fall on any later frame: force it here,
+/// at start-up, with a receive that must time out.
+fn warm_up_blocking() {
+    let (_tx, rx) = bounded::<()>(1);
+    let _ = rx.recv_timeout(std::time::Duration::from_micros(50));
+}
+
 struct Worker {
     jobs: Option<Sender<Job>>,
     handle: Option<JoinHandle<()>>,
@@ -155,7 +172,7 @@ impl EdgeDetector {
 
     pub fn with_params(rig: &Rig, config: &EdgeConfig, params: EdgeParams) -> EdgeDetector {
         let hue = Arc::new(HueTable::new(config.min_hue_saturation, config.min_hue_value));
-        let mut tables: Vec<(crate::geometry::Lens, u32, u32, Arc<[[f32; 3]]>)> = Vec::new();
+        let mut tables: Vec<(crate::geometry::Lens, u32, u32, RayTable)> = Vec::new();
         let max_edges = config.max_edges_per_sensor as usize;
         let workspaces: Box<[Mutex<Workspace>]> = rig
             .sensors
@@ -203,6 +220,8 @@ impl EdgeDetector {
                 let handle = std::thread::Builder::new()
                     .name(format!("edges-{k}"))
                     .spawn(move || {
+                        warm_up_blocking();
+                        let _ = done_tx.send(());
                         while let Ok(job) = rx.recv() {
                             shared.work(job);
                             if done_tx.send(()).is_err() {
@@ -217,6 +236,11 @@ impl EdgeDetector {
                 }
             })
             .collect();
+        // Wait until every worker is up, and set up this thread's channel context now.
+        for _ in 1..threads {
+            let _ = done.recv();
+        }
+        warm_up_blocking();
         EdgeDetector {
             shared,
             workers,
@@ -234,7 +258,9 @@ impl EdgeDetector {
 
     /// Detects the edges of every sensor of the frame; returns them all, sensor by sensor,
     /// strongest first within a sensor. Invalid images, images of the wrong size and sensors
-    /// missing from the frame yield no edges. Allocates nothing.
+    /// missing from the frame yield no edges. Allocates nothing (call it from the thread that
+    /// built the detector: on another thread crossbeam sets up its per-thread context, once, at
+    /// the first blocking wait).
     pub fn detect(&mut self, frame: &FrameSet) -> &[Edge] {
         let images = frame.sensors();
         let job = Job {

@@ -52,12 +52,17 @@ pub(crate) struct Workspace {
     strip_px: usize,
     max_edges: usize,
     min_len_rad: f64,
-    grey: Vec<u8>,
+    /// The image as three colour planes (R, G, B), u8.
+    planes: Vec<u8>,
+    /// A colour channel smoothed by the binomial [1 2 1]² (×16), u16; the horizontal pass goes to `hblur`.
+    smooth: Vec<u16>,
+    hblur: Vec<u16>,
     col_sum: Vec<i16>,
     col_diff: Vec<i16>,
     gx: Vec<i16>,
     gy: Vec<i16>,
-    mag: Vec<u16>,
+    /// |gx| + |gy| ≤ 2 · 4 · 4 · 4 · 255 = 32640: fits i16 (signed, so that SSE2 compares it).
+    mag: Vec<i16>,
     /// 0: no edgel (or already linked); 1..=4: edgel with its gradient bin.
     map: Vec<u8>,
     fwd: Vec<u32>,
@@ -115,7 +120,9 @@ impl Workspace {
             strip_px,
             max_edges,
             min_len_rad: min_len_deg.to_radians(),
-            grey: vec![0; n],
+            planes: vec![0; 3 * n],
+            smooth: vec![0; n],
+            hblur: vec![0; n],
             col_sum: vec![0; w],
             col_diff: vec![0; w],
             gx: vec![0; n],
@@ -146,57 +153,94 @@ impl Workspace {
         if !img.valid || img.width() as usize != self.w || img.height() as usize != self.h || self.w < 3 || self.h < 3 {
             return;
         }
-        self.grey(img.pixels());
-        self.sobel();
+        // Colour gradient: per pixel, the gradient of the channel (R, G or B) where it is largest,
+        // so that edges between colours of equal brightness are found too.
+        self.planes(img.pixels());
+        for c in 0..3 {
+            self.smooth(c);
+            self.sobel(c > 0);
+        }
         self.nms();
         self.link(img.pixels());
         self.merge_across_chains();
         self.select();
     }
 
-    fn grey(&mut self, rgb: &[u8]) {
-        for (g, p) in self.grey.iter_mut().zip(rgb.chunks_exact(3)) {
-            *g = ((p[0] as u32 * 77 + p[1] as u32 * 150 + p[2] as u32 * 29 + 128) >> 8) as u8;
+    /// Splits the RGB image into three planes.
+    #[inline(never)]
+    fn planes(&mut self, rgb: &[u8]) {
+        let n = self.w * self.h;
+        let (r, rest) = self.planes.split_at_mut(n);
+        let (g, b) = rest.split_at_mut(n);
+        for (((p, r), g), b) in rgb
+            .chunks_exact(3)
+            .zip(r.iter_mut())
+            .zip(g.iter_mut())
+            .zip(b.iter_mut())
+        {
+            *r = p[0];
+            *g = p[1];
+            *b = p[2];
         }
     }
 
-    /// Integer 3×3 Sobel, separable: a vertical pass into two row buffers, a horizontal one out.
-    /// Border rows and columns stay 0.
-    fn sobel(&mut self) {
+    /// Plane `c` smoothed by the binomial [1 2 1]² (weights sum to 16), separable; borders
+    /// replicate.
+    #[inline(never)]
+    fn smooth(&mut self, c: usize) {
+        let (w, h) = (self.w, self.h);
+        let n = w - 2;
+        let plane = &self.planes[c * w * h..(c + 1) * w * h];
+        if !self.params.smooth {
+            for (d, &p) in self.smooth.iter_mut().zip(plane) {
+                *d = 16 * p as u16;
+            }
+            return;
+        }
+        for (src, dst) in plane.chunks_exact(w).zip(self.hblur.chunks_exact_mut(w)) {
+            let (a, b, cc) = (&src[..n], &src[1..n + 1], &src[2..n + 2]);
+            let out = &mut dst[1..n + 1];
+            for u in 0..n {
+                out[u] = a[u] as u16 + 2 * b[u] as u16 + cc[u] as u16;
+            }
+            dst[0] = 4 * src[0] as u16;
+            dst[w - 1] = 4 * src[w - 1] as u16;
+        }
+        for v in 0..h {
+            let (r0, r2) = (v.saturating_sub(1), (v + 1).min(h - 1));
+            let a = &self.hblur[r0 * w..r0 * w + w];
+            let b = &self.hblur[v * w..v * w + w];
+            let c = &self.hblur[r2 * w..r2 * w + w];
+            let out = &mut self.smooth[v * w..v * w + w];
+            for u in 0..w {
+                out[u] = a[u] + 2 * b[u] + c[u];
+            }
+        }
+    }
+
+    /// Integer 3×3 Sobel on the smoothed channel (so a 5×5 derivative), separable; with `fold`
+    /// a pixel keeps the earlier channels' gradient unless this one's is larger. Border rows
+    /// and columns stay 0.
+    #[inline(never)]
+    fn sobel(&mut self, fold: bool) {
         let w = self.w;
+        let n = w - 2;
         for v in 1..self.h - 1 {
-            let r0 = &self.grey[(v - 1) * w..v * w];
-            let r1 = &self.grey[v * w..(v + 1) * w];
-            let r2 = &self.grey[(v + 1) * w..(v + 2) * w];
-            for (((s, d), (&a, &b)), &c) in self
-                .col_sum
-                .iter_mut()
-                .zip(self.col_diff.iter_mut())
-                .zip(r0.iter().zip(r1))
-                .zip(r2)
-            {
-                *s = a as i16 + 2 * b as i16 + c as i16;
-                *d = c as i16 - a as i16;
+            let r0 = &self.smooth[(v - 1) * w..(v - 1) * w + w];
+            let r1 = &self.smooth[v * w..v * w + w];
+            let r2 = &self.smooth[(v + 1) * w..(v + 1) * w + w];
+            let cs = &mut self.col_sum[..w];
+            let cd = &mut self.col_diff[..w];
+            for u in 0..w {
+                cs[u] = r0[u] as i16 + 2 * r1[u] as i16 + r2[u] as i16;
+                cd[u] = r2[u] as i16 - r0[u] as i16;
             }
-            let gx = &mut self.gx[v * w + 1..(v + 1) * w - 1];
-            let gy = &mut self.gy[v * w + 1..(v + 1) * w - 1];
-            let s = &self.col_sum;
-            let d = &self.col_diff;
-            for (((gx, gy), (&sl, &sr)), ((&dl, &dc), &dr)) in gx
-                .iter_mut()
-                .zip(gy.iter_mut())
-                .zip(s[..w - 2].iter().zip(&s[2..]))
-                .zip(d[..w - 2].iter().zip(&d[1..w - 1]).zip(&d[2..]))
-            {
-                *gx = sr - sl;
-                *gy = dl + 2 * dc + dr;
-            }
-            let gx = &self.gx[v * w + 1..(v + 1) * w - 1];
-            let gy = &self.gy[v * w + 1..(v + 1) * w - 1];
-            let mag = &mut self.mag[v * w + 1..(v + 1) * w - 1];
-            for ((m, &x), &y) in mag.iter_mut().zip(gx).zip(gy) {
-                *m = x.unsigned_abs() + y.unsigned_abs();
-            }
+            let (s0, s2) = (&self.col_sum[..n], &self.col_sum[2..n + 2]);
+            let (d0, d1, d2) = (&self.col_diff[..n], &self.col_diff[1..n + 1], &self.col_diff[2..n + 2]);
+            let gx = &mut self.gx[v * w + 1..v * w + 1 + n];
+            let gy = &mut self.gy[v * w + 1..v * w + 1 + n];
+            let mag = &mut self.mag[v * w + 1..v * w + 1 + n];
+            sobel_row(s0, s2, d0, d1, d2, gx, gy, mag, fold);
         }
     }
 
@@ -227,9 +271,10 @@ impl Workspace {
         }
     }
 
+    #[inline(never)]
     fn nms(&mut self) {
         let w = self.w;
-        let thr = self.params.gradient_threshold;
+        let thr = self.params.gradient_threshold.min(i16::MAX as u16) as i16;
         let mut count = 0u32;
         for v in 1..self.h - 1 {
             let row = v * w;
@@ -253,13 +298,14 @@ impl Workspace {
         self.stats.edgels = count;
     }
 
-    /// Whether the gradients at i and j agree in polarity and within ~45°.
+    /// Whether the gradient axes at i and j agree within ~50° (polarity is not compared: the
+    /// colour gradient's sign can flip where the dominant channel changes).
     #[inline]
     fn compatible(&self, i: usize, j: usize) -> bool {
         let (ax, ay) = (self.gx[i] as i64, self.gy[i] as i64);
         let (bx, by) = (self.gx[j] as i64, self.gy[j] as i64);
         let dot = ax * bx + ay * by;
-        dot > 0 && 2 * dot * dot > (ax * ax + ay * ay) * (bx * bx + by * by)
+        5 * dot * dot > 2 * (ax * ax + ay * ay) * (bx * bx + by * by)
     }
 
     /// Follows unlinked edgels from `start` in direction `dir`, appending to `out` (which must
@@ -286,6 +332,7 @@ impl Workspace {
         }
     }
 
+    #[inline(never)]
     fn link(&mut self, rgb: &[u8]) {
         let (w, h) = (self.w, self.h);
         let mut map = std::mem::take(&mut self.map);
@@ -327,6 +374,7 @@ impl Workspace {
     }
 
     /// Sub-pixel positions (parabola across the gradient), gradients and rays of a chain's edgels.
+    #[inline(never)]
     fn load_chain(&mut self, idx: impl Iterator<Item = u32>) {
         self.pos.clear();
         self.grad.clear();
@@ -408,6 +456,7 @@ impl Workspace {
         best
     }
 
+    #[inline(never)]
     fn fit_chain(&mut self, rgb: &[u8]) {
         let n = self.ray.len();
         let min_n = self.params.min_chain_edgels;
@@ -466,6 +515,7 @@ impl Workspace {
     }
 
     /// Fits, measures and (if long enough) records one piece of the chain as a candidate.
+    #[inline(never)]
     fn add_piece(&mut self, a: usize, b: usize, rgb: &[u8]) {
         let m = self.moments(a, b);
         let Some(mut nrm) = plane_normal(&m) else { return };
@@ -475,7 +525,9 @@ impl Workspace {
         }
         let r1 = (ra - nrm * nrm.dot(&ra)).normalize();
         let r2 = (rb - nrm * nrm.dot(&rb)).normalize();
-        if r1.dot(&r2).clamp(-1.0, 1.0).acos() < self.min_len_rad {
+        // Pieces down to half the minimum length are kept for merging across chains; `select`
+        // drops what is still short after it.
+        if r1.dot(&r2).clamp(-1.0, 1.0).acos() < 0.5 * self.min_len_rad {
             return;
         }
         // Hue strips and polarity; left of the walk from edgel a to edgel b.
@@ -487,7 +539,6 @@ impl Workspace {
         let mut strength = 0.0f32;
         let count = b + 1 - a;
         let step = count.div_ceil(self.params.hue_samples_per_edge.max(1)).max(1);
-        let (w, h) = (self.w as f32, self.h as f32);
         for k in a..=b {
             strength += self.emag[k];
             let g = self.grad[k];
@@ -506,12 +557,13 @@ impl Workspace {
             for t in 0..self.strip_px {
                 let d = self.params.hue_strip_offset_px + t as f32;
                 for (sign, acc) in [(1.0f32, &mut lacc), (-1.0, &mut racc)] {
-                    let x = (p[0] + sign * d * dx).round();
-                    let y = (p[1] + sign * d * dy).round();
-                    if x < 0.0 || y < 0.0 || x >= w || y >= h {
+                    // +1 keeps the value positive, so truncation rounds.
+                    let x = (p[0] + sign * d * dx + 1.5) as usize;
+                    let y = (p[1] + sign * d * dy + 1.5) as usize;
+                    if x < 1 || y < 1 || x > self.w || y > self.h {
                         continue;
                     }
-                    let i = (y as usize * self.w + x as usize) * 3;
+                    let i = ((y - 1) * self.w + x - 1) * 3;
                     self.hue.accumulate(acc, [rgb[i], rgb[i + 1], rgb[i + 2]]);
                 }
             }
@@ -522,7 +574,7 @@ impl Workspace {
             n: nrm,
             r1,
             r2,
-            strength: strength / 4.0,
+            strength: strength / 64.0,
             bright_left,
             left: lacc,
             right: racc,
@@ -549,6 +601,7 @@ impl Workspace {
 
     /// Joins candidates of different chains that lie on one plane, end to end (a line broken by
     /// an occluder, a gap in the edgels or a junction), same polarity.
+    #[inline(never)]
     fn merge_across_chains(&mut self) {
         let cos_max = self.params.merge_angle_rad.cos();
         let gap_max = self.params.merge_gap_rad;
@@ -584,7 +637,10 @@ impl Workspace {
     }
 
     /// Keeps the strongest `max_edges` candidates and turns them into edges (rig frame).
+    #[inline(never)]
     fn select(&mut self) {
+        let min_cos = self.min_len_rad.cos();
+        self.cands.retain(|c| c.r1.dot(&c.r2) <= min_cos);
         let k = self.max_edges;
         if self.cands.len() > k {
             self.stats.capped = (self.cands.len() - k) as u32;
@@ -632,6 +688,54 @@ impl Workspace {
     }
 }
 
+/// One row of the Sobel on the vertical sums `s` and differences `d` (u ± 1 as slices of equal
+/// length); with `fold` a pixel keeps its earlier gradient unless the new one is larger. A free
+/// function over slices, so that the compiler knows they do not alias and vectorises it.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn sobel_row(
+    s0: &[i16],
+    s2: &[i16],
+    d0: &[i16],
+    d1: &[i16],
+    d2: &[i16],
+    gx: &mut [i16],
+    gy: &mut [i16],
+    mag: &mut [i16],
+    fold: bool,
+) {
+    let n = gx
+        .len()
+        .min(gy.len())
+        .min(mag.len())
+        .min(s0.len())
+        .min(s2.len())
+        .min(d0.len())
+        .min(d1.len())
+        .min(d2.len());
+    let (s0, s2, d0, d1, d2) = (&s0[..n], &s2[..n], &d0[..n], &d1[..n], &d2[..n]);
+    let (gx, gy, mag) = (&mut gx[..n], &mut gy[..n], &mut mag[..n]);
+    if fold {
+        for u in 0..n {
+            let x = s2[u].wrapping_sub(s0[u]);
+            let y = d0[u].wrapping_add(d1[u].wrapping_mul(2)).wrapping_add(d2[u]);
+            let m = x.wrapping_abs().wrapping_add(y.wrapping_abs());
+            let keep = ((m > mag[u]) as i16).wrapping_neg();
+            gx[u] = (x & keep) | (gx[u] & !keep);
+            gy[u] = (y & keep) | (gy[u] & !keep);
+            mag[u] = (m & keep) | (mag[u] & !keep);
+        }
+    } else {
+        for u in 0..n {
+            let x = s2[u].wrapping_sub(s0[u]);
+            let y = d0[u].wrapping_add(d1[u].wrapping_mul(2)).wrapping_add(d2[u]);
+            gx[u] = x;
+            gy[u] = y;
+            mag[u] = x.wrapping_abs().wrapping_add(y.wrapping_abs());
+        }
+    }
+}
+
 /// Unit normal of the plane through the origin best fitting rays with moments `m`: the
 /// eigenvector of the smallest eigenvalue of Σ r rᵀ.
 fn plane_normal(m: &[f64; 6]) -> Option<Vector3<f64>> {
@@ -665,9 +769,6 @@ fn try_merge(ci: &Candidate, cj: &Candidate, gap_max: f64, tol: f64) -> Option<C
     } else {
         (cj.r2, cj.r1, cj.right, cj.left, -cj.bright_left)
     };
-    if (ci.bright_left > 0) != (jb > 0) {
-        return None;
-    }
     let m: [f64; 6] = std::array::from_fn(|k| ci.m[k] + cj.m[k]);
     let mut n = plane_normal(&m)?;
     if n.dot(&ci.n) < 0.0 {

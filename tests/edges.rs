@@ -1,0 +1,411 @@
+//! Edge + hue extraction: exact planes of known great circles, one edge for a strongly curved
+//! fisheye line, hue strips (wrap-around at red, unsaturated pixels left out), blank images,
+//! the CSV, and zero heap allocations per frame after warm-up (counting allocator).
+
+use nalgebra::{Point2, Vector3};
+use omnitrack::capture::{FrameSet, SensorImage};
+use omnitrack::config::EdgeConfig;
+use omnitrack::edges::{edges_csv, Edge, EdgeDetector, EdgeParams, EDGES_CSV_HEADER};
+use omnitrack::Rig;
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::path::Path;
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::{Mutex, MutexGuard};
+
+/// Counts allocations while `COUNTING` is on.
+struct Counting;
+static COUNTING: AtomicBool = AtomicBool::new(false);
+static ALLOCS: AtomicUsize = AtomicUsize::new(0);
+/// Allocations while counting by threads other than the one that counts (worker or harness).
+static OTHER_THREAD: AtomicUsize = AtomicUsize::new(0);
+static LAST_SIZE: AtomicUsize = AtomicUsize::new(0);
+thread_local! {
+    static COUNTER_THREAD: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        if COUNTING.load(Ordering::Relaxed) {
+            ALLOCS.fetch_add(1, Ordering::Relaxed);
+            LAST_SIZE.store(layout.size(), Ordering::Relaxed);
+            if !COUNTER_THREAD.with(|c| c.get()) {
+                OTHER_THREAD.fetch_add(1, Ordering::Relaxed);
+            }
+        }
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        if COUNTING.load(Ordering::Relaxed) {
+            ALLOCS.fetch_add(1, Ordering::Relaxed);
+        }
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+/// The tests of this file run one at a time, so that the allocation count sees one test only.
+static SERIAL: Mutex<()> = Mutex::new(());
+
+fn serial() -> MutexGuard<'static, ()> {
+    SERIAL.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+fn rig() -> Rig {
+    Rig::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("firmware_config/ladybug2.toml")).expect("rig")
+}
+
+/// Renders sensor `k` of the rig: `colour(ray)` for the sensor-frame unit ray of each pixel,
+/// supersampled 4×4 where the ray is within ~3 px of one of the `boundaries` great circles
+/// (given by their sensor-frame normals), so that those edges are anti-aliased.
+fn render(rig: &Rig, k: usize, boundaries: &[Vector3<f64>], colour: impl Fn(&Vector3<f64>) -> [f64; 3]) -> SensorImage {
+    let s = &rig.sensors[k];
+    let mut img = SensorImage::new(k, s.width, s.height);
+    let w = s.width as usize;
+    let px = img.pixels_mut();
+    for v in 0..s.height as usize {
+        for u in 0..w {
+            let centre = s.lens.unproject(&Point2::new(u as f64, v as f64)).expect("ray");
+            let near = boundaries.iter().any(|n| n.dot(&centre).abs() < 0.012);
+            let mut acc = [0.0; 3];
+            let ss = if near { 4 } else { 1 };
+            for i in 0..ss {
+                for j in 0..ss {
+                    let (du, dv) = if near {
+                        ((i as f64 + 0.5) / 4.0 - 0.5, (j as f64 + 0.5) / 4.0 - 0.5)
+                    } else {
+                        (0.0, 0.0)
+                    };
+                    let r = s
+                        .lens
+                        .unproject(&Point2::new(u as f64 + du, v as f64 + dv))
+                        .expect("ray");
+                    let c = colour(&r);
+                    for q in 0..3 {
+                        acc[q] += c[q];
+                    }
+                }
+            }
+            for q in 0..3 {
+                px[(v * w + u) * 3 + q] = (acc[q] / (ss * ss) as f64).round().clamp(0.0, 255.0) as u8;
+            }
+        }
+    }
+    img.set_valid(1);
+    img
+}
+
+fn angle_deg(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
+    a.dot(b).abs().min(1.0).acos().to_degrees()
+}
+
+/// The detected edge whose plane is closest to the rig-frame normal `n`.
+fn closest<'a>(edges: &'a [Edge], n: &Vector3<f64>) -> Option<(&'a Edge, f64)> {
+    edges
+        .iter()
+        .map(|e| (e, angle_deg(&e.plane.normal, n)))
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+}
+
+/// A spherical quadrilateral (the four planes' intersection) on a two-colour background: its
+/// four sides are great-circle arcs with exactly known planes.
+#[test]
+fn known_great_circles_recovered_to_0_05_deg() {
+    let _g = serial();
+    let rig = rig();
+    let k = 0;
+    let s = &rig.sensors[k];
+    let normals: Vec<Vector3<f64>> = [
+        Vector3::new(1.0, 0.05, 0.35),   // left side, tilted
+        Vector3::new(-1.0, 0.08, 0.30),  // right side
+        Vector3::new(0.03, 1.0, 0.45),   // top
+        Vector3::new(-0.06, -1.0, 0.40), // bottom
+    ]
+    .iter()
+    .map(|n| n.normalize())
+    .collect();
+    let img = render(&rig, k, &normals, |r| {
+        if normals.iter().all(|n| n.dot(r) > 0.0) {
+            [200.0, 170.0, 60.0]
+        } else {
+            [40.0, 60.0, 110.0]
+        }
+    });
+    let mut det = EdgeDetector::new(&rig, &EdgeConfig::default());
+    let edges = det.detect_sensor(&img).to_vec();
+    assert!(!edges.is_empty());
+    for n in &normals {
+        let n_rig = s.t_rig_sensor.rotation * n;
+        let (e, err) = closest(&edges, &n_rig).expect("an edge");
+        assert!(err <= 0.05, "plane {n:?}: closest edge {err:.4}° off ({e:?})");
+        assert!(e.length_rad.to_degrees() > 10.0, "the side is one long edge: {e:?}");
+        assert_eq!(e.sensor as usize, k);
+        assert!((e.plane.centre - s.centre()).norm() < 1e-12);
+        // End rays lie in the plane and map to the pixel ends.
+        for (r, px) in e.plane.ends.iter().zip(&e.px) {
+            assert!(e.plane.normal.dot(r).abs() < 1e-9);
+            let p = s
+                .project_from_rig(&(s.centre() + r.into_inner()))
+                .expect("on the image");
+            assert!((p - px).norm() < 1e-6);
+        }
+    }
+    // Nothing else in the image: exactly the four sides.
+    assert_eq!(edges.len(), 4, "{edges:#?}");
+}
+
+/// A straight 3D line far off the optical axis: strongly curved in the fisheye image, yet one
+/// edge on one plane.
+#[test]
+fn curved_fisheye_line_is_one_edge() {
+    let _g = serial();
+    let rig = rig();
+    let k = 0;
+    let s = &rig.sensors[k];
+    let a = 40f64.to_radians();
+    let n = Vector3::new(0.0, a.cos(), -a.sin());
+    let img = render(&rig, k, &[n], |r| {
+        if n.dot(r) > 0.0 {
+            [70.0, 150.0, 90.0]
+        } else {
+            [190.0, 120.0, 150.0]
+        }
+    });
+    let mut det = EdgeDetector::new(&rig, &EdgeConfig::default());
+    let edges = det.detect_sensor(&img).to_vec();
+    assert_eq!(edges.len(), 1, "{edges:#?}");
+    let e = &edges[0];
+    let n_rig = s.t_rig_sensor.rotation * n;
+    let err = angle_deg(&e.plane.normal, &n_rig);
+    assert!(err < 0.05, "normal {err:.4}° off");
+    // The edge is strongly curved on the image: its middle is far from the chord of its ends.
+    let mid = (e.plane.ends[0].into_inner() + e.plane.ends[1].into_inner()).normalize();
+    let pm = s.project_from_rig(&(s.centre() + mid)).expect("middle on the image");
+    let (p1, p2) = (e.px[0], e.px[1]);
+    let chord = p2 - p1;
+    let sag = ((pm - p1).x * chord.y - (pm - p1).y * chord.x).abs() / chord.norm();
+    assert!(
+        sag > 20.0,
+        "sagitta {sag:.1} px: the test line should be strongly curved"
+    );
+    assert!(chord.norm() > 300.0, "the edge spans the image: {e:?}");
+}
+
+/// Colour of a hue in [0,1) at full saturation and value 200.
+fn hsv(h: f64) -> [f64; 3] {
+    let h6 = h.rem_euclid(1.0) * 6.0;
+    let x = 1.0 - (h6 % 2.0 - 1.0).abs();
+    let (r, g, b) = match h6 as u32 {
+        0 => (1.0, x, 0.0),
+        1 => (x, 1.0, 0.0),
+        2 => (0.0, 1.0, x),
+        3 => (0.0, x, 1.0),
+        4 => (x, 0.0, 1.0),
+        _ => (1.0, 0.0, x),
+    };
+    [r * 200.0, g * 200.0, b * 200.0]
+}
+
+fn circ_dist(a: f32, b: f32) -> f32 {
+    let d = (a - b).rem_euclid(1.0);
+    d.min(1.0 - d)
+}
+
+/// The plane x = 0 (sensor frame) is the image column through the principal point. One side
+/// alternates hues 0.97 / 0.03 pixel by pixel (mean at red, across the wrap), the other is
+/// green (hue 1/3); then one side grey (no hue: left out, kept fraction 0).
+#[test]
+fn hue_strips_wrap_around_red() {
+    let _g = serial();
+    let rig = rig();
+    let k = 0;
+    let s = &rig.sensors[k];
+    let n = Vector3::new(1.0, 0.0, 0.0);
+    let mut img = render(&rig, k, &[n], |r| if r.x < 0.0 { [0.0; 3] } else { hsv(1.0 / 3.0) });
+    // Checkerboard of hues 0.97 / 0.03 on the x < 0 side (columns u ≤ 191).
+    let w = s.width as usize;
+    for v in 0..s.height as usize {
+        for u in 0..w {
+            if u < 192 {
+                let c = hsv(if (u + v) % 2 == 0 { 0.97 } else { 0.03 });
+                for (q, &cq) in c.iter().enumerate() {
+                    img.pixels_mut()[(v * w + u) * 3 + q] = cq as u8;
+                }
+            }
+        }
+    }
+    let mut det = EdgeDetector::new(&rig, &EdgeConfig::default());
+    let edges = det.detect_sensor(&img).to_vec();
+    let n_rig = s.t_rig_sensor.rotation * n;
+    let (e, err) = closest(&edges, &n_rig).expect("the edge");
+    assert!(err < 0.1, "{err}");
+    // Which side is "left": the side of (v2 − v1, −(u2 − u1)).
+    let left_dir_u = e.px[1].y - e.px[0].y;
+    let (red, green) = if left_dir_u < 0.0 {
+        (
+            (e.hue.left_mean, e.hue.left_var, e.hue.left_kept),
+            (e.hue.right_mean, e.hue.right_var, e.hue.right_kept),
+        )
+    } else {
+        (
+            (e.hue.right_mean, e.hue.right_var, e.hue.right_kept),
+            (e.hue.left_mean, e.hue.left_var, e.hue.left_kept),
+        )
+    };
+    assert!(
+        circ_dist(red.0, 0.0) < 0.005,
+        "red side mean {} (must wrap to ~0, not 0.5)",
+        red.0
+    );
+    assert!(red.0 >= 0.0 && red.0 < 1.0);
+    // Hues ±0.03 around red: variance ≈ 0.03² = 9e-4.
+    assert!((red.1 - 9e-4).abs() < 3e-4, "red side variance {}", red.1);
+    assert!(circ_dist(green.0, 1.0 / 3.0) < 0.005, "green side mean {}", green.0);
+    assert!(green.1 < 1e-4, "green side variance {}", green.1);
+    assert!(red.2 > 0.99 && green.2 > 0.99);
+
+    // Grey on one side: no hue there, kept fraction 0, mean NaN.
+    let img = render(&rig, k, &[n], |r| if r.x < 0.0 { [120.0; 3] } else { hsv(0.6) });
+    let edges = det.detect_sensor(&img).to_vec();
+    let (e, _) = closest(&edges, &n_rig).expect("the edge");
+    let left_dir_u = e.px[1].y - e.px[0].y;
+    let (grey_mean, grey_kept, blue_mean) = if left_dir_u < 0.0 {
+        (e.hue.left_mean, e.hue.left_kept, e.hue.right_mean)
+    } else {
+        (e.hue.right_mean, e.hue.right_kept, e.hue.left_mean)
+    };
+    assert_eq!(grey_kept, 0.0);
+    assert!(grey_mean.is_nan());
+    assert!(circ_dist(blue_mean, 0.6) < 0.005, "{blue_mean}");
+}
+
+#[test]
+fn blank_and_invalid_images_give_no_edges() {
+    let _g = serial();
+    let rig = rig();
+    let mut det = EdgeDetector::new(&rig, &EdgeConfig::default());
+    let mut frame = FrameSet::for_rig(&rig);
+    for value in [0u8, 255] {
+        for img in frame.sensors_mut() {
+            img.pixels_mut().fill(value);
+            img.set_valid(0);
+        }
+        assert!(det.detect(&frame).is_empty(), "uniform {value}");
+    }
+    // Noise only, below the gradient threshold.
+    for img in frame.sensors_mut() {
+        for (i, p) in img.pixels_mut().iter_mut().enumerate() {
+            *p = 100 + ((i * 2654435761) >> 13 & 3) as u8;
+        }
+    }
+    assert!(det.detect(&frame).is_empty());
+    // An invalid image, and an image of the wrong size, are skipped.
+    let img = SensorImage::new(0, 384, 512);
+    assert!(det.detect_sensor(&img).is_empty());
+    let mut small = SensorImage::new(1, 10, 10);
+    small.set_valid(0);
+    assert!(det.detect_sensor(&small).is_empty());
+}
+
+#[test]
+fn csv_header_and_columns() {
+    let _g = serial();
+    let rig = rig();
+    let n = Vector3::new(1.0, 0.0, 0.0);
+    let img = render(&rig, 2, &[n], |r| {
+        if r.x < 0.0 {
+            [30.0, 30.0, 160.0]
+        } else {
+            [200.0, 200.0, 40.0]
+        }
+    });
+    let mut det = EdgeDetector::new(&rig, &EdgeConfig::default());
+    let edges = det.detect_sensor(&img).to_vec();
+    let csv = edges_csv(&edges);
+    let mut lines = csv.lines();
+    let header = lines.next().unwrap();
+    assert_eq!(header, EDGES_CSV_HEADER);
+    assert!(header.starts_with("u1,v1,u2,v2,hue_left_mean,hue_left_var,hue_right_mean,hue_right_var"));
+    let cols = header.split(',').count();
+    let rows: Vec<&str> = lines.collect();
+    assert_eq!(rows.len(), edges.len());
+    for (row, e) in rows.iter().zip(&edges) {
+        let f: Vec<&str> = row.split(',').collect();
+        assert_eq!(f.len(), cols);
+        assert!((f[0].parse::<f64>().unwrap() - e.px[0].x).abs() < 1e-3);
+        assert_eq!(f[8], "2");
+    }
+}
+
+/// Six images with content (polygons in every sensor), two different frames alternating: after
+/// warm-up, `detect` performs no heap allocation at all (worker threads included).
+#[test]
+fn zero_allocations_per_frame_after_warm_up() {
+    let _g = serial();
+    let rig = rig();
+    let config = EdgeConfig::default();
+    let mut frames: Vec<FrameSet> = (0..2)
+        .map(|f| {
+            let mut fs = FrameSet::for_rig(&rig);
+            for k in 0..rig.sensors.len() {
+                let t = 0.1 * (k + 3 * f) as f64;
+                let normals: Vec<Vector3<f64>> = [
+                    Vector3::new(1.0, t, 0.4),
+                    Vector3::new(-1.0, 0.1, 0.35 + t),
+                    Vector3::new(t, 1.0, 0.5),
+                    Vector3::new(0.0, -1.0, 0.3),
+                ]
+                .iter()
+                .map(|n| n.normalize())
+                .collect();
+                let img = render(&rig, k, &normals, |r| {
+                    let inside = normals.iter().all(|n| n.dot(r) > 0.0);
+                    match (inside, r.y > 0.3) {
+                        (true, _) => [210.0, 80.0, 60.0],
+                        (false, true) => [60.0, 60.0, 60.0],
+                        (false, false) => [90.0, 140.0, 200.0],
+                    }
+                });
+                fs.sensor_mut(k).pixels_mut().copy_from_slice(img.pixels());
+                fs.sensor_mut(k).set_valid(0);
+            }
+            fs
+        })
+        .collect();
+    // One sensor missing from a frame: still no allocation.
+    frames[1]
+        .sensor_mut(3)
+        .set_invalid(omnitrack::capture::ImageFault::Dropped, 0);
+    for threads in [2, 1] {
+        let params = EdgeParams {
+            threads,
+            ..EdgeParams::default()
+        };
+        let mut det = EdgeDetector::with_params(&rig, &config, params);
+        for fs in &frames {
+            det.detect(fs);
+        }
+        // Let the test harness finish printing about earlier tests.
+        std::thread::sleep(std::time::Duration::from_millis(50));
+        let mut total = 0;
+        for i in 0..20 {
+            ALLOCS.store(0, Ordering::SeqCst);
+            COUNTING.store(true, Ordering::SeqCst);
+            let n = det.detect(&frames[i % 2]).len();
+            COUNTING.store(false, Ordering::SeqCst);
+            total += ALLOCS.load(Ordering::SeqCst);
+            assert!(n > 0);
+        }
+        assert_eq!(
+            total,
+            0,
+            "{threads} threads: {total} allocations in 20 frames, {} on other threads, last of {} bytes",
+            OTHER_THREAD.load(Ordering::SeqCst),
+            LAST_SIZE.load(Ordering::SeqCst)
+        );
+    }
+}
