@@ -97,9 +97,9 @@ fn main() -> ExitCode {
 fn run(command: Command) -> Result<(), String> {
     match command {
         Command::Demo => Err(
-            "demo is not available yet: it waits for edge and hue extraction (issue 5), the visibility \
-             table (6) and the tracker (7); synthetic recordings and the pose solvers are in (try \
-             `omnitrack-desk scenario lab` and `omnitrack pose`)"
+            "demo is not available yet: it waits for the visibility table (issue 6) and the tracker \
+             (7); synthetic recordings, the pose solvers and edge extraction are in (try \
+             `omnitrack-desk scenario lab`, `omnitrack pose` and `omnitrack edges`)"
                 .into(),
         ),
         Command::Check { rig, model, config } => {
