@@ -63,11 +63,37 @@ enum Command {
         #[arg(value_name = "IMAGE.png")]
         image: PathBuf,
     },
+    /// Builds or queries the prior visibility table (Koch–Teller §4.3).
+    Visibility {
+        #[command(subcommand)]
+        command: VisibilityCommand,
+    },
     /// Prints the model segments of an OBJ as CSV: x1,y1,z1,x2,y2,z2,faces (OBJ face numbers,
     /// space-separated; empty for a free `l` segment).
     Segments {
         #[arg(long)]
         model: PathBuf,
+    },
+}
+
+#[derive(Subcommand)]
+enum VisibilityCommand {
+    /// Builds the table of visible faces, segments and vertices per node (progress on stderr).
+    Build {
+        #[arg(long, value_name = "MODEL.obj")]
+        model: PathBuf,
+        #[arg(long, value_name = "TABLE.vis")]
+        out: PathBuf,
+        /// Node spacing in metres (default: [visibility] node_spacing_m of tracker.toml, 1 m).
+        #[arg(long, value_name = "METRES", allow_hyphen_values = true)]
+        spacing_m: Option<f64>,
+    },
+    /// Prints the visibility set serving a position as one line of JSON.
+    Query {
+        #[arg(long, value_name = "TABLE.vis")]
+        visibility: PathBuf,
+        #[arg(long, value_name = "x,y,z", allow_hyphen_values = true)]
+        at: String,
     },
 }
 
@@ -188,6 +214,32 @@ fn run(command: Command) -> Result<(), String> {
             let mut out = std::io::stdout().lock();
             out.write_all(csv.as_bytes())
                 .map_err(|e| format!("cannot write to standard output: {e}"))
+        }
+        #[cfg(feature = "desk")]
+        Command::Visibility {
+            command: VisibilityCommand::Build { model, out, spacing_m },
+        } => {
+            let config = TrackerConfig::default().visibility;
+            let summary =
+                omnitrack::visibility::build::run_build(&model, &out, spacing_m, &config).map_err(|e| e.to_string())?;
+            eprintln!("{summary}");
+            Ok(())
+        }
+        #[cfg(not(feature = "desk"))]
+        Command::Visibility {
+            command: VisibilityCommand::Build { .. },
+        } => Err(
+            "visibility build is desk work: this binary was built without the `desk` feature (build with default \
+             features)"
+                .into(),
+        ),
+        Command::Visibility {
+            command: VisibilityCommand::Query { visibility, at },
+        } => {
+            let at = omnitrack::visibility::parse_point(&at)?;
+            let json = omnitrack::visibility::run_query(&visibility, &at).map_err(|e| e.to_string())?;
+            println!("{json}");
+            Ok(())
         }
         Command::Segments { model } => {
             let m = Model::load(&model).map_err(|e| e.to_string())?;

@@ -6,25 +6,33 @@
 //!
 //! **Nodes** (§4.1.1) lie on a grid over the model's bounding box: in x and y at the centres of
 //! `node_spacing_m` cells, in z at `node_heights_m` above the lowest point of the model (the
-//! ground floor). Each node's cell is its Voronoi region on that grid. A node is *valid* (a
-//! camera can be there) when it is in free space inside the building — see `build` for the
-//! exact rule; in short: the floor below and the ceiling above are hit from their visible side,
-//! at least half of 26 rays hit a face, at most a tenth of the hits see a face from behind
-//! (which is what a point inside a wall or outside the building sees), and no face is nearer
-//! than 0.2 m. Rays that leave through an open door or window are allowed (misses), so
-//! rooms with openings keep their nodes. Every grid cell stores the index of the nearest valid
-//! node, so a position in a wall or just outside still gets an answer.
+//! ground floor; one storey). Each node's cell is its Voronoi region on that grid. A node is
+//! *valid* (a camera can be there) when it is in free space inside the building — see
+//! [`build`] for the exact rule; in short: the floor below and the ceiling above are hit from
+//! their visible side, at least half of 26 rays hit a face, at most a tenth of the hits see a
+//! face from behind (which is what a point inside a wall, a pillar or a slab sees), and no face
+//! is nearer than 0.2 m. Rays that leave through an open door or window count as misses, which
+//! are allowed, so rooms with openings keep their nodes; a point outside the building has no
+//! floor below it.
+//!
+//! **Lookup**: every node cell is split into 4 × 4 lookup cells in x, y; each lookup cell stores
+//! the nearest valid node in line of sight of its centre (else the nearest valid node), so a
+//! position next to a wall, whose own node is in the wall, is served from its side of the wall.
+//! Query = three divisions, a scan of the (few) layer heights and two array reads.
 //!
 //! **Visibility sets** (§4.3, Figure 9) are computed by the desk-only builder
 //! ([`build::build_table`]) with an exact software cube-map rasteriser: face ids and depth per
 //! pixel; visible faces = ids in the buffer; a segment is visible when at least
-//! `min_visible_pixels` of its rasterised pixels pass the depth test against the full model;
-//! vertices = end points of visible segments.
+//! `min_visible_pixels` of its rasterised pixels pass the depth test against the full model
+//! (ambiguous pixels — silhouettes, grazing surfaces — are settled by an exact ray);
+//! vertices = end points of visible segments. Geometry farther than `max_range_m` (40 m) from a
+//! node is not rendered.
 //!
 //! **File**: 8 magic bytes `OMNIVIS\n`, then a postcard [`TableHeader`] (format version, FNV-1a
-//! hash of the model, grid, spacing, heights, build settings), then the postcard body: per grid
-//! cell its serving node, per node its set index, and the deduplicated sets as delta-coded
-//! sorted id lists. Loading against a different model is an error that says so.
+//! hash of the model, model path, grid, spacing, heights, build settings), then the postcard
+//! body: per lookup cell its serving node, per node its set index, per segment its end-point
+//! vertex ids, and the deduplicated sets as delta-coded sorted id lists (vertex lists are
+//! derived on load). Loading against a different model is an error that says so.
 
 #[cfg(feature = "desk")]
 pub mod build;
@@ -90,15 +98,20 @@ pub struct TableHeader {
     pub min_visible_pixels: u32,
     /// Triangles farther than this from a node were not rendered.
     pub max_range_m: f64,
-    /// Whether each node's set is the union with its line-of-sight grid neighbours.
-    pub merged_neighbours: bool,
+    /// How each node's set was widened to its cell: 0 the node alone, 1 union with its
+    /// line-of-sight grid neighbours, 2 union with renders at its cell's corners.
+    pub merge: u8,
     /// Valid nodes.
     pub node_count: u32,
+    /// The query lookup grid splits every node cell into `lookup_subdivisions²` cells in x, y,
+    /// each served by the nearest valid node in line of sight of its centre (so that a position
+    /// near a wall is not served by a node on the other side).
+    pub lookup_subdivisions: u32,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 struct TableBody {
-    /// Per grid cell (x fastest, then y, then layer): the serving node, or [`NO_NODE`].
+    /// Per lookup cell (x fastest, then y, then layer): the serving node, or [`NO_NODE`].
     cell_node: Vec<u32>,
     /// Per node: its own grid cell.
     node_cell: Vec<u32>,
@@ -270,10 +283,18 @@ impl VisibilityTable {
     }
 
     fn from_parts(header: TableHeader, body: TableBody) -> Result<VisibilityTable, String> {
-        let cells = header.dims.iter().map(|&d| d as usize).product::<usize>();
-        if body.cell_node.len() != cells {
+        if header.dims.contains(&0) || header.spacing_m.is_nan() || header.spacing_m <= 0.0 {
+            return Err("empty or invalid grid".into());
+        }
+        let m = header.lookup_subdivisions as usize;
+        let cells = header.dims.iter().try_fold(1usize, |a, &d| a.checked_mul(d as usize));
+        let lookup = cells.and_then(|c| c.checked_mul(m)?.checked_mul(m));
+        let (Some(cells), Some(lookup)) = (cells, lookup) else {
+            return Err("grid too large".into());
+        };
+        if m == 0 || body.cell_node.len() != lookup {
             return Err(format!(
-                "{} grid cells stored, header says {cells}",
+                "{} lookup cells stored, header says {lookup}",
                 body.cell_node.len()
             ));
         }
@@ -281,7 +302,7 @@ impl VisibilityTable {
         if body.node_cell.len() != nodes || body.node_set.len() != nodes {
             return Err("node arrays do not match the node count".into());
         }
-        if header.heights_m.len() != header.dims[2] as usize || !(header.spacing_m > 0.0) {
+        if header.heights_m.len() != header.dims[2] as usize || header.heights_m.iter().any(|h| !h.is_finite()) {
             return Err("inconsistent grid header".into());
         }
         if body.segment_vertices.len() != header.segment_count as usize {
@@ -460,15 +481,17 @@ impl VisibilityTable {
         self.cell_position(self.node_cell[node as usize] as usize)
     }
 
-    /// The grid cell that contains `at` (positions outside the grid are clamped to it).
-    pub fn cell_of(&self, at: &Point3<f64>) -> usize {
+    /// The lookup cell that contains `at` (positions outside the grid are clamped to it).
+    pub fn lookup_cell_of(&self, at: &Point3<f64>) -> usize {
         let h = &self.header;
+        let m = h.lookup_subdivisions as usize;
+        let step = h.spacing_m / m as f64;
         let axis = |c: f64, o: f64, n: u32| -> usize {
-            let i = ((c - o) / h.spacing_m).round();
+            let i = ((c - (o - 0.5 * h.spacing_m)) / step).floor();
             if i.is_nan() || i < 0.0 {
                 0
             } else {
-                (i as usize).min(n as usize - 1)
+                (i as usize).min(n as usize * m - 1)
             }
         };
         let i = axis(at.x, h.origin[0], h.dims[0]);
@@ -480,14 +503,15 @@ impl VisibilityTable {
                 k = l;
             }
         }
-        (k * h.dims[1] as usize + j) * h.dims[0] as usize + i
+        let (lx, ly) = (h.dims[0] as usize * m, h.dims[1] as usize * m);
+        (k * ly + j) * lx + i
     }
 
-    /// VIS(T): the visibility set of the node serving position `at` (the node of the grid cell
-    /// that contains it, or the nearest valid node when that cell has none). `None` only for a
-    /// table without any valid node. O(1), no allocation.
+    /// VIS(T): the visibility set of the node serving position `at`: the nearest valid node in
+    /// line of sight of the centre of the lookup cell containing `at` (usually the node of its
+    /// own node cell). `None` only for a table without any valid node. O(1), no allocation.
     pub fn query(&self, at: &Point3<f64>) -> Option<VisibilitySet<'_>> {
-        let node = self.cell_node[self.cell_of(at)];
+        let node = self.cell_node[self.lookup_cell_of(at)];
         if node == NO_NODE {
             return None;
         }

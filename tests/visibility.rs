@@ -1,0 +1,400 @@
+//! The prior visibility table (Koch–Teller §4.3): closed room, two rooms joined by a door, a
+//! pillar occluding a wall, nodes inside walls and outside the building excluded, the file
+//! round trip, the model-hash mismatch error and the query JSON.
+#![cfg(feature = "desk")]
+
+use nalgebra::{Point3, Vector3};
+use omnitrack::visibility::build::{build_table, BuildOptions, Merge, Scene};
+use omnitrack::visibility::{query_json, VisibilityError, VisibilityTable};
+use omnitrack::Model;
+
+/// OBJ text from polygons given with the side they are seen from.
+#[derive(Default)]
+struct Obj {
+    text: String,
+    vertices: usize,
+}
+
+impl Obj {
+    /// A planar polygon, oriented counter-clockwise about `visible` (the side it is seen from).
+    fn poly(&mut self, corners: &[[f64; 3]], visible: [f64; 3]) {
+        let mut n = Vector3::zeros();
+        for i in 0..corners.len() {
+            let (a, b) = (corners[i], corners[(i + 1) % corners.len()]);
+            n += Vector3::new(
+                (a[1] - b[1]) * (a[2] + b[2]),
+                (a[2] - b[2]) * (a[0] + b[0]),
+                (a[0] - b[0]) * (a[1] + b[1]),
+            );
+        }
+        let mut order: Vec<usize> = (0..corners.len()).collect();
+        if n.dot(&Vector3::from(visible)) < 0.0 {
+            order.reverse();
+        }
+        let mut f = String::from("f");
+        for &i in &order {
+            let c = corners[i];
+            self.text.push_str(&format!("v {} {} {}\n", c[0], c[1], c[2]));
+            self.vertices += 1;
+            let _ = i;
+            f.push_str(&format!(" {}", self.vertices));
+        }
+        // Vertices are written in `order`, so the face lists them 1..n in that order.
+        self.text.push_str(&f);
+        self.text.push('\n');
+    }
+
+    /// An axis-aligned rectangle in the plane `axis = at`, spanning [lo, hi] on the other two
+    /// axes (in cyclic order axis+1, axis+2), seen from direction `sign` along `axis`.
+    fn rect(&mut self, axis: usize, at: f64, lo: [f64; 2], hi: [f64; 2], sign: f64) {
+        let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+        let p = |a: f64, b: f64| {
+            let mut c = [0.0; 3];
+            c[axis] = at;
+            c[u] = a;
+            c[v] = b;
+            c
+        };
+        let mut n = [0.0; 3];
+        n[axis] = sign;
+        self.poly(&[p(lo[0], lo[1]), p(hi[0], lo[1]), p(hi[0], hi[1]), p(lo[0], hi[1])], n);
+    }
+
+    /// A closed box room seen from inside: floor, ceiling and four walls.
+    fn room(&mut self, lo: [f64; 3], hi: [f64; 3]) {
+        self.rect(2, lo[2], [lo[0], lo[1]], [hi[0], hi[1]], 1.0);
+        self.rect(2, hi[2], [lo[0], lo[1]], [hi[0], hi[1]], -1.0);
+        self.rect(0, lo[0], [lo[1], lo[2]], [hi[1], hi[2]], 1.0);
+        self.rect(0, hi[0], [lo[1], lo[2]], [hi[1], hi[2]], -1.0);
+        self.rect(1, lo[1], [lo[2], lo[0]], [hi[2], hi[0]], 1.0);
+        self.rect(1, hi[1], [lo[2], lo[0]], [hi[2], hi[0]], -1.0);
+    }
+
+    fn line(&mut self, a: [f64; 3], b: [f64; 3]) {
+        self.text
+            .push_str(&format!("v {} {} {}\nv {} {} {}\n", a[0], a[1], a[2], b[0], b[1], b[2]));
+        self.vertices += 2;
+        self.text
+            .push_str(&format!("l {} {}\n", self.vertices - 1, self.vertices));
+    }
+
+    fn model(&self) -> Model {
+        Model::from_obj_str(&self.text, "test.obj").expect("test model loads")
+    }
+}
+
+fn options() -> BuildOptions {
+    BuildOptions {
+        spacing_m: 1.0,
+        heights_m: vec![1.0, 1.5],
+        cube_map_resolution: 64,
+        merge: Merge::None,
+        ..BuildOptions::default()
+    }
+}
+
+const H: f64 = 2.7;
+
+/// Index of the segment with these end points (either order).
+fn segment(model: &Model, a: [f64; 3], b: [f64; 3]) -> u32 {
+    let (a, b) = (Point3::from(a), Point3::from(b));
+    model
+        .segments
+        .iter()
+        .position(|s| {
+            ((s.a - a).norm() < 1e-9 && (s.b - b).norm() < 1e-9) || ((s.a - b).norm() < 1e-9 && (s.b - a).norm() < 1e-9)
+        })
+        .unwrap_or_else(|| panic!("no segment {a:?} – {b:?}")) as u32
+}
+
+/// Brute force: some sample of the segment is in clear line of sight from `eye`.
+fn seen(scene: &Scene, model: &Model, eye: &Point3<f64>, s: u32) -> bool {
+    let s = &model.segments[s as usize];
+    (0..=200).any(|k| {
+        let p = s.a + (s.b - s.a) * (k as f64 / 200.0);
+        let d = p - eye;
+        scene.clear_line(eye, &(eye + d * (1.0 - 1e-3 / d.norm())))
+    })
+}
+
+#[test]
+fn closed_room_everything_visible() {
+    let mut obj = Obj::default();
+    obj.room([0.0, 0.0, 0.0], [4.0, 3.0, H]);
+    let model = obj.model();
+    assert_eq!(model.segments.len(), 12);
+    let table = build_table(&model, "room.obj", &options());
+    assert_eq!(table.node_count(), 4 * 3 * 2, "every node of the room is valid");
+    for n in 0..table.node_count() as u32 {
+        let set = table.node_set(n);
+        assert_eq!(set.faces, (0..6).collect::<Vec<u32>>().as_slice(), "node {n}");
+        assert_eq!(set.segments, (0..12).collect::<Vec<u32>>().as_slice(), "node {n}");
+        assert_eq!(set.vertices.len(), 8, "node {n}");
+    }
+    // Any position, even outside the grid, is served.
+    let set = table.query(&Point3::new(-5.0, 40.0, 9.0)).expect("served");
+    assert_eq!(set.segments.len(), 12);
+}
+
+/// Room A [0,4]×[0,4] and room B [4.3,8.3]×[0,3], joined through a 0.3 m thick wall by a door
+/// y ∈ [0.9, 2.1], z ∈ [0, 2.1].
+fn two_rooms() -> Obj {
+    let (x0, x1) = (4.0, 4.3);
+    let (d0, d1, dh) = (0.9, 2.1, 2.1);
+    let mut obj = Obj::default();
+    // Room A without its x = 4 wall.
+    obj.rect(2, 0.0, [0.0, 0.0], [x0, 4.0], 1.0);
+    obj.rect(2, H, [0.0, 0.0], [x0, 4.0], -1.0);
+    obj.rect(0, 0.0, [0.0, 0.0], [4.0, H], 1.0);
+    obj.rect(1, 0.0, [0.0, 0.0], [H, x0], 1.0);
+    obj.rect(1, 4.0, [0.0, 0.0], [H, x0], -1.0);
+    // Room B without its x = 4.6 wall.
+    obj.rect(2, 0.0, [x1, 0.0], [8.3, 3.0], 1.0);
+    obj.rect(2, H, [x1, 0.0], [8.3, 3.0], -1.0);
+    obj.rect(0, 8.3, [0.0, 0.0], [3.0, H], -1.0);
+    obj.rect(1, 0.0, [0.0, x1], [H, 8.3], 1.0);
+    obj.rect(1, 3.0, [0.0, x1], [H, 8.3], -1.0);
+    // The thick wall: its two sides with the door cut from the bottom, the door's reveals, and
+    // the wall's ends and top closing the solid where it meets the rooms' outlines.
+    for (x, sign, y_end) in [(x0, -1.0, 4.0), (x1, 1.0, 3.0)] {
+        obj.poly(
+            &[
+                [x, 0.0, 0.0],
+                [x, d0, 0.0],
+                [x, d0, dh],
+                [x, d1, dh],
+                [x, d1, 0.0],
+                [x, y_end, 0.0],
+                [x, y_end, H],
+                [x, 0.0, H],
+            ],
+            [sign, 0.0, 0.0],
+        );
+    }
+    obj.rect(1, d0, [0.0, x0], [dh, x1], 1.0);
+    obj.rect(1, d1, [0.0, x0], [dh, x1], -1.0);
+    obj.rect(2, dh, [x0, d0], [x1, d1], -1.0);
+    // Room B is narrower: the wall's side facing +y beyond y = 3 belongs to the outside.
+    obj
+}
+
+#[test]
+fn two_rooms_far_room_seen_only_through_the_door() {
+    let obj = two_rooms();
+    let model = obj.model();
+    let scene = Scene::new(&model);
+    let table = build_table(&model, "two_rooms.obj", &options());
+
+    // Nodes inside the wall (x = 4.15) and outside the building (room B's side beyond y = 3)
+    // are excluded; the rest of both rooms is in.
+    for n in 0..table.node_count() as u32 {
+        let p = table.node_position(n);
+        assert!(!(p.x > 4.0 && p.x < 4.3), "node {p} lies in the wall");
+        assert!(!(p.x > 4.3 && p.y > 3.0), "node {p} lies outside the building");
+    }
+    let nodes: Vec<_> = (0..table.node_count() as u32).map(|n| table.node_position(n)).collect();
+    assert_eq!(table.node_count(), (3 * 4 + 3 * 3) * 2, "{nodes:?}");
+    let p = Point3::new(2.15, 1.5, 1.5);
+    let set = table.query(&p).expect("served");
+    let eye = set.node_position;
+    assert!(
+        eye.x < 4.0,
+        "room A's position is served by a node of room A, not {eye}"
+    );
+
+    // Room B's far corners (8.3, 0) and (8.3, 3) are seen through the door; its corners behind
+    // the wall, (4.3, 0) and (4.3, 3), are not.
+    let far = segment(&model, [8.3, 0.0, 0.0], [8.3, 0.0, H]);
+    let far2 = segment(&model, [8.3, 3.0, 0.0], [8.3, 3.0, H]);
+    let hidden = [
+        segment(&model, [4.3, 0.0, 0.0], [4.3, 0.0, H]),
+        segment(&model, [4.3, 3.0, 0.0], [4.3, 3.0, H]),
+    ];
+    let b_only: Vec<u32> = (0..model.segments.len() as u32)
+        .filter(|&s| {
+            let g = &model.segments[s as usize];
+            g.a.x >= 4.3 - 1e-9 && g.b.x >= 4.3 - 1e-9
+        })
+        .collect();
+    assert!(
+        set.segments.contains(&far),
+        "far corner of room B seen through the door"
+    );
+    assert!(
+        set.segments.contains(&far2),
+        "far corner of room B seen through the door"
+    );
+    for h in hidden {
+        assert!(!set.segments.contains(&h), "segment {h} is behind the wall");
+    }
+    // Everything of room B in the set is seen through the door, by brute force.
+    let mut through = 0;
+    for &s in set.segments.iter().filter(|s| b_only.contains(s)) {
+        assert!(
+            seen(&scene, &model, &eye, s),
+            "segment {s} of room B is not visible from {eye}"
+        );
+        through += 1;
+    }
+    assert!(through >= 3, "only {through} segments of room B seen through the door");
+
+    // A node in room A off the door's axis, near the shared wall: whatever of room B it has is
+    // visible (through the door).
+    let side = table.query(&Point3::new(3.5, 0.5, 1.0)).expect("served");
+    for &s in side.segments {
+        if b_only.contains(&s) {
+            assert!(seen(&scene, &model, &side.node_position, s), "segment {s}");
+        }
+    }
+}
+
+#[test]
+fn pillar_occludes_wall() {
+    let mut obj = Obj::default();
+    obj.room([0.0, 0.0, 0.0], [10.0, 5.0, H]);
+    // A pillar [4.1,4.9]×[2.1,2.9], floor to ceiling, seen from outside; node (4.5, 2.5) lies
+    // in it, 0.4 m from its faces (excluded because it sees their backs).
+    obj.rect(0, 4.1, [2.1, 0.0], [2.9, H], -1.0);
+    obj.rect(0, 4.9, [2.1, 0.0], [2.9, H], 1.0);
+    obj.rect(1, 2.1, [0.0, 4.1], [H, 4.9], -1.0);
+    obj.rect(1, 2.9, [0.0, 4.1], [H, 4.9], 1.0);
+    // A free segment painted on the far wall behind the pillar.
+    obj.line([10.0, 2.5, 0.5], [10.0, 2.5, 2.2]);
+    let model = obj.model();
+    let table = build_table(&model, "pillar.obj", &options());
+    let painted = segment(&model, [10.0, 2.5, 0.5], [10.0, 2.5, 2.2]);
+    let front = segment(&model, [4.1, 2.1, 0.0], [4.1, 2.1, H]);
+    let back = segment(&model, [4.9, 2.1, 0.0], [4.9, 2.1, H]);
+
+    let behind = table.query(&Point3::new(1.5, 2.5, 1.5)).expect("served");
+    assert_eq!(behind.node_position, Point3::new(1.5, 2.5, 1.5));
+    assert!(!behind.segments.contains(&painted), "the pillar hides the painted line");
+    assert!(behind.segments.contains(&front));
+    assert!(!behind.segments.contains(&back), "the pillar hides its own back edge");
+    // The pillar's faces are opaque: nodes inside it are excluded.
+    for n in 0..table.node_count() as u32 {
+        let p = table.node_position(n);
+        assert!(
+            !(p.x > 4.1 && p.x < 4.9 && p.y > 2.1 && p.y < 2.9),
+            "node {p} inside the pillar"
+        );
+    }
+
+    let aside = table.query(&Point3::new(1.5, 0.5, 1.5)).expect("served");
+    assert!(aside.segments.contains(&painted), "seen past the pillar");
+    assert!(aside.segments.contains(&back), "back edge seen from the side");
+}
+
+#[test]
+fn file_round_trip_and_model_mismatch() {
+    let obj = two_rooms();
+    let model = obj.model();
+    let table = build_table(&model, "two_rooms.obj", &options());
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("two_rooms.vis");
+    table.save(&path).expect("saved");
+    let back = VisibilityTable::load(&path, &model).expect("loads against its model");
+    assert_eq!(back, table);
+
+    let mut other = Obj::default();
+    other.room([0.0, 0.0, 0.0], [4.0, 3.0, H]);
+    let err = VisibilityTable::load(&path, &other.model()).expect_err("other model");
+    assert!(matches!(err, VisibilityError::ModelMismatch { .. }), "{err:?}");
+    let msg = err.to_string();
+    assert!(
+        msg.contains("two_rooms.vis") && msg.contains("different model"),
+        "{msg}"
+    );
+    assert!(!msg.contains('\n'));
+
+    // Garbage and truncation are errors too, never panics.
+    let bytes = table.to_bytes();
+    assert!(VisibilityTable::from_bytes(b"not a table", "x.vis").is_err());
+    for cut in [8, 20, bytes.len() / 2, bytes.len() - 1] {
+        assert!(
+            VisibilityTable::from_bytes(&bytes[..cut], "x.vis").is_err(),
+            "cut {cut}"
+        );
+    }
+}
+
+#[test]
+fn query_json_lists_obj_faces_segments_and_vertices() {
+    let mut obj = Obj::default();
+    obj.room([0.0, 0.0, 0.0], [4.0, 3.0, H]);
+    let model = obj.model();
+    let table = build_table(&model, "room.obj", &options());
+    let json = query_json(&table, &model, &Point3::new(-1.5, 2.0, 1.6));
+    let v: serde_json::Value = serde_json::from_str(&json).expect("valid JSON");
+    assert_eq!(v["node_m"], serde_json::json!([0.5, 2.5, 1.5]));
+    assert_eq!(v["faces"], serde_json::json!([1, 2, 3, 4, 5, 6]));
+    assert_eq!(v["segments"].as_array().unwrap().len(), 12);
+    assert!(v["segments"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .all(|s| s.as_array().unwrap().len() == 6));
+    assert_eq!(v["vertices"].as_array().unwrap().len(), 8);
+    assert!(!json.contains('\n'));
+}
+
+#[test]
+fn neighbour_merging_is_a_superset() {
+    let obj = two_rooms();
+    let model = obj.model();
+    let plain = build_table(&model, "m.obj", &options());
+    let merged = build_table(
+        &model,
+        "m.obj",
+        &BuildOptions {
+            merge: Merge::Neighbours,
+            ..options()
+        },
+    );
+    assert_eq!(plain.node_count(), merged.node_count());
+    for n in 0..plain.node_count() as u32 {
+        let (a, b) = (plain.node_set(n), merged.node_set(n));
+        assert!(a.segments.iter().all(|s| b.segments.contains(s)), "node {n}");
+    }
+}
+
+#[test]
+fn cli_build_and_query_entry_points() {
+    use omnitrack::config::VisibilityConfig;
+    use omnitrack::visibility::build::run_build;
+    use omnitrack::visibility::{parse_point, run_query};
+    let dir = tempfile::tempdir().expect("temp dir");
+    let model_path = dir.path().join("room.obj");
+    let table_path = dir.path().join("room.vis");
+    let mut obj = Obj::default();
+    obj.room([0.0, 0.0, 0.0], [4.0, 3.0, H]);
+    std::fs::write(&model_path, &obj.text).unwrap();
+    let config = VisibilityConfig {
+        cube_map_resolution: 32,
+        ..VisibilityConfig::default()
+    };
+    let summary = run_build(&model_path, &table_path, Some(1.0), &config).expect("builds");
+    assert!(summary.contains("valid nodes"), "{summary}");
+    let json = run_query(&table_path, &parse_point("-1.5,2,1.6").unwrap()).expect("queries");
+    let v: serde_json::Value = serde_json::from_str(&json).expect("valid JSON");
+    assert_eq!(v["faces"], serde_json::json!([1, 2, 3, 4, 5, 6]));
+
+    // The model changed on disk since the build: one line naming the table and the cause.
+    let mut other = Obj::default();
+    other.room([0.0, 0.0, 0.0], [5.0, 3.0, H]);
+    std::fs::write(&model_path, &other.text).unwrap();
+    let err = run_query(&table_path, &parse_point("1,1,1.5").unwrap()).expect_err("mismatch");
+    let msg = err.to_string();
+    assert!(
+        msg.contains("room.vis") && msg.contains("different model") && !msg.contains('\n'),
+        "{msg}"
+    );
+
+    // Bad inputs are one-line errors.
+    std::fs::write(&model_path, "# nothing\n").unwrap();
+    let err = run_build(&model_path, &table_path, None, &config).expect_err("no faces");
+    assert!(err.to_string().contains("room.obj"), "{err}");
+    assert!(run_build(&model_path, &table_path, Some(-1.0), &config).is_err());
+    let err = run_query(&dir.path().join("missing.vis"), &parse_point("0,0,0").unwrap()).expect_err("missing");
+    assert!(err.to_string().contains("missing.vis"), "{err}");
+}
