@@ -123,9 +123,9 @@ fn main() -> ExitCode {
 fn run(command: Command) -> Result<(), String> {
     match command {
         Command::Demo => Err(
-            "demo is not available yet: it waits for the visibility table (issue 6) and the tracker \
-             (7); synthetic recordings, the pose solvers and edge extraction are in (try \
-             `omnitrack-desk scenario lab`, `omnitrack pose` and `omnitrack edges`)"
+            "demo is not available yet: it waits for the tracker (issue 7); synthetic recordings, the \
+             pose solvers, edge extraction and the visibility table are in (try `omnitrack-desk \
+             scenario lab`, `omnitrack pose`, `omnitrack edges` and `omnitrack visibility`)"
                 .into(),
         ),
         Command::Check { rig, model, config } => {
