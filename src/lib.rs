@@ -10,6 +10,7 @@ pub mod edges;
 pub mod geometry;
 pub mod lines;
 pub mod model;
+pub mod publish;
 pub mod rig;
 pub mod solver;
 pub mod trajectory;

@@ -68,6 +68,12 @@ enum Command {
         #[command(subcommand)]
         command: VisibilityCommand,
     },
+    /// Subscribes to the pose service and prints one line per sample.
+    Listen {
+        /// Stop after N samples (default: until Ctrl-C).
+        #[arg(long)]
+        count: Option<u64>,
+    },
     /// Prints the model segments of an OBJ as CSV: x1,y1,z1,x2,y2,z2,faces (OBJ face numbers,
     /// space-separated; empty for a free `l` segment).
     Segments {
@@ -240,6 +246,9 @@ fn run(command: Command) -> Result<(), String> {
             let json = omnitrack::visibility::run_query(&visibility, &at).map_err(|e| e.to_string())?;
             println!("{json}");
             Ok(())
+        }
+        Command::Listen { count } => {
+            omnitrack::publish::listen(omnitrack::publish::POSE_SERVICE, count, &mut std::io::stdout().lock())
         }
         Command::Segments { model } => {
             let m = Model::load(&model).map_err(|e| e.to_string())?;

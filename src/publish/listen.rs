@@ -1,0 +1,71 @@
+//! `omnitrack listen [--count N]`: subscribes to the pose service and prints one line per sample.
+//!
+//! Line format (one sample per line, space-separated `key=value`, fixed key order):
+//!
+//! ```text
+//! seq=42 t=1700000000123456789ns status=tracking pos=[1.234567,-0.500000,1.600000] q=[0.999999,0.000000,0.001000,0.000000] sd_m=[0.0100,0.0100,0.0200] sd_deg=[0.100,0.100,0.050] inliers=57 xi=1.234e-5
+//! ```
+//!
+//! - `seq`: [`PoseSample::sequence`]; `t`: [`PoseSample::timestamp_ns`] in nanoseconds;
+//! - `status`: `initializing`, `tracking`, `lost` (`unknown(N)` for an unknown byte N);
+//! - `pos`: position of `T_world_rig` in metres (6 decimals); `q`: its rotation `[w,x,y,z]`;
+//! - `sd_m` / `sd_deg`: square roots of the covariance diagonal (translation in metres,
+//!   rotation converted to degrees);
+//! - `inliers`: accepted correspondences; `xi`: ξ in rad² (scientific notation).
+
+use std::io::Write;
+use std::time::Duration;
+
+use super::{PoseSample, PoseStatus, PoseSubscriber};
+
+/// Writes one sample as one line in the format above (without the newline).
+pub fn format_pose_line(s: &PoseSample, out: &mut dyn Write) -> std::io::Result<()> {
+    let p = &s.position_m;
+    let q = &s.rotation_wxyz;
+    let sd = |i: usize| s.covariance[i * 7].max(0.0).sqrt();
+    write!(out, "seq={} t={}ns status=", s.sequence, s.timestamp_ns)?;
+    match PoseStatus::try_from(s.status) {
+        Ok(st) => write!(out, "{}", st.as_str())?,
+        Err(b) => write!(out, "unknown({b})")?,
+    }
+    write!(
+        out,
+        " pos=[{:.6},{:.6},{:.6}] q=[{:.6},{:.6},{:.6},{:.6}] sd_m=[{:.4},{:.4},{:.4}] sd_deg=[{:.3},{:.3},{:.3}] \
+         inliers={} xi={:.3e}",
+        p[0],
+        p[1],
+        p[2],
+        q[0],
+        q[1],
+        q[2],
+        q[3],
+        sd(0),
+        sd(1),
+        sd(2),
+        sd(3).to_degrees(),
+        sd(4).to_degrees(),
+        sd(5).to_degrees(),
+        s.inliers,
+        s.xi_rad2
+    )
+}
+
+/// Subscribes to `service` and prints one line per received pose sample to `out` (format in the
+/// module doc), flushing after each; stops after `count` samples, or never when `None`. A sample
+/// already published before the call (history 1) is printed first. Waits on the service's event,
+/// so an idle listener sleeps.
+pub fn listen(service: &str, count: Option<u64>, out: &mut dyn Write) -> Result<(), String> {
+    let subscriber = PoseSubscriber::create(service).map_err(|e| e.to_string())?;
+    let mut printed = 0u64;
+    while count.is_none_or(|n| printed < n) {
+        let Some(sample) = subscriber.wait(Duration::from_secs(1)).map_err(|e| e.to_string())? else {
+            continue;
+        };
+        format_pose_line(&sample, out)
+            .and_then(|_| writeln!(out))
+            .and_then(|_| out.flush())
+            .map_err(|e| format!("writing to output: {e}"))?;
+        printed += 1;
+    }
+    Ok(())
+}
