@@ -25,7 +25,7 @@ mod bench {
     use omnitrack::config::EdgeConfig;
     use omnitrack::desk::render::{Appearance, FrameSpec, Ray, Renderer};
     use omnitrack::desk::scenario::{Scenario, ScenarioName};
-    use omnitrack::edges::{Edge, EdgeDetector, EdgeParams};
+    use omnitrack::edges::{Edge, EdgeDetector, EdgeParams, Smoothing};
     use omnitrack::geometry::Pose;
     use omnitrack::{Model, Rig};
     use std::path::{Path, PathBuf};
@@ -165,6 +165,30 @@ mod bench {
                 }
             }
             s.truths += 1;
+            if best.is_none() && std::env::var("EDGES_MISSES").is_ok() {
+                // Diagnostics: nearest plane among overlapping edges, best overlap within 1°.
+                let mut near = (f64::INFINITY, 0.0);
+                let mut cover = 0.0f64;
+                for e in edges.iter().filter(|e| e.sensor as usize == t.sensor) {
+                    let ei = interval(&t.normal, &e1, &e.plane.ends[0], &e.plane.ends[1]);
+                    let overlap = (ti.1.min(ei.1) - ti.0.max(ei.0)).max(0.0) / tlen;
+                    let ang = e.plane.normal.dot(&t.normal).abs().min(1.0).acos().to_degrees();
+                    if overlap > 0.3 && ang < near.0 {
+                        near = (ang, overlap);
+                    }
+                    if ang < 1.0 {
+                        cover = cover.max(overlap);
+                    }
+                }
+                eprintln!(
+                    "miss s{} len {:.2}° nearest-plane {:.2}° (overlap {:.2}) best-cover-within-1° {:.2}",
+                    t.sensor,
+                    tlen.to_degrees(),
+                    near.0,
+                    near.1,
+                    cover
+                );
+            }
             if let Some(err) = best {
                 s.recalled += 1;
                 s.errors_deg.push(err);
@@ -273,7 +297,8 @@ mod bench {
     }
 
     /// `EdgeParams::default()`, with overrides from EDGES_THRESHOLD, EDGES_SPLIT_DEG,
-    /// EDGES_MERGE_DEG, EDGES_GAP_DEG, EDGES_MIN_CHAIN (for tuning sweeps).
+    /// EDGES_MERGE_DEG, EDGES_GAP_DEG, EDGES_SMOOTH (0 none, 1 binomial², 2 along the edge),
+    /// EDGES_MIN_CHAIN (for tuning sweeps). EDGES_MISSES=1 prints every missed segment to stderr.
     fn params() -> EdgeParams {
         let get = |k: &str| std::env::var(k).ok().and_then(|v| v.parse::<f64>().ok());
         let mut p = EdgeParams::default();
@@ -290,7 +315,12 @@ mod bench {
             p.merge_gap_rad = v.to_radians();
         }
         if let Some(v) = get("EDGES_SMOOTH") {
-            p.smooth = v != 0.0;
+            // 0: none, 1: binomial [1 2 1]², 2: along the edge only.
+            p.smoothing = match v as i64 {
+                0 => Smoothing::None,
+                1 => Smoothing::Full,
+                _ => Smoothing::Along,
+            };
         }
         if let Some(v) = get("EDGES_MIN_CHAIN") {
             p.min_chain_edgels = v as usize;

@@ -5,12 +5,16 @@
 //! sensor's optical centre that contains a straight 3D edge (rig frame), its pixel and ray end
 //! points, angular length, strength and [`HueSignature`].
 //!
-//! Per sensor: grey image → integer Sobel gradients → non-maximum suppression → edgels linked
-//! into chains (same polarity, direction within ~45°) → sub-pixel edgels (parabola across the
-//! gradient) unprojected to unit rays through a per-pixel ray table built at start-up → planes
-//! fitted to the rays (smallest eigenvector of Σ r rᵀ), chains split where they bend off a great
-//! circle and neighbouring collinear pieces merged, also across chains → hue strips on both
-//! sides. Fisheye curvature costs nothing: rays, not pixels, are fitted.
+//! Per sensor: per colour channel, integer Sobel gradients on the channel smoothed along the
+//! derivative's cross axis only (3 px wide across an edge, so a door or window reveal's two edges
+//! 2–3 px apart stay apart), the strongest channel kept per pixel → non-maximum suppression →
+//! edgels linked into chains (direction within ~50°) → sub-pixel edgels (Gaussian peak: parabola
+//! through the log magnitudes across the gradient) unprojected to unit rays through a per-pixel
+//! ray table built at start-up → planes fitted to the rays (smallest eigenvector of Σ w r rᵀ, w
+//! the gradient magnitude; outliers beyond 2.5 RMS refitted out), chains split where they bend off
+//! a great circle and neighbouring collinear pieces merged, also across chains (short pieces'
+//! normals are loose, so candidates within 5° are tried; the merged fit decides) → hue strips on
+//! both sides. Fisheye curvature costs nothing: rays, not pixels, are fitted.
 //!
 //! Memory is fixed: every buffer is sized in [`EdgeDetector::new`] from the rig (resolution) and
 //! the [`EdgeConfig`] (edges per sensor); [`EdgeDetector::detect`] allocates nothing. Sensors are
@@ -60,15 +64,27 @@ pub struct Edge {
     pub rms_rad: f32,
 }
 
+/// Smoothing of each colour channel before the Sobel.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Smoothing {
+    /// None: the plain 3×3 Sobel (edges 2 px apart stay apart, but noisier directions).
+    None,
+    /// The binomial [1 2 1]² (a 5×5 derivative: steadier directions and sub-pixel positions,
+    /// but edges closer than ~3 px blend into one).
+    Full,
+    /// [1 2 1] along the derivative's cross axis only: each derivative is 3 px wide across
+    /// (near-parallel edges 2–3 px apart stay apart) and 5 px long along the edge.
+    Along,
+}
+
 /// Tuning of the detector beyond [`EdgeConfig`]; `Default` is what the benchmarks measured.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct EdgeParams {
     /// Minimum L1 gradient magnitude |gx| + |gy| of an edgel: Sobel of the binomially smoothed
     /// grey image ×16 (a step of h grey levels gives ≈ 4h·16 = 64h across its peak).
     pub gradient_threshold: u16,
-    /// Smooth each channel by the binomial [1 2 1]² before the Sobel (a 5×5 derivative: steadier
-    /// directions and sub-pixel positions, but edges closer than ~3 px blend into one).
-    pub smooth: bool,
+    /// Smoothing of each channel before the Sobel.
+    pub smoothing: Smoothing,
     /// Chains shorter than this (edgels) are dropped.
     pub min_chain_edgels: usize,
     /// A chain is split where a ray deviates more than this (rad) from the great circle of the
@@ -90,10 +106,10 @@ impl Default for EdgeParams {
     fn default() -> Self {
         EdgeParams {
             gradient_threshold: 640,
-            smooth: true,
-            min_chain_edgels: 10,
+            smoothing: Smoothing::Along,
+            min_chain_edgels: 8,
             split_tolerance_rad: 0.2f64.to_radians(),
-            merge_angle_rad: 1.5f64.to_radians(),
+            merge_angle_rad: 5.0f64.to_radians(),
             merge_gap_rad: 10.0f64.to_radians(),
             hue_strip_offset_px: 2.0,
             hue_samples_per_edge: 48,

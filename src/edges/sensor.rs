@@ -4,7 +4,7 @@
 //! collinear pieces, also across chains) → hue strips → the strongest `max_edges` edges.
 
 use super::hue::{HueAcc, HueTable};
-use super::{Edge, EdgeParams, HueSignature};
+use super::{Edge, EdgeParams, HueSignature, Smoothing};
 use crate::capture::SensorImage;
 use crate::geometry::{EdgePlane, Lens};
 use crate::rig::Sensor;
@@ -20,8 +20,8 @@ const DIRS: [(isize, isize); 8] = [(1, 0), (1, 1), (0, 1), (-1, 1), (-1, 0), (-1
 /// An edge piece before selection: moments of its rays, end rays, hue sums.
 #[derive(Debug, Clone, Copy, Default)]
 struct Candidate {
-    /// Σ r rᵀ over its edgels (xx, xy, xz, yy, yz, zz), sensor frame.
-    m: [f64; 6],
+    /// Σ w r rᵀ over its edgels (xx, xy, xz, yy, yz, zz), sensor frame, and Σ w.
+    m: Moments,
     count: u32,
     /// Unit normal (sensor frame), oriented as r1 × r2.
     n: Vector3<f64>,
@@ -72,7 +72,7 @@ pub(crate) struct Workspace {
     grad: Vec<[f32; 2]>,
     emag: Vec<f32>,
     ray: Vec<Vector3<f64>>,
-    prefix: Vec<[f64; 6]>,
+    prefix: Vec<Moments>,
     stack: Vec<(u32, u32)>,
     pieces: Vec<(u32, u32)>,
     cands: Vec<Candidate>,
@@ -184,27 +184,46 @@ impl Workspace {
         }
     }
 
-    /// Plane `c` smoothed by the binomial [1 2 1]² (weights sum to 16), separable; borders
+    /// Plane `c` smoothed for the Sobel (×16, u16): `hblur` by the binomial [1 2 1] across
+    /// columns (×4), `smooth` down rows. With [`Smoothing::Along`] `smooth` is the vertical pass
+    /// of the plane itself, so that the Sobel's x derivative is taken of `smooth` (smoothing along
+    /// a vertical edge only) and its y derivative of `hblur`; with [`Smoothing::Full`] `smooth`
+    /// is the vertical pass of `hblur` (the binomial [1 2 1]², both derivatives of it). Borders
     /// replicate.
     #[inline(never)]
     fn smooth(&mut self, c: usize) {
         let (w, h) = (self.w, self.h);
         let n = w - 2;
         let plane = &self.planes[c * w * h..(c + 1) * w * h];
-        if !self.params.smooth {
+        let mode = self.params.smoothing;
+        if mode == Smoothing::None {
             for (d, &p) in self.smooth.iter_mut().zip(plane) {
                 *d = 16 * p as u16;
             }
             return;
         }
+        let hscale: u16 = if mode == Smoothing::Along { 4 } else { 1 };
         for (src, dst) in plane.chunks_exact(w).zip(self.hblur.chunks_exact_mut(w)) {
             let (a, b, cc) = (&src[..n], &src[1..n + 1], &src[2..n + 2]);
             let out = &mut dst[1..n + 1];
             for u in 0..n {
-                out[u] = a[u] as u16 + 2 * b[u] as u16 + cc[u] as u16;
+                out[u] = hscale * (a[u] as u16 + 2 * b[u] as u16 + cc[u] as u16);
             }
-            dst[0] = 4 * src[0] as u16;
-            dst[w - 1] = 4 * src[w - 1] as u16;
+            dst[0] = 4 * hscale * src[0] as u16;
+            dst[w - 1] = 4 * hscale * src[w - 1] as u16;
+        }
+        if mode == Smoothing::Along {
+            for v in 0..h {
+                let (r0, r2) = (v.saturating_sub(1), (v + 1).min(h - 1));
+                let a = &plane[r0 * w..r0 * w + w];
+                let b = &plane[v * w..v * w + w];
+                let c = &plane[r2 * w..r2 * w + w];
+                let out = &mut self.smooth[v * w..v * w + w];
+                for u in 0..w {
+                    out[u] = 4 * (a[u] as u16 + 2 * b[u] as u16 + c[u] as u16);
+                }
+            }
+            return;
         }
         for v in 0..h {
             let (r0, r2) = (v.saturating_sub(1), (v + 1).min(h - 1));
@@ -218,22 +237,30 @@ impl Workspace {
         }
     }
 
-    /// Integer 3×3 Sobel on the smoothed channel (so a 5×5 derivative), separable; with `fold`
-    /// a pixel keeps the earlier channels' gradient unless this one's is larger. Border rows
-    /// and columns stay 0.
+    /// Integer 3×3 Sobel on the smoothed channel (so a 5×5 derivative), separable: the x
+    /// derivative of `smooth`, the y derivative of `hblur` under [`Smoothing::Along`], else of
+    /// `smooth` too; with `fold` a pixel keeps the earlier channels' gradient unless this one's
+    /// is larger. Border rows and columns stay 0.
     #[inline(never)]
     fn sobel(&mut self, fold: bool) {
         let w = self.w;
         let n = w - 2;
+        let ysrc = if self.params.smoothing == Smoothing::Along {
+            &self.hblur
+        } else {
+            &self.smooth
+        };
         for v in 1..self.h - 1 {
             let r0 = &self.smooth[(v - 1) * w..(v - 1) * w + w];
             let r1 = &self.smooth[v * w..v * w + w];
             let r2 = &self.smooth[(v + 1) * w..(v + 1) * w + w];
+            let y0 = &ysrc[(v - 1) * w..(v - 1) * w + w];
+            let y2 = &ysrc[(v + 1) * w..(v + 1) * w + w];
             let cs = &mut self.col_sum[..w];
             let cd = &mut self.col_diff[..w];
             for u in 0..w {
                 cs[u] = r0[u] as i16 + 2 * r1[u] as i16 + r2[u] as i16;
-                cd[u] = r2[u] as i16 - r0[u] as i16;
+                cd[u] = y2[u] as i16 - y0[u] as i16;
             }
             let (s0, s2) = (&self.col_sum[..n], &self.col_sum[2..n + 2]);
             let (d0, d1, d2) = (&self.col_diff[..n], &self.col_diff[1..n + 1], &self.col_diff[2..n + 2]);
@@ -381,7 +408,7 @@ impl Workspace {
         self.emag.clear();
         self.ray.clear();
         self.prefix.clear();
-        self.prefix.push([0.0; 6]);
+        self.prefix.push([0.0; 7]);
         let w = self.w;
         for i in idx {
             let i = i as usize;
@@ -392,9 +419,13 @@ impl Workspace {
             let m0 = self.mag[i] as f32;
             let ma = self.mag[(i as isize - off) as usize] as f32;
             let mb = self.mag[(i as isize + off) as usize] as f32;
-            let denom = ma - 2.0 * m0 + mb;
+            // Gaussian sub-pixel peak: the parabola through the logarithms of the magnitudes
+            // (exact for a Gaussian profile; less biased than a parabola on the magnitudes for
+            // the narrow profiles of the 3-px-wide derivative).
+            let (la, l0, lb) = (ma.max(1.0).ln(), m0.max(1.0).ln(), mb.max(1.0).ln());
+            let denom = la - 2.0 * l0 + lb;
             let s = if denom < 0.0 {
-                (0.5 * (ma - mb) / denom).clamp(-0.5, 0.5)
+                (0.5 * (la - lb) / denom).clamp(-0.5, 0.5)
             } else {
                 0.0
             };
@@ -405,15 +436,9 @@ impl Workspace {
             self.grad.push([gx as f32, gy as f32]);
             self.emag.push(m0);
             self.ray.push(r);
-            let p = *self.prefix.last().unwrap_or(&[0.0; 6]);
-            self.prefix.push([
-                p[0] + r.x * r.x,
-                p[1] + r.x * r.y,
-                p[2] + r.x * r.z,
-                p[3] + r.y * r.y,
-                p[4] + r.y * r.z,
-                p[5] + r.z * r.z,
-            ]);
+            let p = *self.prefix.last().unwrap_or(&[0.0; 7]);
+            let o = weighted_outer(&r, edgel_weight(m0));
+            self.prefix.push(std::array::from_fn(|k| p[k] + o[k]));
         }
     }
 
@@ -439,7 +464,7 @@ impl Workspace {
         (n.is_finite() && n > 0.5).then(|| v / n)
     }
 
-    fn moments(&self, a: usize, b: usize) -> [f64; 6] {
+    fn moments(&self, a: usize, b: usize) -> Moments {
         let (p, q) = (&self.prefix[a], &self.prefix[b + 1]);
         std::array::from_fn(|k| q[k] - p[k])
     }
@@ -514,11 +539,44 @@ impl Workspace {
         self.pieces = pieces;
     }
 
+    /// Moments, count and plane normal of edgels a..=b without the outliers of their plane
+    /// (rays more than `OUTLIER_SIGMAS` RMS off it: edgels bent by a junction or a neighbouring
+    /// edge, noise), refitted at most twice.
+    fn robust_fit(&self, a: usize, b: usize) -> Option<(Moments, u32, Vector3<f64>)> {
+        let all = self.moments(a, b);
+        let total = b + 1 - a;
+        let (mut m, mut count) = (all, total);
+        let mut n = plane_normal(&m)?;
+        let floor = OUTLIER_FLOOR_RAD.sin();
+        for _ in 0..2 {
+            let rms = (plane_residual(&m, &n) / m[6]).max(0.0).sqrt();
+            let cut = (OUTLIER_SIGMAS * rms).max(floor);
+            let mut kept = all;
+            let mut k_count = total;
+            for (r, &g) in self.ray[a..=b].iter().zip(&self.emag[a..=b]) {
+                if n.dot(r).abs() > cut {
+                    let o = weighted_outer(r, edgel_weight(g));
+                    for (x, y) in kept.iter_mut().zip(o) {
+                        *x -= y;
+                    }
+                    k_count -= 1;
+                }
+            }
+            if k_count == count || k_count < self.params.min_chain_edgels.max(3) {
+                break;
+            }
+            let Some(k_n) = plane_normal(&kept) else { break };
+            (m, count, n) = (kept, k_count, k_n);
+        }
+        Some((m, count as u32, n))
+    }
+
     /// Fits, measures and (if long enough) records one piece of the chain as a candidate.
     #[inline(never)]
     fn add_piece(&mut self, a: usize, b: usize, rgb: &[u8]) {
-        let m = self.moments(a, b);
-        let Some(mut nrm) = plane_normal(&m) else { return };
+        let Some((m, fitted, mut nrm)) = self.robust_fit(a, b) else {
+            return;
+        };
         let (ra, rb) = (self.ray[a], self.ray[b]);
         if nrm.dot(&ra.cross(&rb)) < 0.0 {
             nrm = -nrm;
@@ -570,7 +628,7 @@ impl Workspace {
         }
         let cand = Candidate {
             m,
-            count: count as u32,
+            count: fitted,
             n: nrm,
             r1,
             r2,
@@ -682,7 +740,7 @@ impl Workspace {
                     right_kept: rk,
                 },
                 edgels: c.count,
-                rms_rad: (lambda / c.count.max(1) as f64).max(0.0).sqrt() as f32,
+                rms_rad: (lambda / c.m[6].max(1e-12)).max(0.0).sqrt() as f32,
             });
         }
     }
@@ -736,9 +794,31 @@ fn sobel_row(
     }
 }
 
+/// Rays further off their piece's plane than this many RMS are left out of its fit…
+const OUTLIER_SIGMAS: f64 = 2.5;
+/// …but never rays within this (rad) of it.
+const OUTLIER_FLOOR_RAD: f64 = 0.02 * std::f64::consts::PI / 180.0;
+
+/// Weighted second moments of rays: Σ w r rᵀ as (xx, xy, xz, yy, yz, zz), then Σ w.
+type Moments = [f64; 7];
+
+/// w r rᵀ as (xx, xy, xz, yy, yz, zz) and w.
+#[inline]
+fn weighted_outer(r: &Vector3<f64>, w: f64) -> Moments {
+    let (x, y, z) = (w * r.x, w * r.y, w * r.z);
+    [x * r.x, x * r.y, x * r.z, y * r.y, y * r.z, z * r.z, w]
+}
+
+/// Weight of an edgel in the plane fits: proportional to its gradient magnitude (contrast), so
+/// that faint edgels (noise, a weak neighbouring edge bleeding in) pull less.
+#[inline]
+fn edgel_weight(mag: f32) -> f64 {
+    mag as f64 / 1024.0
+}
+
 /// Unit normal of the plane through the origin best fitting rays with moments `m`: the
 /// eigenvector of the smallest eigenvalue of Σ r rᵀ.
-fn plane_normal(m: &[f64; 6]) -> Option<Vector3<f64>> {
+fn plane_normal(m: &Moments) -> Option<Vector3<f64>> {
     let mat = Matrix3::new(m[0], m[1], m[2], m[1], m[3], m[4], m[2], m[4], m[5]);
     let e = mat.symmetric_eigen();
     let k = e.eigenvalues.imin();
@@ -748,7 +828,7 @@ fn plane_normal(m: &[f64; 6]) -> Option<Vector3<f64>> {
 }
 
 /// nᵀ M n: the sum of squared sines of the rays' angles off the plane.
-fn plane_residual(m: &[f64; 6], n: &Vector3<f64>) -> f64 {
+fn plane_residual(m: &Moments, n: &Vector3<f64>) -> f64 {
     let mat = Matrix3::new(m[0], m[1], m[2], m[1], m[3], m[4], m[2], m[4], m[5]);
     n.dot(&(mat * n))
 }
@@ -769,7 +849,19 @@ fn try_merge(ci: &Candidate, cj: &Candidate, gap_max: f64, tol: f64) -> Option<C
     } else {
         (cj.r2, cj.r1, cj.right, cj.left, -cj.bright_left)
     };
-    let m: [f64; 6] = std::array::from_fn(|k| ci.m[k] + cj.m[k]);
+    // Cheap reject before the eigen-decomposition: the gap measured along i's own plane.
+    {
+        let e2 = ci.n.cross(&ci.r1);
+        let ang = |r: &Vector3<f64>| r.dot(&e2).atan2(r.dot(&ci.r1));
+        let ilen = ang(&ci.r2);
+        let (a1, a2) = (ang(&jr1), ang(&jr2));
+        let (lo, hi) = (a1.min(a2), a1.max(a2));
+        let gap = if lo > ilen { lo - ilen } else { -hi };
+        if gap > 1.5 * gap_max + 0.01 {
+            return None;
+        }
+    }
+    let m: Moments = std::array::from_fn(|k| ci.m[k] + cj.m[k]);
     let mut n = plane_normal(&m)?;
     if n.dot(&ci.n) < 0.0 {
         n = -n;
@@ -781,7 +873,7 @@ fn try_merge(ci: &Candidate, cj: &Candidate, gap_max: f64, tol: f64) -> Option<C
         }
     }
     let count = ci.count + cj.count;
-    if plane_residual(&m, &n) / count as f64 > tol * tol * 0.25 {
+    if plane_residual(&m, &n) / m[6] > tol * tol * 0.25 {
         return None;
     }
     // Intervals along the great circle: must not overlap (beyond a sliver), gap small.
