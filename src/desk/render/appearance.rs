@@ -115,13 +115,19 @@ pub fn hash64(mut x: u64) -> u64 {
     x ^ (x >> 31)
 }
 
-/// A tiny deterministic generator (SplitMix64 stream) for placement decisions.
+/// A tiny deterministic generator (SplitMix64 stream) for desk decisions (placement, tours):
+/// streams must stay reproducible from a seed across versions of any crate, which a
+/// general-purpose generator does not promise.
 #[derive(Debug, Clone)]
 pub struct Rng(u64);
 
 impl Rng {
     pub fn new(seed: u64) -> Rng {
         Rng(hash64(seed))
+    }
+    /// A stream starting from a raw state (no seed mixing).
+    pub fn from_state(state: u64) -> Rng {
+        Rng(state)
     }
     pub fn next_u64(&mut self) -> u64 {
         self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);

@@ -169,7 +169,7 @@ impl Scenario {
         let samples = loop {
             // Each attempt restarts the generator from the seed: the result depends on the seed only
             // (and on `frames`, through how long a tour is drawn).
-            let mut rng = path::Rng::new(seed);
+            let mut rng = path::Rng::from_state(tour_stream(seed));
             let tour = path::tour(&space, need, &mut rng);
             let tour = path::ease_sharp_turns(&space, &tour);
             let dense = path::smooth(&space, &tour);
@@ -179,7 +179,7 @@ impl Scenario {
             }
             need *= 2.0;
         };
-        let mut rng = path::Rng::new(seed ^ 0x5eed_0f6d_0f00);
+        let mut rng = path::Rng::from_state(tour_stream(seed ^ 0x5eed_0f6d_0f00));
         let phases: Vec<f64> = (0..8).map(|_| rng.range(0.0, TAU)).collect();
         let mut yaw = samples[0].1;
         samples
@@ -224,4 +224,10 @@ fn wrap_angle(a: f64) -> f64 {
         a += TAU;
     }
     a
+}
+
+/// The generator state that reproduces the tours of earlier versions for a seed (the stream
+/// pre-adds the SplitMix increment, hence the subtraction).
+fn tour_stream(seed: u64) -> u64 {
+    (seed ^ 0x6a09_e667_f3bc_c909).wrapping_sub(0x9e37_79b9_7f4a_7c15)
 }

@@ -8,6 +8,7 @@
 //! length at a walking speed.
 
 use crate::desk::floorplan::{FloorPlan, OpeningKind};
+pub use crate::desk::render::appearance::Rng;
 use crate::trajectory::Stamped;
 use nalgebra::{Point2, Vector2};
 use std::collections::BinaryHeap;
@@ -269,30 +270,6 @@ pub fn doorways_passed(plan: &FloorPlan, trajectory: &[Stamped]) -> usize {
         }
     }
     n
-}
-
-/// Deterministic pseudo-random numbers (SplitMix64): the library carries no `rand`.
-#[derive(Debug, Clone)]
-pub struct Rng(u64);
-
-impl Rng {
-    pub fn new(seed: u64) -> Self {
-        Rng(seed ^ 0x6a09_e667_f3bc_c909)
-    }
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-    /// Uniform in [0, 1).
-    pub fn f64(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-    pub fn range(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * self.f64()
-    }
 }
 
 /// A door seen from one room: which door, the room behind it, and the approach points on this
@@ -569,7 +546,7 @@ pub fn tour(space: &Space, min_length_m: f64, rng: &mut Rng) -> Vec<P2> {
                 })
                 .collect();
             let total: f64 = weights.iter().sum();
-            let mut pick = rng.f64() * total;
+            let mut pick = rng.unit() * total;
             let mut chosen = *candidates[candidates.len() - 1];
             for (e, w) in candidates.iter().zip(&weights) {
                 if pick < *w {
