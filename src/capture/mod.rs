@@ -1,7 +1,12 @@
 //! Capture: where frames come from.
 //!
-//! In: a camera rig ([`Rig`]) and a source of images — a recording on disk ([`replay`]) now; live
-//! V4L2 / USB drivers later, behind the same [`FrameSource`] trait.
+//! In: a camera rig ([`Rig`]) and a source of images, all behind the [`FrameSource`] trait: a
+//! recording on disk ([`replay`], the mock camera), V4L2 devices (`v4l2`, cargo feature `v4l`)
+//! or USB3 Vision cameras (`usb`, cargo feature `usb`, over the always-compiled stream parser
+//! [`u3v`]). [`open_source`] picks one from a `--source` spec (`replay:DIR`, `v4l`, `usb`) and
+//! answers a live source left out of the build with the cargo command that enables it. The live
+//! sources share [`LiveSource`] (one camera per sensor, a lost sensor reopened every second while
+//! the others go on) and the pixel conversions of [`convert`].
 //! Out: [`FrameSet`]s — one RGB8 image per rig sensor, with its capture time and whether the
 //! sensor delivered for this frame — plus [`SourceStats`] counting everything that went wrong.
 //!
@@ -17,8 +22,16 @@
 //! [`SourceStats`], warned on standard error a few times per kind, and the stream goes on.
 //! [`SourceError`] is only for the whole source failing (cannot open, wrong frame set).
 
+pub mod convert;
+pub mod open;
 pub mod replay;
+pub mod u3v;
+#[cfg(feature = "usb")]
+pub mod usb;
+#[cfg(feature = "v4l")]
+pub mod v4l2;
 
+pub use open::{open_source, open_source_with, LiveSource, SourceOptions};
 pub use replay::{Pacing, ReplaySource};
 
 use crate::rig::{Rig, RigError};

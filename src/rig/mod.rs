@@ -24,6 +24,21 @@ pub struct Sensor {
     pub t_rig_sensor: Pose,
     /// Live capture device (e.g. `/dev/video0`), if the rig file names one.
     pub device: Option<String>,
+    /// Serial number of this sensor's USB3 Vision camera (`usb_serial`), if the rig file names
+    /// one; either every sensor has one or none does (see [`UsbRig`]).
+    pub usb_serial: Option<String>,
+}
+
+/// How the rig's USB3 Vision cameras are found on the bus: the optional `[usb]` table.
+///
+/// Every camera with this vendor and product id is a candidate. When the sensors name their
+/// `usb_serial`, each takes the camera with that serial number; when none does, the sensors take
+/// the cameras in USB port order (bus number, then the port path from the root hub), so that the
+/// mapping follows the cabling and survives replugging into the same ports.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct UsbRig {
+    pub vendor_id: u16,
+    pub product_id: u16,
 }
 
 /// The whole camera rig: a generalised camera whose sensors do not share a centre.
@@ -32,6 +47,8 @@ pub struct Rig {
     pub name: String,
     /// Indexed by sensor id.
     pub sensors: Vec<Sensor>,
+    /// The `[usb]` table, for `--source usb`.
+    pub usb: Option<UsbRig>,
 }
 
 /// A rig file that cannot be used, with everything needed to fix it in one line.
@@ -44,7 +61,7 @@ pub struct RigError {
     pub message: String,
 }
 
-const SENSOR_KEYS: [&str; 8] = [
+const SENSOR_KEYS: [&str; 9] = [
     "id",
     "resolution",
     "model",
@@ -53,6 +70,7 @@ const SENSOR_KEYS: [&str; 8] = [
     "rotation_wxyz",
     "translation_m",
     "device",
+    "usb_serial",
 ];
 
 impl Sensor {
@@ -115,10 +133,10 @@ impl Rig {
             err(String::new(), format!("not valid TOML: {}", one_line(&e.to_string())))
         })?;
         for key in table.keys() {
-            if key != "name" && key != "sensors" {
+            if key != "name" && key != "sensors" && key != "usb" {
                 return Err(err(
                     format!("key '{key}': "),
-                    "unknown key (expected 'name' and [[sensors]])".into(),
+                    "unknown key (expected 'name', [[sensors]] and an optional [usb])".into(),
                 ));
             }
         }
@@ -147,11 +165,16 @@ impl Rig {
             sensors[id] = Some(sensor);
         }
         // N entries with unique ids in 0..N cover every slot.
-        let sensors = sensors
+        let sensors: Vec<Sensor> = sensors
             .into_iter()
             .map(|s| s.expect("ids are unique and in range"))
             .collect();
-        Ok(Rig { name, sensors })
+        let usb = match table.get("usb") {
+            None => None,
+            Some(v) => Some(parse_usb(v).map_err(|(place, m)| err(place, m))?),
+        };
+        check_usb_serials(&sensors).map_err(|(place, m)| err(place, m))?;
+        Ok(Rig { name, sensors, usb })
     }
 
     /// The rig as TOML in the INTERFACES.md format, with every number written so that it reads
@@ -159,6 +182,13 @@ impl Rig {
     pub fn to_toml_string(&self) -> String {
         let mut out = String::new();
         let _ = writeln!(out, "name = {}", Value::String(self.name.clone()));
+        if let Some(usb) = &self.usb {
+            let _ = writeln!(
+                out,
+                "\n[usb]\nvendor_id = 0x{:04x}\nproduct_id = 0x{:04x}",
+                usb.vendor_id, usb.product_id
+            );
+        }
         for s in &self.sensors {
             let _ = writeln!(out, "\n[[sensors]]\nid = {}", s.id);
             let _ = writeln!(out, "resolution = [{}, {}]", s.width, s.height);
@@ -183,6 +213,9 @@ impl Rig {
             );
             if let Some(d) = &s.device {
                 let _ = writeln!(out, "device = {}", Value::String(d.clone()));
+            }
+            if let Some(serial) = &s.usb_serial {
+                let _ = writeln!(out, "usb_serial = {}", Value::String(serial.clone()));
             }
         }
         out
@@ -298,6 +331,16 @@ fn parse_sensor(entry: &Value, index: usize, count: usize) -> Result<Sensor, Pla
             ))
         }
     };
+    let usb_serial = match t.get("usb_serial") {
+        None => None,
+        Some(Value::String(s)) if !s.trim().is_empty() => Some(s.clone()),
+        Some(_) => {
+            return Err(fail(
+                "usb_serial",
+                "must be a non-empty string (the camera's USB serial number)".into(),
+            ))
+        }
+    };
     Ok(Sensor {
         id,
         width: resolution[0] as u32,
@@ -305,5 +348,68 @@ fn parse_sensor(entry: &Value, index: usize, count: usize) -> Result<Sensor, Pla
         lens,
         t_rig_sensor,
         device,
+        usb_serial,
     })
+}
+
+const USB_KEYS: [&str; 2] = ["vendor_id", "product_id"];
+
+/// The optional `[usb]` table: `vendor_id` and `product_id`, integers 0..=0xFFFF (hex allowed).
+fn parse_usb(v: &Value) -> Result<UsbRig, PlaceError> {
+    let Value::Table(t) = v else {
+        return Err((
+            "key 'usb': ".into(),
+            "must be a table ([usb] with vendor_id and product_id)".into(),
+        ));
+    };
+    if let Some(key) = t.keys().find(|k| !USB_KEYS.contains(&k.as_str())) {
+        return Err((
+            format!("[usb], key '{key}': "),
+            format!("unknown key (allowed: {})", USB_KEYS.join(", ")),
+        ));
+    }
+    let id = |key: &str| -> Result<u16, PlaceError> {
+        let place = format!("[usb], key '{key}': ");
+        match t.get(key) {
+            Some(Value::Integer(i)) => {
+                u16::try_from(*i).map_err(|_| (place, format!("must be a USB id 0..=0xFFFF, found {i}")))
+            }
+            Some(_) => Err((place, "must be an integer such as 0x1e10".into())),
+            None => Err((place, "missing".into())),
+        }
+    };
+    Ok(UsbRig {
+        vendor_id: id("vendor_id")?,
+        product_id: id("product_id")?,
+    })
+}
+
+/// Either every sensor names its `usb_serial` or none does, and no two name the same one.
+fn check_usb_serials(sensors: &[Sensor]) -> Result<(), PlaceError> {
+    let named = sensors.iter().filter(|s| s.usb_serial.is_some()).count();
+    if named == 0 {
+        return Ok(());
+    }
+    if let Some(s) = sensors.iter().find(|s| s.usb_serial.is_none()) {
+        return Err((
+            format!("sensor {}, key 'usb_serial': ", s.id),
+            format!(
+                "missing, while {named} other sensor(s) have one: name it for every sensor or for none \
+                 (then the cameras are taken in USB port order)"
+            ),
+        ));
+    }
+    for (i, a) in sensors.iter().enumerate() {
+        if let Some(b) = sensors[..i].iter().find(|b| b.usb_serial == a.usb_serial) {
+            return Err((
+                format!("sensor {}, key 'usb_serial': ", a.id),
+                format!(
+                    "duplicate serial '{}' (also sensor {})",
+                    a.usb_serial.as_deref().unwrap_or_default(),
+                    b.id
+                ),
+            ));
+        }
+    }
+    Ok(())
 }

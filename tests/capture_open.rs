@@ -1,0 +1,323 @@
+//! Choosing a frame source (`--source replay:DIR|v4l|usb`), its one-line errors, the live
+//! sources' handling of a sensor that disappears and comes back, and the rig's optional USB keys.
+
+use image::{Rgb, RgbImage};
+use omnitrack::capture::open::{FailureDetail, LiveCamera, ReadFailure, USB_DISABLED, V4L_DISABLED};
+use omnitrack::capture::{
+    open_source, open_source_with, FrameSet, FrameSource, ImageFault, LiveSource, Pacing, SensorImage, SourceError,
+    SourceOptions,
+};
+use omnitrack::rig::{Rig, Sensor, UsbRig};
+use std::fmt::Write as _;
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+/// A pinhole rig of these sizes; `extra(id)` adds keys to a sensor, `head` goes before them.
+fn rig_toml(sizes: &[(u32, u32)], head: &str, extra: &dyn Fn(usize) -> String) -> String {
+    let mut s = format!("name = \"test-rig\"\n{head}\n");
+    for (id, (w, h)) in sizes.iter().enumerate() {
+        let _ = write!(
+            s,
+            "\n[[sensors]]\nid = {id}\nresolution = [{w}, {h}]\nmodel = \"pinhole\"\n\
+             intrinsics = [100.0, 100.0, {}, {}]\nrotation_wxyz = [1.0, 0.0, 0.0, 0.0]\n\
+             translation_m = [{}, 0.0, 0.0]\n{}\n",
+            (*w as f64 - 1.0) / 2.0,
+            (*h as f64 - 1.0) / 2.0,
+            0.01 * id as f64,
+            extra(id)
+        );
+    }
+    s
+}
+
+fn rig(sizes: &[(u32, u32)], head: &str, extra: &dyn Fn(usize) -> String) -> Rig {
+    Rig::from_toml_str(&rig_toml(sizes, head, extra), "rig.toml").unwrap()
+}
+
+fn open_err(spec: &str, rig: Option<&Rig>) -> String {
+    match open_source(spec, rig) {
+        Ok(_) => panic!("{spec} opened"),
+        Err(e) => {
+            let s = e.to_string();
+            assert!(!s.contains('\n'), "one line: {s}");
+            s
+        }
+    }
+}
+
+/// A recording of two frames for a rig of these sizes.
+fn recording(sizes: &[(u32, u32)]) -> tempfile::TempDir {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path();
+    std::fs::write(root.join("rig.toml"), rig_toml(sizes, "", &|_| String::new())).unwrap();
+    let mut index = String::from("frame,sensor,timestamp_ns,path\n");
+    for (k, &(w, h)) in sizes.iter().enumerate() {
+        std::fs::create_dir_all(root.join(format!("sensor{k}"))).unwrap();
+        for f in 0..2u64 {
+            let path = format!("sensor{k}/{f:06}.png");
+            RgbImage::from_pixel(w, h, Rgb([f as u8, k as u8, 9]))
+                .save(root.join(&path))
+                .unwrap();
+            let _ = writeln!(index, "{f},{k},{},{path}", 1_000 + f * 33_000_000);
+        }
+    }
+    std::fs::write(root.join("frames.csv"), index).unwrap();
+    dir
+}
+
+#[test]
+fn replay_needs_no_rig_and_checks_a_given_one() {
+    let sizes = [(8, 6), (10, 4)];
+    let dir = recording(&sizes);
+    let spec = format!("replay:{}", dir.path().display());
+    let options = SourceOptions {
+        pacing: Pacing::AsFastAsPossible,
+        ..SourceOptions::default()
+    };
+    let mut source = open_source_with(&spec, None, &options).unwrap();
+    let mut frame = FrameSet::for_rig(source.rig());
+    assert!(source.next_frame(&mut frame).unwrap());
+    assert_eq!(frame.valid_count(), 2);
+    assert!(source.next_frame(&mut frame).unwrap());
+    assert!(!source.next_frame(&mut frame).unwrap());
+
+    // The same sensors given with --rig: fine; other sizes: one line naming the recording's rig.
+    assert!(open_source_with(&spec, Some(&rig(&sizes, "", &|_| String::new())), &options).is_ok());
+    let other = rig(&[(8, 6)], "", &|_| String::new());
+    let e = open_source_with(&spec, Some(&other), &options)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(e.contains("rig.toml") && e.contains("does not match --rig"), "{e}");
+}
+
+#[test]
+fn bad_specs_are_one_line_each() {
+    let e = open_err("webcam", None);
+    assert!(
+        e.contains("webcam") && e.contains("expected replay:DIR, v4l or usb"),
+        "{e}"
+    );
+    let e = open_err("replay", None);
+    assert!(e.contains("replay:DIR"), "{e}");
+    let e = open_err("replay:", None);
+    assert!(e.contains("replay:DIR"), "{e}");
+    let e = open_err("replay:/no/such/recording_xyz", None);
+    assert!(
+        e.contains("/no/such/recording_xyz") && e.contains("does not exist"),
+        "{e}"
+    );
+    let e = open_err("v4l", None);
+    assert!(e.starts_with("v4l: needs the rig (--rig"), "{e}");
+    let e = open_err("usb", None);
+    assert!(e.starts_with("usb: needs the rig (--rig"), "{e}");
+}
+
+#[test]
+fn v4l_missing_device_is_a_clear_error() {
+    let rig = rig(&[(8, 6), (8, 6)], "", &|id| {
+        format!("device = \"/dev/video_missing_xyz{}\"", if id == 0 { "" } else { "_b" })
+    });
+    let e = open_err("v4l", Some(&rig));
+    if cfg!(feature = "v4l") {
+        assert_eq!(e, "/dev/video_missing_xyz: sensor 0: no such device");
+    } else {
+        assert_eq!(e, format!("v4l: {V4L_DISABLED}"));
+        assert!(
+            e.contains("cargo build --release --features v4l") && e.contains("libclang"),
+            "{e}"
+        );
+    }
+}
+
+#[test]
+fn v4l_sensor_without_device_key_is_named() {
+    let rig = rig(&[(8, 6)], "", &|_| String::new());
+    let e = open_err("v4l", Some(&rig));
+    if cfg!(feature = "v4l") {
+        assert!(e.contains("sensor 0 has no 'device' key"), "{e}");
+    } else {
+        assert!(e.contains("--features v4l"), "{e}");
+    }
+}
+
+#[test]
+fn usb_without_cameras_or_bus_is_a_clear_error_not_a_panic() {
+    let no_table = rig(&[(8, 6)], "", &|_| String::new());
+    let with_table = rig(&[(8, 6)], "[usb]\nvendor_id = 0x1e10\nproduct_id = 0x4000", &|_| {
+        String::new()
+    });
+    let serials = rig(
+        &[(8, 6), (8, 6)],
+        "[usb]\nvendor_id = 0x1e10\nproduct_id = 0x4000",
+        &|id| format!("usb_serial = \"CAM{id}\""),
+    );
+    if cfg!(feature = "usb") {
+        let e = open_err("usb", Some(&no_table));
+        assert!(e.starts_with("usb: rig 'test-rig' has no [usb] table"), "{e}");
+        // Either libusb cannot start here (no bus) or it finds no such camera.
+        for r in [&with_table, &serials] {
+            let e = open_err("usb", Some(r));
+            eprintln!("{e}");
+            assert!(
+                e.starts_with("usb: cannot start libusb") || e.starts_with("usb 1e10:4000: sensor 0: no camera"),
+                "{e}"
+            );
+        }
+    } else {
+        for r in [&no_table, &with_table] {
+            assert_eq!(open_err("usb", Some(r)), format!("usb: {USB_DISABLED}"));
+        }
+    }
+}
+
+/// A fake camera: sensor k's image is filled with k; `plugged[k]` says whether it is there.
+struct FakeCamera {
+    sensor: usize,
+    name: String,
+    plugged: Arc<Mutex<Vec<bool>>>,
+    reads: u64,
+}
+
+impl LiveCamera for FakeCamera {
+    type Env = Arc<Mutex<Vec<bool>>>;
+
+    fn open(env: &mut Self::Env, sensor: &Sensor, _: &SourceOptions) -> Result<FakeCamera, SourceError> {
+        if !env.lock().unwrap()[sensor.id] {
+            return Err(SourceError::Device {
+                device: format!("fake{}", sensor.id),
+                message: format!("sensor {}: no such device", sensor.id),
+            });
+        }
+        Ok(FakeCamera {
+            sensor: sensor.id,
+            name: format!("fake{}", sensor.id),
+            plugged: env.clone(),
+            reads: 0,
+        })
+    }
+
+    fn name(&self) -> &str {
+        &self.name
+    }
+
+    fn read(&mut self, img: &mut SensorImage) -> Result<u64, ReadFailure> {
+        if !self.plugged.lock().unwrap()[self.sensor] {
+            return Err(ReadFailure {
+                fault: ImageFault::Missing,
+                lost: true,
+                detail: FailureDetail::Os(19),
+            });
+        }
+        self.reads += 1;
+        img.pixels_mut().fill(self.sensor as u8 + 1);
+        Ok(self.reads * 1000 + self.sensor as u64)
+    }
+}
+
+#[test]
+fn a_lost_sensor_is_reported_reopened_and_the_others_go_on() {
+    let rig = rig(&[(4, 3), (4, 3), (4, 3)], "", &|_| String::new());
+    let plugged = Arc::new(Mutex::new(vec![true; 3]));
+    let options = SourceOptions {
+        reopen_interval: Duration::from_millis(30),
+        ..SourceOptions::default()
+    };
+    // A sensor missing at start is an error naming it.
+    plugged.lock().unwrap()[2] = false;
+    let e = LiveSource::<FakeCamera>::open_with_env(rig.clone(), plugged.clone(), options).unwrap_err();
+    assert_eq!(e.to_string(), "fake2: sensor 2: no such device");
+    plugged.lock().unwrap()[2] = true;
+
+    let mut source = LiveSource::<FakeCamera>::open_with_env(rig, plugged.clone(), options).unwrap();
+    let mut frame = FrameSet::for_rig(source.rig());
+    assert!(source.next_frame(&mut frame).unwrap());
+    assert_eq!(frame.valid_count(), 3);
+    assert!(frame.sensor(1).pixels().iter().all(|&p| p == 2));
+
+    // Sensor 1 is unplugged: it is marked missing, the others deliver.
+    plugged.lock().unwrap()[1] = false;
+    for _ in 0..3 {
+        assert!(source.next_frame(&mut frame).unwrap());
+        assert_eq!(frame.valid_count(), 2);
+        assert!(!frame.sensor(1).valid);
+        assert_eq!(frame.sensor(1).fault, Some(ImageFault::Missing));
+        assert!(frame.sensor(0).valid && frame.sensor(2).valid);
+    }
+    assert!(!source.is_connected(1));
+    assert_eq!(source.connected(), 2);
+    assert_eq!(source.stats().sensors[1].missing, 3);
+
+    // Plugged back: reopened at the next attempt.
+    plugged.lock().unwrap()[1] = true;
+    std::thread::sleep(Duration::from_millis(40));
+    assert!(source.next_frame(&mut frame).unwrap());
+    assert_eq!(frame.valid_count(), 3);
+    assert!(source.is_connected(1));
+    assert_eq!(source.stats().frames_delivered, 5);
+    assert_eq!(source.stats().sensors[0].delivered, 5);
+    assert_eq!(source.stats().sensors[1].delivered, 2);
+
+    // All gone: next_frame waits for the reopening attempt instead of spinning, never errs.
+    *plugged.lock().unwrap() = vec![false; 3];
+    for _ in 0..3 {
+        assert!(source.next_frame(&mut frame).unwrap());
+        assert_eq!(frame.valid_count(), 0);
+    }
+    // A frame set of another rig is refused.
+    let mut wrong = FrameSet::for_rig(&Rig::from_toml_str(&rig_toml(&[(4, 3)], "", &|_| String::new()), "x").unwrap());
+    assert!(matches!(
+        source.next_frame(&mut wrong),
+        Err(SourceError::FrameSetMismatch { .. })
+    ));
+}
+
+#[test]
+fn rig_usb_keys_parse_validate_and_round_trip() {
+    let head = "[usb]\nvendor_id = 0x1E10\nproduct_id = 16384";
+    let r = rig(&[(8, 6), (8, 6)], head, &|id| format!("usb_serial = \"SN{id}\""));
+    assert_eq!(
+        r.usb,
+        Some(UsbRig {
+            vendor_id: 0x1e10,
+            product_id: 0x4000
+        })
+    );
+    assert_eq!(r.sensors[1].usb_serial.as_deref(), Some("SN1"));
+    let again = Rig::from_toml_str(&r.to_toml_string(), "again.toml").unwrap();
+    assert_eq!(again, r);
+    // Without the keys nothing changes.
+    let plain = rig(&[(8, 6)], "", &|_| String::new());
+    assert_eq!(plain.usb, None);
+    assert_eq!(plain.sensors[0].usb_serial, None);
+    assert_eq!(Rig::from_toml_str(&plain.to_toml_string(), "p").unwrap(), plain);
+
+    let err = |head: &str, extra: &dyn Fn(usize) -> String| {
+        Rig::from_toml_str(&rig_toml(&[(8, 6), (8, 6)], head, extra), "rig.toml")
+            .unwrap_err()
+            .to_string()
+    };
+    let none = |_: usize| String::new();
+    assert_eq!(
+        err("[usb]\nvendor_id = 70000\nproduct_id = 1", &none),
+        "rig.toml: [usb], key 'vendor_id': must be a USB id 0..=0xFFFF, found 70000"
+    );
+    assert_eq!(
+        err("[usb]\nvendor_id = 1", &none),
+        "rig.toml: [usb], key 'product_id': missing"
+    );
+    assert!(err("[usb]\nvendor_id = 1\nproduct_id = 2\nserial = 3", &none)
+        .starts_with("rig.toml: [usb], key 'serial': unknown key"));
+    assert!(err("usb = 5", &none).starts_with("rig.toml: key 'usb': must be a table"));
+    assert!(err("", &|id| if id == 0 {
+        "usb_serial = \"A\"".into()
+    } else {
+        String::new()
+    })
+    .starts_with("rig.toml: sensor 1, key 'usb_serial': missing, while 1 other sensor(s) have one"));
+    assert_eq!(
+        err("", &|_| "usb_serial = \"A\"".into()),
+        "rig.toml: sensor 1, key 'usb_serial': duplicate serial 'A' (also sensor 0)"
+    );
+    assert!(err("", &|_| "usb_serial = \"\"".into()).starts_with("rig.toml: sensor 0, key 'usb_serial': must be"));
+}
