@@ -2,8 +2,10 @@
 //! on a workstation, never on the device path. Compiled only with the `desk` feature (on by
 //! default); the device build (`--no-default-features`) leaves it and its dependencies out.
 
+pub mod eval;
 pub mod floorplan;
 pub mod observations;
+pub mod pictures;
 pub mod recording;
 pub mod render;
 pub mod scenario;

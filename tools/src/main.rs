@@ -7,11 +7,15 @@
 //! `omnitrack-desk render --rig R --model M.obj --trajectory T.tum --out DIR` renders a synthetic
 //! recording (INTERFACES.md layout) of the rig moving along the trajectory through the model.
 //!
+//! `omnitrack-desk eval GT.tum EST.tum [--align] [--rpe-delta N] [--max-diff S]` compares an
+//! estimated trajectory with the ground truth (ATE and RPE, evo's definitions) and prints a table.
+//!
 //! Every error is one line on stderr and exit code 2, so scripts can tell a bad input from a
 //! crash.
 
 use clap::error::ErrorKind;
 use clap::{Parser, Subcommand};
+use omnitrack::desk::eval::{evaluate_files, ErrorSeries, EvalOptions, Evaluation, Stats};
 use omnitrack::desk::floorplan;
 use omnitrack::desk::recording::{write_recording, RecordingOptions};
 use omnitrack::desk::render::Appearance;
@@ -73,6 +77,25 @@ enum Command {
         out: PathBuf,
         #[command(flatten)]
         look: Look,
+    },
+    /// Compare an estimated trajectory with the ground truth: ATE and RPE (as evo_ape/evo_rpe).
+    Eval {
+        /// Ground truth, TUM format (T_world_rig).
+        gt: PathBuf,
+        /// The estimate, TUM format (T_world_rig).
+        est: PathBuf,
+        /// Rigidly align the estimate onto the ground truth first (Umeyama, no scale).
+        #[arg(long)]
+        align: bool,
+        /// RPE distance in associated frames.
+        #[arg(long, value_name = "N", default_value_t = 1)]
+        rpe_delta: usize,
+        /// Largest timestamp difference (seconds) to associate two poses.
+        #[arg(long, value_name = "S", default_value_t = 0.01)]
+        max_diff: f64,
+        /// Print every statistic as JSON (metres and degrees) instead of the table.
+        #[arg(long)]
+        json: bool,
     },
 }
 
@@ -227,7 +250,47 @@ fn run(command: Command) -> Result<(), String> {
             }
             render(&rig, &obj, &trajectory, &out, look.appearance()?)
         }
+        Command::Eval {
+            gt,
+            est,
+            align,
+            rpe_delta,
+            max_diff,
+            json,
+        } => {
+            let options = EvalOptions {
+                max_diff_s: max_diff,
+                align,
+                rpe_delta,
+            };
+            let evaluation = evaluate_files(&gt, &est, &options).map_err(|e| e.to_string())?;
+            if json {
+                println!("{}", eval_json(&evaluation));
+            } else {
+                print!("{}", evaluation.table());
+            }
+            Ok(())
+        }
     }
+}
+
+/// Every statistic of an evaluation as JSON (translation in metres, rotation in degrees), for
+/// scripts such as tools/check_evo.py.
+fn eval_json(e: &Evaluation) -> serde_json::Value {
+    let stats = |s: &Stats| {
+        serde_json::json!({
+            "rmse": s.rmse, "mean": s.mean, "median": s.median, "std": s.std,
+            "min": s.min, "max": s.max, "count": s.count,
+        })
+    };
+    let series = |s: Option<&ErrorSeries>| {
+        s.map(|s| serde_json::json!({"translation_m": stats(&s.translation_m), "rotation_deg": stats(&s.rotation_deg)}))
+    };
+    serde_json::json!({
+        "matched": e.pairs.len(),
+        "ate": series(Some(&e.ate)),
+        "rpe": series(e.rpe.as_ref()),
+    })
 }
 
 /// Renders and writes a recording, with progress on stderr.
