@@ -12,7 +12,9 @@ pub mod lines;
 pub mod model;
 pub mod publish;
 pub mod rig;
+pub mod runtime;
 pub mod solver;
+pub mod tracker;
 pub mod trajectory;
 pub mod visibility;
 

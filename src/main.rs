@@ -26,6 +26,40 @@ struct Cli {
 enum Command {
     /// The embedded default: synthetic building, recording, visibility table, tracking, report.
     Demo,
+    /// Tracks: frames from the source, poses on the iceoryx2 pose service and, if asked, a TUM
+    /// trajectory. Without --init the whole model is searched.
+    Run {
+        /// The rig (a replay recording's own rig.toml is used when this is omitted).
+        #[arg(long, value_name = "RIG.toml")]
+        rig: Option<PathBuf>,
+        #[arg(long, value_name = "MODEL.obj")]
+        model: PathBuf,
+        /// Prior visibility table (default: MODEL.vis beside the model, built if absent).
+        #[arg(long, value_name = "TABLE.vis")]
+        visibility: Option<PathBuf>,
+        /// replay:DIR, v4l or usb.
+        #[arg(long, value_name = "replay:DIR|v4l|usb")]
+        source: String,
+        /// Initial search volume: centre x,y,z and optionally its diameter in metres (default
+        /// [initialisation] search_diameter_m of tracker.toml).
+        #[arg(long, value_name = "x,y,z[,diameter_m]", allow_hyphen_values = true)]
+        init: Option<String>,
+        /// Write the trajectory (TUM) here.
+        #[arg(long, value_name = "OUT.tum")]
+        trajectory: Option<PathBuf>,
+        /// Tracker tunables (default: the shipped firmware_config/tracker.toml values).
+        #[arg(long, value_name = "tracker.toml")]
+        config: Option<PathBuf>,
+        /// Stop after N frames.
+        #[arg(long)]
+        frames: Option<u64>,
+        /// Do not publish on iceoryx2.
+        #[arg(long)]
+        no_publish: bool,
+        /// Replay at the recorded frame rate (default: as fast as the tracker goes).
+        #[arg(long)]
+        realtime: bool,
+    },
     /// Validates a rig, and optionally a model and a tracker config, and summarises them.
     Check {
         #[arg(long)]
@@ -134,6 +168,29 @@ fn run(command: Command) -> Result<(), String> {
              scenario lab`, `omnitrack pose`, `omnitrack edges` and `omnitrack visibility`)"
                 .into(),
         ),
+        Command::Run {
+            rig,
+            model,
+            visibility,
+            source,
+            init,
+            trajectory,
+            config,
+            frames,
+            no_publish,
+            realtime,
+        } => run_tracker(RunArgs {
+            rig,
+            model,
+            visibility,
+            source,
+            init,
+            trajectory,
+            config,
+            frames,
+            no_publish,
+            realtime,
+        }),
         Command::Check { rig, model, config } => {
             if rig.is_none() && model.is_none() && config.is_none() {
                 return Err("check needs at least one of --rig, --model, --config".into());
@@ -328,4 +385,165 @@ fn lens_name(lens: &omnitrack::geometry::Lens) -> &'static str {
         omnitrack::geometry::Lens::Pinhole(_) => "pinhole",
         omnitrack::geometry::Lens::Kb4(_) => "kb4",
     }
+}
+
+struct RunArgs {
+    rig: Option<PathBuf>,
+    model: PathBuf,
+    visibility: Option<PathBuf>,
+    source: String,
+    init: Option<String>,
+    trajectory: Option<PathBuf>,
+    config: Option<PathBuf>,
+    frames: Option<u64>,
+    no_publish: bool,
+    realtime: bool,
+}
+
+/// `--init x,y,z[,diameter]`.
+fn parse_init(text: &str, default_diameter: f64) -> Result<omnitrack::tracker::SearchVolume, String> {
+    let v: Vec<f64> = text
+        .split(',')
+        .map(|x| x.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| format!("--init {text:?}: expected x,y,z or x,y,z,diameter_m (numbers)"))?;
+    if !(v.len() == 3 || v.len() == 4) || v.iter().any(|x| !x.is_finite()) {
+        return Err(format!(
+            "--init {text:?}: expected x,y,z or x,y,z,diameter_m (finite numbers)"
+        ));
+    }
+    let diameter = v.get(3).copied().unwrap_or(default_diameter);
+    if diameter <= 0.0 {
+        return Err(format!("--init {text:?}: the diameter must be positive"));
+    }
+    Ok(omnitrack::tracker::SearchVolume {
+        centre: nalgebra::Point3::new(v[0], v[1], v[2]),
+        diameter_m: Some(diameter),
+    })
+}
+
+fn run_tracker(a: RunArgs) -> Result<(), String> {
+    use omnitrack::capture::{open_source_with, Pacing, SourceOptions};
+    use omnitrack::publish::{PosePublisher, PoseStatus, POSE_SERVICE};
+    use omnitrack::runtime::{load_or_build_table, track, RunOptions};
+    use omnitrack::tracker::{TrackerEvent, TrackerState};
+    use omnitrack::trajectory::{tum_line, Stamped};
+
+    let cfg = match &a.config {
+        Some(p) => TrackerConfig::load(p).map_err(|e| e.to_string())?,
+        None => TrackerConfig::default(),
+    };
+    let hint = a
+        .init
+        .as_deref()
+        .map(|t| parse_init(t, cfg.initialisation.search_diameter_m))
+        .transpose()?;
+    let rig = a.rig.as_deref().map(Rig::load).transpose().map_err(|e| e.to_string())?;
+    let options = SourceOptions {
+        pacing: if a.realtime {
+            Pacing::RealTime
+        } else {
+            Pacing::AsFastAsPossible
+        },
+        ..SourceOptions::default()
+    };
+    let mut source = open_source_with(&a.source, rig.as_ref(), &options).map_err(|e| e.to_string())?;
+    let model = Model::load(&a.model).map_err(|e| e.to_string())?;
+    let (table, origin) =
+        load_or_build_table(&a.model, &model, a.visibility.as_deref(), &cfg).map_err(|e| e.to_string())?;
+    eprintln!("omnitrack: {origin}");
+    let publisher = if a.no_publish {
+        None
+    } else {
+        omnitrack::publish::quiet_iceoryx2_logs();
+        match PosePublisher::create(POSE_SERVICE) {
+            Ok(p) => Some(p),
+            Err(e) => {
+                eprintln!("omnitrack: warning: not publishing poses: {e}");
+                None
+            }
+        }
+    };
+    let mut out = match &a.trajectory {
+        Some(p) => {
+            let f = std::fs::File::create(p).map_err(|e| format!("{}: cannot create: {e}", p.display()))?;
+            let mut w = std::io::BufWriter::new(f);
+            writeln!(w, "# timestamp_s tx ty tz qx qy qz qw (T_world_rig)")
+                .map_err(|e| format!("{}: cannot write: {e}", p.display()))?;
+            Some(w)
+        }
+        None => None,
+    };
+    let opts = RunOptions {
+        hint,
+        seed: 1,
+        max_frames: a.frames,
+    };
+    let mut last_pose = omnitrack::Pose::identity();
+    let trajectory_name = a
+        .trajectory
+        .as_ref()
+        .map(|p| p.display().to_string())
+        .unwrap_or_default();
+    let stats = track(source.as_mut(), &model, &table, &cfg, &opts, &mut |r, _| {
+        match r.result.event {
+            Some(TrackerEvent::Searched(rep)) => eprintln!(
+                "omnitrack: frame {}: searched {} of {} cells in {:.0} ms",
+                r.sequence,
+                rep.cells_searched,
+                rep.cells_in_volume,
+                rep.elapsed.as_secs_f64() * 1e3
+            ),
+            Some(TrackerEvent::Committed { candidates, .. }) => {
+                eprintln!(
+                    "omnitrack: frame {}: tracking ({candidates} candidates weighed)",
+                    r.sequence
+                )
+            }
+            Some(TrackerEvent::LostLock) => eprintln!("omnitrack: frame {}: lost lock, re-initialising", r.sequence),
+            Some(TrackerEvent::Relocalised) => {}
+            None => {}
+        }
+        if let Some(p) = &r.result.pose {
+            last_pose = *p;
+            if let Some(w) = out.as_mut() {
+                let line = tum_line(&Stamped {
+                    timestamp_ns: r.timestamp_ns,
+                    pose: *p,
+                });
+                writeln!(w, "{line}").map_err(|e| format!("{trajectory_name}: cannot write: {e}"))?;
+            }
+        }
+        if let Some(publ) = &publisher {
+            let status = match r.result.state {
+                TrackerState::Initializing => PoseStatus::Initializing,
+                TrackerState::Tracking if r.result.pose.is_some() => PoseStatus::Tracking,
+                TrackerState::Tracking | TrackerState::Lost => PoseStatus::Lost,
+            };
+            let _ = publ.publish_pose(
+                r.timestamp_ns,
+                r.sequence,
+                status,
+                &last_pose,
+                &r.result.covariance,
+                r.result.inliers,
+                r.result.xi_rad2,
+            );
+        }
+        Ok(())
+    });
+    if let Some(mut w) = out {
+        w.flush().map_err(|e| format!("{trajectory_name}: cannot write: {e}"))?;
+    }
+    let stats = stats.map_err(|e| e.to_string())?;
+    eprintln!(
+        "omnitrack: {} frames, {} tracked ({:.1} %), {} losses, {} re-initialisations; {}",
+        stats.frames,
+        stats.tracked,
+        100.0 * stats.tracked as f64 / stats.frames.max(1) as f64,
+        stats.losses,
+        stats.reinitialisations,
+        source.stats()
+    );
+    Ok(())
 }

@@ -29,6 +29,13 @@ pub struct InitialisationConfig {
     pub time_budget_ms: f64,
     pub simplex_refinement: bool,
     pub confirm_frames: u32,
+    pub edges_considered: u32,
+    pub segments_considered: u32,
+    pub samples_per_cell: u32,
+    pub dihedral_tolerance_deg: f64,
+    pub max_dihedral_range_deg: f64,
+    pub whole_model_time_budget_ms: f64,
+    pub clear_winner_ratio: f64,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -43,6 +50,12 @@ pub struct MaintenanceConfig {
     pub max_samples: u32,
     pub time_budget_ms: f64,
     pub constant_velocity_prior: bool,
+    pub inlier_angle_deg: f64,
+    pub min_inliers: u32,
+    pub lost_after_frames: u32,
+    pub max_jump_m: f64,
+    pub max_jump_deg: f64,
+    pub relocalise_diameter_m: f64,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -127,6 +140,13 @@ impl Default for InitialisationConfig {
             time_budget_ms: 1000.0,
             simplex_refinement: true, // Koch–Teller §4.1.3
             confirm_frames: 3,
+            edges_considered: 40,
+            segments_considered: 40,
+            samples_per_cell: 100,
+            dihedral_tolerance_deg: 1.0,
+            max_dihedral_range_deg: 10.0,
+            whole_model_time_budget_ms: 10000.0,
+            clear_winner_ratio: 0.8,
         }
     }
 }
@@ -143,6 +163,12 @@ impl Default for MaintenanceConfig {
             max_samples: 1000,
             time_budget_ms: 15.0,
             constant_velocity_prior: true,
+            inlier_angle_deg: 1.5,
+            min_inliers: 8,
+            lost_after_frames: 3,
+            max_jump_m: 0.5,
+            max_jump_deg: 15.0,
+            relocalise_diameter_m: 1.0,
         }
     }
 }
@@ -294,6 +320,21 @@ impl TrackerConfig {
         at_least("initialisation.max_samples", i.max_samples, 1)?;
         positive("initialisation.time_budget_ms", i.time_budget_ms)?;
         at_least("initialisation.confirm_frames", i.confirm_frames, 1)?;
+        at_least("initialisation.edges_considered", i.edges_considered, 3)?;
+        if i.edges_considered > 64 {
+            return Err(format!(
+                "key 'initialisation.edges_considered': must be at most 64 (one bit per edge), found {}",
+                i.edges_considered
+            ));
+        }
+        at_least("initialisation.segments_considered", i.segments_considered, 3)?;
+        at_least("initialisation.samples_per_cell", i.samples_per_cell, 1)?;
+        positive("initialisation.dihedral_tolerance_deg", i.dihedral_tolerance_deg)?;
+        positive("initialisation.max_dihedral_range_deg", i.max_dihedral_range_deg)?;
+        positive(
+            "initialisation.whole_model_time_budget_ms",
+            i.whole_model_time_budget_ms,
+        )?;
         positive("maintenance.angular_gate_deg", m.angular_gate_deg)?;
         if !(m.hue_gate > 0.0 && m.hue_gate <= 0.5) {
             return Err(format!(
@@ -312,6 +353,17 @@ impl TrackerConfig {
         }
         at_least("maintenance.max_samples", m.max_samples, 1)?;
         positive("maintenance.time_budget_ms", m.time_budget_ms)?;
+        positive("maintenance.inlier_angle_deg", m.inlier_angle_deg)?;
+        at_least("maintenance.min_inliers", m.min_inliers, 4)?;
+        at_least("maintenance.lost_after_frames", m.lost_after_frames, 1)?;
+        positive("maintenance.max_jump_m", m.max_jump_m)?;
+        positive("maintenance.max_jump_deg", m.max_jump_deg)?;
+        if !(m.relocalise_diameter_m >= 0.0 && m.relocalise_diameter_m.is_finite()) {
+            return Err(format!(
+                "key 'maintenance.relocalise_diameter_m': must be 0 (off) or a positive number of metres, found {}",
+                m.relocalise_diameter_m
+            ));
+        }
         positive("visibility.node_spacing_m", v.node_spacing_m)?;
         at_least("visibility.min_visible_pixels", v.min_visible_pixels, 1)?;
         at_least("visibility.cube_map_resolution", v.cube_map_resolution, 8)?;

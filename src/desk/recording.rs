@@ -154,3 +154,32 @@ pub fn write_recording(
         write_seconds,
     })
 }
+
+/// A rendered recording of a scenario in a cache directory, made on first use: `root/NAME-FRAMESf-seedSEED-LABEL`.
+/// A recording is reused only when complete (a `complete` marker is written last), so an
+/// interrupted render is redone. `progress(done, total)` is called per rendered frame. Returns
+/// the directory and whether it was rendered now.
+#[allow(clippy::too_many_arguments)]
+pub fn cached_scenario(
+    root: &Path,
+    scenario: &crate::desk::scenario::Scenario,
+    frames: usize,
+    seed: u64,
+    label: &str,
+    rig: &Rig,
+    options: &RecordingOptions,
+    progress: impl FnMut(usize, usize),
+) -> Result<(PathBuf, bool), RecordingError> {
+    let dir = root.join(format!("{}-{frames}f-seed{seed}-{label}", scenario.name));
+    let marker = dir.join("complete");
+    if marker.exists() {
+        return Ok((dir, false));
+    }
+    let obj = scenario
+        .model_obj()
+        .map_err(|e| err(&dir, format!("cannot extrude the scenario's plan: {e}")))?;
+    let trajectory = scenario.trajectory(frames, seed);
+    write_recording(&dir, rig, &obj, &trajectory, options, progress)?;
+    write_file(&marker, b"")?;
+    Ok((dir, true))
+}

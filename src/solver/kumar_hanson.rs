@@ -420,6 +420,17 @@ fn solution(
     }
 }
 
+/// R_and_T's iteration (§3.1) from `guess` over `c`: the pose only, without the covariance, ξ
+/// or inlier list of [`r_and_t`], so that it allocates nothing (the tracker's sampling loop calls
+/// it per sample). `None` if the normal equations are singular or the iteration diverges.
+pub fn r_and_t_refine(c: &[Correspondence], guess: &Pose, o: &SolverOptions) -> Option<Pose> {
+    if c.len() < 3 {
+        return None;
+    }
+    let (q, s) = unknowns_of(guess);
+    refine(c, q, s, o).ok().map(|r| pose_of(&r.q, &r.s))
+}
+
 /// R_and_T's iteration (§3.1) from `(q, s)` over `c` with `o.error`; no covariance, no ξ.
 pub(crate) fn refine(
     c: &[Correspondence],

@@ -1,0 +1,241 @@
+//! The tracker end to end on rendered recordings of the paper's scenarios: accuracy against the
+//! ground truth (absolute trajectory error, no alignment: both are in the model frame), the
+//! fraction of frames tracked, re-initialisations, initialisation time, per-frame latency and
+//! frames per second (edge extraction + tracking; PNG decoding of the replay excluded).
+//!
+//! Run: `cargo bench --bench tracker` (needs the `desk` feature, on by default). Options after
+//! `--`: `--scenario lab|corridor|handheld` (repeatable; default all three), `--frames N`
+//! (default 300 per scenario; `--full` for the paper's lengths, Table 2: 1500, 7800 and 1900
+//! frames — an hour of rendering on 2 cores, cached afterwards), `--seed S`, `--verbose` (one line
+//! per frame), `--upright` (KT §5.4 mode for the rolling scenarios), `--no-hint` (search the
+//! whole model instead of a 3 m volume around the first ground-truth pose), `--config tracker.toml`.
+//!
+//! Recordings are cached in `target/omnitrack-cache/` (or `$OMNITRACK_CACHE`).
+
+#[cfg(feature = "desk")]
+mod bench {
+    use nalgebra::Point3;
+    use omnitrack::capture::{Pacing, ReplaySource};
+    use omnitrack::config::TrackerConfig;
+    use omnitrack::desk::recording::{cached_scenario, RecordingOptions};
+    use omnitrack::desk::scenario::{Motion, Scenario, ScenarioName};
+    use omnitrack::runtime::{load_or_build_table, track, RunOptions};
+    use omnitrack::tracker::{SearchVolume, TrackerEvent};
+    use omnitrack::trajectory::Stamped;
+    use omnitrack::{Model, Rig};
+    use std::path::{Path, PathBuf};
+    use std::time::Duration;
+
+    fn percentile(sorted: &[f64], q: f64) -> f64 {
+        if sorted.is_empty() {
+            return f64::NAN;
+        }
+        sorted[((sorted.len() - 1) as f64 * q).round() as usize]
+    }
+
+    struct Args {
+        scenarios: Vec<ScenarioName>,
+        frames: Option<usize>,
+        full: bool,
+        seed: u64,
+        verbose: bool,
+        upright: bool,
+        hint: bool,
+        config: Option<PathBuf>,
+    }
+
+    fn args() -> Args {
+        let mut a = Args {
+            scenarios: vec![],
+            frames: None,
+            full: false,
+            seed: 11,
+            verbose: false,
+            upright: false,
+            hint: true,
+            config: None,
+        };
+        let mut it = std::env::args().skip(1);
+        while let Some(x) = it.next() {
+            match x.as_str() {
+                "--scenario" => a
+                    .scenarios
+                    .push(it.next().and_then(|s| s.parse().ok()).expect("--scenario NAME")),
+                "--frames" => a.frames = it.next().and_then(|s| s.parse().ok()),
+                "--seed" => a.seed = it.next().and_then(|s| s.parse().ok()).expect("--seed S"),
+                "--full" => a.full = true,
+                "--verbose" => a.verbose = true,
+                "--upright" => a.upright = true,
+                "--no-hint" => a.hint = false,
+                "--config" => a.config = it.next().map(PathBuf::from),
+                _ => {}
+            }
+        }
+        if a.scenarios.is_empty() {
+            a.scenarios = ScenarioName::ALL.to_vec();
+        }
+        a
+    }
+
+    fn cache_root() -> PathBuf {
+        std::env::var_os("OMNITRACK_CACHE")
+            .map(PathBuf::from)
+            .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("target/omnitrack-cache"))
+    }
+
+    pub fn main() {
+        let a = args();
+        let rig = Rig::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("firmware_config/ladybug2.toml")).unwrap();
+        println!(
+            "| scenario | frames | tracked | re-inits (relocalised) | ATE pos RMSE / max (cm) | ATE rot RMSE / max (°) | init (ms) | frame p50 / p99 / max (ms) | frames/s |"
+        );
+        println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- |");
+        for name in &a.scenarios {
+            let scenario = Scenario::get(*name);
+            let frames = a.frames.unwrap_or(if a.full { scenario.paper_frames } else { 300 });
+            let (dir, made) = cached_scenario(
+                &cache_root(),
+                &scenario,
+                frames,
+                a.seed,
+                "default",
+                &rig,
+                &RecordingOptions::default(),
+                |d, t| eprint!("\rrendering {name}: {d}/{t}"),
+            )
+            .unwrap();
+            if made {
+                eprintln!();
+            }
+            let model_path = dir.join("model.obj");
+            let model = Model::load(&model_path).unwrap();
+            let mut cfg = match &a.config {
+                Some(p) => TrackerConfig::load(p).unwrap(),
+                None => TrackerConfig::default(),
+            };
+            if a.upright {
+                if let Motion::Rolling3Dof { height_m } = scenario.motion {
+                    cfg.motion.upright = true;
+                    cfg.motion.upright_height_m = height_m;
+                }
+            }
+            let (table, origin) = load_or_build_table(&model_path, &model, None, &cfg).unwrap();
+            eprintln!("{name}: {origin}");
+            let mut source = ReplaySource::open(&dir, Pacing::AsFastAsPossible).unwrap();
+            let truth: Vec<Stamped> = source.ground_truth().unwrap().to_vec();
+            let hint = a.hint.then(|| SearchVolume {
+                centre: Point3::from(truth[0].pose.translation.vector),
+                diameter_m: Some(cfg.initialisation.search_diameter_m),
+            });
+            let opts = RunOptions {
+                hint,
+                seed: 1,
+                max_frames: None,
+            };
+            let mut pos_err = Vec::new();
+            let mut rot_err = Vec::new();
+            let mut latency = Vec::new();
+            let mut busy = Duration::ZERO;
+            let verbose = a.verbose;
+            let stats = track(&mut source, &model, &table, &cfg, &opts, &mut |r, tracker| {
+                busy += r.frame_time;
+                latency.push(r.frame_time.as_secs_f64() * 1e3);
+                if let Some(TrackerEvent::Searched(rep)) = r.result.event {
+                    if verbose {
+                        eprintln!(
+                            "  search: {}/{} cells, {} triplet matches, {} samples, {:.0} ms{}",
+                            rep.cells_searched,
+                            rep.cells_in_volume,
+                            rep.triplet_matches,
+                            rep.samples,
+                            rep.elapsed.as_secs_f64() * 1e3,
+                            if rep.timed_out { " (timed out)" } else { "" }
+                        );
+                    }
+                }
+                let gt = truth
+                    .iter()
+                    .find(|s| s.timestamp_ns.abs_diff(r.timestamp_ns) < 1_000_000);
+                if verbose {
+                    if let Some(g) = gt {
+                        for (p, score, frames, alive) in tracker.candidates() {
+                            eprintln!(
+                                "    candidate {:6.1} cm {:6.2}° score {:.2e} over {frames} frames{}",
+                                (p.translation.vector - g.pose.translation.vector).norm() * 100.0,
+                                p.rotation.angle_to(&g.pose.rotation).to_degrees(),
+                                score,
+                                if alive { "" } else { " (dropped)" }
+                            );
+                        }
+                    }
+                }
+                let err = match (&r.result.pose, gt) {
+                    (Some(p), Some(g)) => {
+                        let dp = (p.translation.vector - g.pose.translation.vector).norm();
+                        let dr = p.rotation.angle_to(&g.pose.rotation).to_degrees();
+                        pos_err.push(dp);
+                        rot_err.push(dr);
+                        Some((dp, dr))
+                    }
+                    _ => None,
+                };
+                if verbose {
+                    let r2 = &r.result;
+                    eprintln!(
+                        "{:4} {:?} {} inl {:3} u/p/a {:?} samples {:4} edges {:4} match {:.2} solve {:.2} ms{}",
+                        r.sequence,
+                        r2.state,
+                        match err {
+                            Some((dp, dr)) => format!("{:6.1} cm {:5.2}°", dp * 100.0, dr),
+                            None => "      --         ".into(),
+                        },
+                        r2.inliers,
+                        r2.states,
+                        r2.samples,
+                        r.edges,
+                        r2.match_time.as_secs_f64() * 1e3,
+                        r2.solve_time.as_secs_f64() * 1e3,
+                        match r2.event {
+                            Some(TrackerEvent::Committed {
+                                candidates,
+                                changed_mind,
+                            }) => format!(" committed ({candidates} candidates, changed mind: {changed_mind})"),
+                            Some(TrackerEvent::LostLock) => " LOST".into(),
+                            Some(TrackerEvent::Relocalised) => " relocalised".into(),
+                            _ => String::new(),
+                        }
+                    );
+                }
+                Ok(())
+            })
+            .unwrap();
+            let init_ms = stats.first_search.map_or(f64::NAN, |d| d.as_secs_f64() * 1e3);
+            let rmse = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64).sqrt();
+            let max = |v: &[f64]| v.iter().cloned().fold(0.0, f64::max);
+            latency.sort_by(f64::total_cmp);
+            println!(
+                "| {name} | {} | {:.1} % | {} ({}) | {:.2} / {:.1} | {:.3} / {:.2} | {:.0} | {:.1} / {:.1} / {:.1} | {:.1} |",
+                stats.frames,
+                100.0 * stats.tracked as f64 / stats.frames.max(1) as f64,
+                stats.reinitialisations,
+                stats.relocalisations,
+                rmse(&pos_err) * 100.0,
+                max(&pos_err) * 100.0,
+                rmse(&rot_err),
+                max(&rot_err),
+                init_ms,
+                percentile(&latency, 0.5),
+                percentile(&latency, 0.99),
+                latency.last().copied().unwrap_or(f64::NAN),
+                stats.frames as f64 / busy.as_secs_f64(),
+            );
+        }
+    }
+}
+
+fn main() {
+    #[cfg(feature = "desk")]
+    bench::main();
+    #[cfg(not(feature = "desk"))]
+    eprintln!("the tracker benchmark needs the `desk` feature");
+}

@@ -1,0 +1,986 @@
+//! Initialisation: Koch–Teller §4.1, INIT-SEGMENT-EDGE (Figure 4) inside a search volume
+//! (centre T̃, diameter δ) over the cells of the prior visibility grid (§4.1.1), followed by the
+//! simplex minimisation of ξ (§4.1.3, Figure 5).
+//!
+//! In: one frame's [`Edge`]s, a [`SearchVolume`], the model, the visibility table. Out: the best
+//! few distinct [`Candidate`] poses (lowest score first) with their inlier correspondences'
+//! count and ξ, and an [`InitReport`] of the work done.
+//!
+//! Per cell meeting the volume (nearest first), as in Figure 4:
+//! 1. ℒ: the segments of the cell's visibility set, the `segments_considered` longest as seen
+//!    from the node; ℰ: the frame's `edges_considered` strongest edges (once per frame).
+//! 2. Dihedral angles: of every edge pair (the angle between their planes, independent of the
+//!    rig's rotation), and of every segment pair as a range [min, max] over the cell, from the
+//!    planes through the segments at the cell's centre and corners.
+//! 3. Triplets: an edge triplet {e_r, e_s, e_t} matches a segment triplet {l_i, l_j, l_k} when
+//!    all three dihedral angles fall in the ranges (within the edge noise). The score α of a
+//!    match is the normalised product of overlaps: per pair, the overlap of the observation's
+//!    interval (±`dihedral_tolerance`) with the expected range divided by their union, so a
+//!    narrow, informative range counts more than one that a near segment sweeps over the cell.
+//!    A[r][i], A[s][j], A[t][k] += α (Figure 4 line 7).
+//! 4. The k best edges of each segment (k = 3) by A; random samples of three segments, each with
+//!    one of its k best edges; the pose of each sample; the sample's pose scored.
+//!
+//! **Indexing instead of brute force.** Figure 4 loops over all O(m³n³) triplet pairs (the paper:
+//! a minute per initialisation). Here the ordered edge pairs are sorted by dihedral angle, so the
+//! pairs compatible with a segment pair are one contiguous slice found by binary search; the third
+//! edge is then found in O(1) as the intersection of two 64-bit masks ("edges whose dihedral
+//! angle with e_r lies in a range", from per-edge cumulative masks over 0.5° bins). Segment pairs
+//! whose range over the cell is wider than `max_range_deg` say little and are pruned. The work
+//! per cell is then ~n³/6 × (compatible pairs), a few milliseconds.
+//!
+//! **Pose of a sample.** Three correspondences fix the pose: the rotation from the three plane
+//! normals (edge, rig frame ↔ segment seen from the cell centre, world frame; signs made
+//! consistent by the dihedral cosines) by Wahba's SVD, the translation from eq. 9 by linear least
+//! squares, then Kumar–Hanson's R_and_T on the three (KT minimise ξ here; R_and_T reaches the same
+//! minimum of a 3-line sample ~50× faster). The ξ simplex comes once, on the winner's inliers.
+//!
+//! **Scoring (deviation).** ξ over a three-line sample is ~0 for many wrong samples, so samples
+//! are compared by the truncated ξ over all of the cell's segments (each segment's best edge α,
+//! capped), the consensus score of the maintenance sampler. The best samples are then polished:
+//! matches gathered at the pose with shrinking gates (model segments of VIS(T), all edges), refit,
+//! and ranked by the truncated ξ with the inlier cap.
+//!
+//! With `upright` set (KT §5.4), the cells are those of the layer nearest the known height, the
+//! rotation is the yaw alone (closed form) and every fit solves x, y and yaw only.
+//!
+//! Fixed memory: all tables are sized in [`Initialiser::new`]; `run` allocates nothing.
+
+use super::matching::{best_edge, correspondence, Gate, Predicted};
+use crate::edges::Edge;
+use crate::geometry::{xi, Correspondence, Pose};
+use crate::model::Model;
+use crate::rig::Rig;
+use crate::solver::{minimise_xi, minimise_xi_upright, r_and_t_refine, refine_upright, SimplexOptions, SolverOptions};
+use crate::visibility::VisibilityTable;
+use nalgebra::{Matrix2, Matrix3, Point3, Translation3, UnitQuaternion, Vector2, Vector3};
+use rand::rngs::SmallRng;
+use rand::Rng;
+use std::time::{Duration, Instant};
+
+/// Dihedral-angle bins of the edge masks (rad).
+const BIN_RAD: f64 = 0.5 * std::f64::consts::PI / 180.0;
+/// Bins covering [0, π/2].
+const BINS: usize = 181;
+/// Most edges per frame the triplet matching considers (one bit each in a u64 mask).
+pub const MAX_EDGES_CONSIDERED: usize = 64;
+/// Samples kept per cell for polishing, and candidates polished per run.
+const KEEP_PER_CELL: usize = 3;
+const POOL: usize = 64;
+const POLISHED: usize = 16;
+/// Two candidates closer than this are the same (m, rad).
+const SAME_POSITION_M: f64 = 0.3;
+const SAME_ROTATION_RAD: f64 = 0.0873;
+
+/// Tunables of [`Initialiser`] (from tracker.toml `[initialisation]` and the noise model).
+#[derive(Debug, Clone, PartialEq)]
+pub struct InitOptions {
+    /// m: strongest edges of the frame used in the triplet matching (≤ 64).
+    pub edges_considered: usize,
+    /// n: longest visible segments of a cell used in the triplet matching.
+    pub segments_considered: usize,
+    /// k of Figure 4.
+    pub best_edges_per_segment: usize,
+    /// Random correspondence samples per cell.
+    pub samples_per_cell: usize,
+    /// The whole run stops after this (anytime: the cells nearest the centre come first).
+    pub time_budget: Duration,
+    /// Half-width of an observed dihedral angle's interval (rad).
+    pub dihedral_tolerance_rad: f64,
+    /// Segment pairs whose dihedral range over a cell is wider than this are pruned (rad).
+    pub max_range_rad: f64,
+    /// A correspondence is an inlier when its α is below this (rad).
+    pub inlier_alpha_rad: f64,
+    /// Edges and predicted segments shorter than this are ignored (rad).
+    pub min_length_rad: f64,
+    /// KT §5.4: the rig's known height when it rolls upright (x, y and yaw only).
+    pub upright_height_m: Option<f64>,
+    /// KT §4.1.3: finish with the simplex minimisation of ξ.
+    pub simplex_refinement: bool,
+    /// Distinct candidates returned.
+    pub candidates: usize,
+}
+
+/// Where to search.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SearchVolume {
+    /// T̃.
+    pub centre: Point3<f64>,
+    /// δ; `None` searches the whole model.
+    pub diameter_m: Option<f64>,
+}
+
+/// A pose found by initialisation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Candidate {
+    pub pose: Pose,
+    /// Truncated ξ over the segments predicted visible (rad², lower is better).
+    pub score: f64,
+    /// Correspondences with α below the inlier angle.
+    pub inliers: usize,
+    /// Plain ξ over those inliers (rad²).
+    pub xi_rad2: f64,
+}
+
+/// What one [`Initialiser::run`] did.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct InitReport {
+    pub cells_in_volume: usize,
+    pub cells_searched: usize,
+    pub triplet_matches: u64,
+    pub samples: u64,
+    pub elapsed: Duration,
+    pub timed_out: bool,
+}
+
+/// The search's buffers, sized once.
+pub struct Initialiser<'m> {
+    model: &'m Model,
+    table: &'m VisibilityTable,
+    centres: Vec<Point3<f64>>,
+    opts: InitOptions,
+    solver: SolverOptions,
+    // Per frame.
+    edge_order: Vec<(f32, u32)>,
+    top: Vec<Edge>,
+    dihedral: Vec<f32>,
+    le_mask: Vec<u64>,
+    pairs: Vec<(f32, u8, u8)>,
+    // Per cell.
+    cells: Vec<(f64, u32)>,
+    seg_order: Vec<(f64, u32)>,
+    segs: Vec<u32>,
+    seg_normals: Vec<Vector3<f64>>,
+    ranges: Vec<(f32, f32)>,
+    score: Vec<f32>,
+    best: Vec<[(f32, u8); 3]>,
+    weights: Vec<f64>,
+    // Results.
+    pool: Vec<(f64, Pose)>,
+    corr: Vec<Correspondence>,
+    alphas: Vec<f64>,
+    candidates: Vec<Candidate>,
+}
+
+impl<'m> Initialiser<'m> {
+    /// Buffers for `rig` (its sensors' centres), `model` and `table`; `max_edges` is the most
+    /// edges a frame can have (sensors × edges per sensor).
+    pub fn new(
+        rig: &Rig,
+        model: &'m Model,
+        table: &'m VisibilityTable,
+        mut opts: InitOptions,
+        solver: SolverOptions,
+        max_edges: usize,
+    ) -> Initialiser<'m> {
+        opts.edges_considered = opts.edges_considered.clamp(3, MAX_EDGES_CONSIDERED);
+        opts.segments_considered = opts.segments_considered.max(3);
+        opts.best_edges_per_segment = opts.best_edges_per_segment.clamp(1, 3);
+        opts.candidates = opts.candidates.max(1);
+        let (m, n) = (opts.edges_considered, opts.segments_considered);
+        let max_set = (0..table.node_count() as u32)
+            .map(|i| table.node_set(i).segments.len())
+            .max()
+            .unwrap_or(0)
+            .max(model.segments.len().min(4096));
+        Initialiser {
+            model,
+            table,
+            centres: rig.sensors.iter().map(|s| s.centre()).collect(),
+            opts,
+            solver,
+            edge_order: Vec::with_capacity(max_edges),
+            top: Vec::with_capacity(m),
+            dihedral: vec![0.0; m * m],
+            le_mask: vec![0; m * BINS],
+            pairs: Vec::with_capacity(m * m),
+            cells: Vec::with_capacity(table.node_count()),
+            seg_order: Vec::with_capacity(max_set),
+            segs: Vec::with_capacity(n),
+            seg_normals: vec![Vector3::zeros(); n * 9],
+            ranges: vec![(0.0, 0.0); n * n],
+            score: vec![0.0; n * m],
+            best: vec![[(0.0, 0); 3]; n],
+            weights: vec![0.0; n],
+            pool: Vec::with_capacity(POOL),
+            corr: Vec::with_capacity(max_set),
+            alphas: Vec::with_capacity(max_set),
+            candidates: Vec::with_capacity(POLISHED),
+        }
+    }
+
+    pub fn options(&self) -> &InitOptions {
+        &self.opts
+    }
+
+    /// Changes the search's time budget (a volume, or the whole model).
+    pub fn set_time_budget(&mut self, budget: Duration) {
+        self.opts.time_budget = budget;
+    }
+
+    /// INIT-SEGMENT-EDGE over the cells meeting `volume`, then the polish of the best samples.
+    /// Returns the distinct candidates, best first (empty if nothing was found).
+    pub fn run(&mut self, edges: &[Edge], volume: &SearchVolume, rng: &mut SmallRng) -> (&[Candidate], InitReport) {
+        let started = Instant::now();
+        let mut report = InitReport::default();
+        self.candidates.clear();
+        self.pool.clear();
+        self.prepare_edges(edges);
+        self.select_cells(volume);
+        report.cells_in_volume = self.cells.len();
+        if self.top.len() >= 3 {
+            for ci in 0..self.cells.len() {
+                if started.elapsed() >= self.opts.time_budget {
+                    report.timed_out = true;
+                    break;
+                }
+                let node = self.cells[ci].1;
+                report.cells_searched += 1;
+                report.triplet_matches += self.score_cell(node);
+                report.samples += self.sample_cell(node, volume, rng);
+            }
+        }
+        self.pool.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+        let mut polished = 0;
+        for pi in 0..self.pool.len() {
+            if polished >= POLISHED {
+                break;
+            }
+            let start = self.pool[pi].1;
+            if self
+                .candidates
+                .iter()
+                .any(|c| same_pose(&c.pose, &start, 2.0 * SAME_POSITION_M, 2.0 * SAME_ROTATION_RAD))
+            {
+                continue;
+            }
+            polished += 1;
+            if let Some(c) = self.polish(&start, edges) {
+                if self
+                    .candidates
+                    .iter()
+                    .all(|o| !same_pose(&o.pose, &c.pose, SAME_POSITION_M, SAME_ROTATION_RAD))
+                {
+                    self.candidates.push(c);
+                }
+            }
+        }
+        self.candidates.sort_unstable_by(|a, b| a.score.total_cmp(&b.score));
+        self.candidates.truncate(self.opts.candidates);
+        report.elapsed = started.elapsed();
+        (&self.candidates, report)
+    }
+
+    /// ℰ: the strongest edges of sufficient length, their dihedral angles, masks and sorted pairs.
+    fn prepare_edges(&mut self, edges: &[Edge]) {
+        self.edge_order.clear();
+        for (i, e) in edges.iter().enumerate() {
+            if e.length_rad >= self.opts.min_length_rad && self.edge_order.len() < self.edge_order.capacity() {
+                self.edge_order.push((e.strength, i as u32));
+            }
+        }
+        self.edge_order.sort_unstable_by(|a, b| b.0.total_cmp(&a.0));
+        self.top.clear();
+        for &(_, i) in self.edge_order.iter().take(self.opts.edges_considered) {
+            self.top.push(edges[i as usize]);
+        }
+        let m = self.top.len();
+        let mm = self.opts.edges_considered;
+        self.le_mask.iter_mut().for_each(|x| *x = 0);
+        self.pairs.clear();
+        for r in 0..m {
+            for s in 0..m {
+                if r == s {
+                    self.dihedral[r * mm + s] = 0.0;
+                    continue;
+                }
+                let d = dihedral(&self.top[r].plane.normal, &self.top[s].plane.normal);
+                self.dihedral[r * mm + s] = d as f32;
+                self.le_mask[r * BINS + bin(d)] |= 1u64 << s;
+                self.pairs.push((d as f32, r as u8, s as u8));
+            }
+            for b in 1..BINS {
+                self.le_mask[r * BINS + b] |= self.le_mask[r * BINS + b - 1];
+            }
+        }
+        self.pairs.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+    }
+
+    /// The nodes whose cells meet the volume, nearest first (one layer when upright).
+    fn select_cells(&mut self, volume: &SearchVolume) {
+        self.cells.clear();
+        let h = &self.table.header;
+        let half = 0.5 * h.spacing_m;
+        let half_z = layer_half_height(&h.heights_m);
+        let layer_z = self
+            .opts
+            .upright_height_m
+            .map(|z| nearest_layer_z(h.origin[2], &h.heights_m, z));
+        for node in 0..self.table.node_count() as u32 {
+            let p = self.table.node_position(node);
+            if let Some(z) = layer_z {
+                if (p.z - z).abs() > 1e-6 {
+                    continue;
+                }
+            }
+            let d = volume.centre - p;
+            let dz = if self.opts.upright_height_m.is_some() {
+                0.0
+            } else {
+                (d.z.abs() - half_z).max(0.0)
+            };
+            let gap = Vector3::new((d.x.abs() - half).max(0.0), (d.y.abs() - half).max(0.0), dz).norm();
+            if volume.diameter_m.is_none_or(|dm| gap <= 0.5 * dm) && self.cells.len() < self.cells.capacity() {
+                self.cells.push((d.norm(), node));
+            }
+        }
+        self.cells.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+    }
+
+    /// The sample points of a node's cell: its centre and corners (at the known height when
+    /// upright). Returns how many of `out` were filled.
+    fn cell_points(&self, node: u32, out: &mut [Point3<f64>; 9]) -> usize {
+        let h = &self.table.header;
+        let p = self.table.node_position(node);
+        let half = 0.5 * h.spacing_m;
+        if let Some(z) = self.opts.upright_height_m {
+            out[0] = Point3::new(p.x, p.y, z);
+            let mut k = 1;
+            for sx in [-1.0, 1.0] {
+                for sy in [-1.0, 1.0] {
+                    out[k] = Point3::new(p.x + sx * half, p.y + sy * half, z);
+                    k += 1;
+                }
+            }
+            5
+        } else {
+            let hz = layer_half_height(&h.heights_m);
+            out[0] = p;
+            let mut k = 1;
+            for sx in [-1.0, 1.0] {
+                for sy in [-1.0, 1.0] {
+                    for sz in [-1.0, 1.0] {
+                        out[k] = Point3::new(p.x + sx * half, p.y + sy * half, p.z + sz * hz);
+                        k += 1;
+                    }
+                }
+            }
+            9
+        }
+    }
+
+    /// Figure 4 lines 1–10 for one cell: ℒ, the dihedral ranges, the triplet matching into the
+    /// score table, the k best edges per segment. Returns the number of triplet matches.
+    fn score_cell(&mut self, node: u32) -> u64 {
+        let mut points = [Point3::origin(); 9];
+        let np = self.cell_points(node, &mut points);
+        let centre = points[0];
+        let set = self.table.node_set(node);
+        self.seg_order.clear();
+        for &s in set.segments {
+            let seg = &self.model.segments[s as usize];
+            let (a, b) = (seg.a - centre, seg.b - centre);
+            let len = a.cross(&b).norm().atan2(a.dot(&b));
+            if len >= 1.5 * self.opts.min_length_rad && self.seg_order.len() < self.seg_order.capacity() {
+                self.seg_order.push((len, s));
+            }
+        }
+        self.seg_order.sort_unstable_by(|a, b| b.0.total_cmp(&a.0));
+        self.segs.clear();
+        let n_max = self.opts.segments_considered;
+        for &(_, s) in self.seg_order.iter().take(n_max) {
+            self.segs.push(s);
+        }
+        let n = self.segs.len();
+        let m = self.top.len();
+        let mm = self.opts.edges_considered;
+        for (i, &s) in self.segs.iter().enumerate() {
+            let seg = &self.model.segments[s as usize];
+            for (k, p) in points[..np].iter().enumerate() {
+                let nrm = (seg.a - p).cross(&(seg.b - p));
+                self.seg_normals[i * 9 + k] = nrm.try_normalize(1e-12).unwrap_or_else(Vector3::z);
+            }
+        }
+        let tol = self.opts.dihedral_tolerance_rad as f32;
+        let max_width = self.opts.max_range_rad as f32;
+        for i in 0..n {
+            for j in i + 1..n {
+                let (mut lo, mut hi) = (f32::INFINITY, 0f32);
+                for k in 0..np {
+                    let d = dihedral_v(&self.seg_normals[i * 9 + k], &self.seg_normals[j * 9 + k]) as f32;
+                    lo = lo.min(d);
+                    hi = hi.max(d);
+                }
+                self.ranges[i * n_max + j] = (lo, hi);
+            }
+        }
+        self.score[..n_max * mm].iter_mut().for_each(|x| *x = 0.0);
+        let mut matches = 0u64;
+        for i in 0..n {
+            for j in i + 1..n {
+                let rij = self.ranges[i * n_max + j];
+                if rij.1 - rij.0 > max_width {
+                    continue;
+                }
+                let a = self.pairs.partition_point(|p| p.0 < rij.0 - tol);
+                let b = self.pairs.partition_point(|p| p.0 <= rij.1 + tol);
+                if a >= b {
+                    continue;
+                }
+                for k in j + 1..n {
+                    let rik = self.ranges[i * n_max + k];
+                    let rjk = self.ranges[j * n_max + k];
+                    if rik.1 - rik.0 > max_width || rjk.1 - rjk.0 > max_width {
+                        continue;
+                    }
+                    for &(d_rs, r, s) in &self.pairs[a..b] {
+                        let (r, s) = (r as usize, s as usize);
+                        let mask = range_mask(&self.le_mask[r * BINS..(r + 1) * BINS], rik, tol)
+                            & range_mask(&self.le_mask[s * BINS..(s + 1) * BINS], rjk, tol);
+                        let mut bits = mask & !((1u64 << r) | (1u64 << s));
+                        while bits != 0 {
+                            let t = bits.trailing_zeros() as usize;
+                            bits &= bits - 1;
+                            let alpha = jaccard(d_rs, rij, tol)
+                                * jaccard(self.dihedral[r * mm + t], rik, tol)
+                                * jaccard(self.dihedral[s * mm + t], rjk, tol);
+                            if alpha > 0.0 {
+                                matches += 1;
+                                self.score[i * mm + r] += alpha;
+                                self.score[j * mm + s] += alpha;
+                                self.score[k * mm + t] += alpha;
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        // Lines 8–10: the k best edges of each segment; a segment's weight in the sampling is
+        // how much its best edge stands out of its row.
+        let kb = self.opts.best_edges_per_segment;
+        for i in 0..n {
+            let row = &self.score[i * mm..i * mm + m];
+            let mut best = [(0f32, 0u8); 3];
+            let mut total = 0f32;
+            for (r, &v) in row.iter().enumerate() {
+                total += v;
+                if v > best[kb - 1].0 {
+                    let mut p = kb - 1;
+                    while p > 0 && best[p - 1].0 < v {
+                        best[p] = best[p - 1];
+                        p -= 1;
+                    }
+                    best[p] = (v, r as u8);
+                }
+            }
+            self.best[i] = best;
+            self.weights[i] = if total > 0.0 { (best[0].0 / total) as f64 } else { 0.0 };
+        }
+        matches
+    }
+
+    /// Figure 4 lines 11–15 for one cell: random correspondence samples, a pose for each, the best
+    /// kept in the pool. Returns the number of samples drawn.
+    fn sample_cell(&mut self, node: u32, volume: &SearchVolume, rng: &mut SmallRng) -> u64 {
+        let n = self.segs.len();
+        let total: f64 = self.weights[..n].iter().sum();
+        if n < 3 || total <= 0.0 || self.weights[..n].iter().filter(|w| **w > 0.0).count() < 3 {
+            return 0;
+        }
+        let mut points = [Point3::origin(); 9];
+        self.cell_points(node, &mut points);
+        let centre = points[0];
+        let h = &self.table.header;
+        let reach = h.spacing_m;
+        // Predictions for scoring are recomputed per sample pose; the segment list is the cell's.
+        let mut kept = [(f64::INFINITY, Pose::identity()); KEEP_PER_CELL];
+        let mut drawn = 0u64;
+        let mut attempts = 0;
+        let tol = self.opts.dihedral_tolerance_rad as f32;
+        let (mm, n_max) = (self.opts.edges_considered, self.opts.segments_considered);
+        while (drawn as usize) < self.opts.samples_per_cell && attempts < 20 * self.opts.samples_per_cell {
+            attempts += 1;
+            let mut pick = [(0usize, 0usize); 3];
+            let mut ok = true;
+            for slot in 0..3 {
+                let mut found = false;
+                for _attempt in 0..8 {
+                    let i = weighted_index(&self.weights[..n], total, rng);
+                    let options = self.best[i].iter().filter(|b| b.0 > 0.0).count();
+                    if options == 0 {
+                        continue;
+                    }
+                    let r = self.best[i][rng.random_range(0..options)].1 as usize;
+                    if pick[..slot].iter().any(|&(pi, pr)| pi == i || pr == r) {
+                        continue;
+                    }
+                    pick[slot] = (i, r);
+                    found = true;
+                    break;
+                }
+                if !found {
+                    ok = false;
+                    break;
+                }
+            }
+            if !ok {
+                continue;
+            }
+            // Figure 4's compatibility holds for the sample as a whole: all three pairs' dihedral
+            // angles must fall in their ranges (the table only scored each pair's members).
+            let consistent = (0..3).all(|a| {
+                let b = (a + 1) % 3;
+                let (i, j) = (pick[a].0.min(pick[b].0), pick[a].0.max(pick[b].0));
+                let d = self.dihedral[pick[a].1 * mm + pick[b].1];
+                jaccard(d, self.ranges[i * n_max + j], tol) > 0.0
+            });
+            if !consistent {
+                continue;
+            }
+            drawn += 1;
+            let Some(pose) = self.sample_pose(&pick, &centre) else {
+                continue;
+            };
+            let p = pose.translation.vector;
+            let inside_cell = (p.x - centre.x).abs() <= reach && (p.y - centre.y).abs() <= reach;
+            let inside_volume = volume
+                .diameter_m
+                .is_none_or(|dm| (p - volume.centre.coords).xy().norm() <= 0.5 * dm + reach);
+            let z_ok = self.opts.upright_height_m.is_some() || (p.z - centre.z).abs() <= reach;
+            if !(inside_cell && inside_volume && z_ok) {
+                continue;
+            }
+            let s = self.loose_score(&pose);
+            if s < kept[KEEP_PER_CELL - 1].0 {
+                kept[KEEP_PER_CELL - 1] = (s, pose);
+                kept.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+            }
+        }
+        for (s, pose) in kept {
+            if s.is_finite() {
+                if self.pool.len() < POOL {
+                    self.pool.push((s, pose));
+                } else if let Some(w) = self.pool.iter_mut().max_by(|a, b| a.0.total_cmp(&b.0)) {
+                    if s < w.0 {
+                        *w = (s, pose);
+                    }
+                }
+            }
+        }
+        drawn
+    }
+
+    /// The pose of three correspondences (segment slot, top-edge index): Wahba rotation from the
+    /// plane normals at the cell centre, eq. 9 translation, R_and_T on the three.
+    fn sample_pose(&mut self, pick: &[(usize, usize); 3], centre: &Point3<f64>) -> Option<Pose> {
+        let mut u = [Vector3::zeros(); 3];
+        let mut v = [Vector3::zeros(); 3];
+        for (k, &(i, r)) in pick.iter().enumerate() {
+            u[k] = self.top[r].plane.normal.into_inner();
+            v[k] = self.seg_normals[i * 9];
+        }
+        // Normals carry no sign: make the edge normals' pairwise signs agree with the segments'.
+        for k in 1..3 {
+            if u[0].dot(&u[k]) * v[0].dot(&v[k]) < 0.0 {
+                u[k] = -u[k];
+            }
+        }
+        let rotation = if self.opts.upright_height_m.is_some() {
+            let plus = yaw_fit(&u, &v, 1.0);
+            let minus = yaw_fit(&u, &v, -1.0);
+            if plus.1 <= minus.1 {
+                plus.0
+            } else {
+                minus.0
+            }
+        } else {
+            let plus = wahba(&u, &v, 1.0)?;
+            let minus = wahba(&u, &v, -1.0)?;
+            if plus.1 <= minus.1 {
+                plus.0
+            } else {
+                minus.0
+            }
+        };
+        self.corr.clear();
+        for &(i, r) in pick {
+            let seg = &self.model.segments[self.segs[i] as usize];
+            self.corr.push(correspondence(&self.top[r], &[seg.a, seg.b]));
+        }
+        let t = translation_given_rotation(&self.corr, &rotation, self.opts.upright_height_m, centre)?;
+        let start = Pose::from_parts(Translation3::from(t), rotation);
+        self.fit(&start)
+    }
+
+    /// R_and_T (or its upright form) on `self.corr` from `start`.
+    fn fit(&self, start: &Pose) -> Option<Pose> {
+        match self.opts.upright_height_m {
+            Some(_) => refine_upright(&self.corr, start, &self.solver),
+            None => r_and_t_refine(&self.corr, start, &self.solver),
+        }
+    }
+
+    /// The fit of `self.corr` from `start`, then twice: correspondences whose α exceeds
+    /// max(inlier angle, 2.5 robust σ from the median α) are dropped and the rest refitted. A
+    /// greedy gather at a wide gate holds wrong matches, and one of them is enough to pull a plain
+    /// least-squares fit into a neighbouring minimum.
+    fn trimmed_fit(&mut self, start: &Pose) -> Option<Pose> {
+        let mut pose = self.fit(start)?;
+        for _ in 0..2 {
+            self.alphas.clear();
+            self.alphas.extend(self.corr.iter().map(|c| c.alpha(&pose)));
+            let n = self.alphas.len();
+            if n < 5 {
+                break;
+            }
+            let (_, median, _) = self.alphas.select_nth_unstable_by(n / 2, f64::total_cmp);
+            let limit = (2.5 * 1.4826 * *median).max(self.opts.inlier_alpha_rad);
+            let before = self.corr.len();
+            self.corr.retain(|c| c.alpha(&pose) <= limit);
+            if self.corr.len() == before {
+                break;
+            }
+            if self.corr.len() < 4 {
+                return None;
+            }
+            pose = self.fit(&pose)?;
+        }
+        Some(pose)
+    }
+
+    /// Truncated ξ of a sample's pose over the cell's segments and the frame's top edges (a
+    /// loose cap: the sample's pose is not refined yet).
+    fn loose_score(&mut self, pose: &Pose) -> f64 {
+        let cap = (4.0 * self.opts.inlier_alpha_rad).min(0.2);
+        let gate = Gate {
+            cos_alpha: cap.cos(),
+            min_overlap: 0.5,
+            hue: None,
+        };
+        let mut sum = 0.0;
+        let mut counted = 0usize;
+        for &s in &self.segs {
+            let seg = &self.model.segments[s as usize];
+            let pred = Predicted::new(&[seg.a, seg.b], pose, &self.centres);
+            if pred.length_rad < self.opts.min_length_rad {
+                continue;
+            }
+            counted += 1;
+            sum += match best_edge(&pred, &self.centres, &self.top, &gate) {
+                Some((_, a)) => a * a,
+                None => cap * cap,
+            };
+        }
+        if counted < 3 {
+            f64::INFINITY
+        } else {
+            sum / counted as f64
+        }
+    }
+
+    /// Matches gathered at `start` with shrinking gates over the segments of VIS(T) and all of
+    /// the frame's edges, refit each time, the ξ simplex last; scored by the truncated ξ.
+    pub fn polish(&mut self, start: &Pose, edges: &[Edge]) -> Option<Candidate> {
+        let inlier = self.opts.inlier_alpha_rad;
+        let mut pose = *start;
+        for gate_rad in [4.0 * inlier, 2.0 * inlier, inlier] {
+            let count = self.gather(&pose, edges, gate_rad);
+            if count < 4 {
+                return None;
+            }
+            pose = self.trimmed_fit(&pose)?;
+        }
+        let count = self.gather(&pose, edges, inlier);
+        if count < 4 {
+            return None;
+        }
+        if self.opts.simplex_refinement {
+            let opts = SimplexOptions {
+                max_iterations: 600,
+                ..SimplexOptions::default()
+            };
+            let (p, _, _, _) = match self.opts.upright_height_m {
+                Some(_) => minimise_xi_upright(&self.corr, &pose, &opts),
+                None => minimise_xi(&self.corr, &pose, &opts),
+            };
+            if xi(&self.corr, &p) <= xi(&self.corr, &pose) {
+                pose = p;
+            }
+        }
+        let (score, inliers) = self.final_score(&pose, edges);
+        let count = self.gather(&pose, edges, inlier);
+        Some(Candidate {
+            pose,
+            score,
+            inliers,
+            xi_rad2: xi(&self.corr[..count], &pose),
+        })
+    }
+
+    /// `self.corr` ← for each segment of VIS(pose) long enough, its best edge within `gate_rad`.
+    fn gather(&mut self, pose: &Pose, edges: &[Edge], gate_rad: f64) -> usize {
+        self.corr.clear();
+        let gate = Gate {
+            cos_alpha: gate_rad.cos(),
+            min_overlap: 0.5,
+            hue: None,
+        };
+        let Some(set) = self.table.query(&Point3::from(pose.translation.vector)) else {
+            return 0;
+        };
+        for &s in set.segments {
+            let seg = &self.model.segments[s as usize];
+            let ends = [seg.a, seg.b];
+            let pred = Predicted::new(&ends, pose, &self.centres);
+            if pred.length_rad < self.opts.min_length_rad {
+                continue;
+            }
+            if let Some((e, _)) = best_edge(&pred, &self.centres, edges, &gate) {
+                if self.corr.len() < self.corr.capacity() {
+                    self.corr.push(correspondence(&edges[e], &ends));
+                }
+            }
+        }
+        self.corr.len()
+    }
+
+    /// (truncated ξ with the inlier cap over the segments of VIS(pose) long enough, inliers).
+    fn final_score(&self, pose: &Pose, edges: &[Edge]) -> (f64, usize) {
+        let cap = self.opts.inlier_alpha_rad;
+        let gate = Gate {
+            cos_alpha: cap.cos(),
+            min_overlap: 0.5,
+            hue: None,
+        };
+        let Some(set) = self.table.query(&Point3::from(pose.translation.vector)) else {
+            return (f64::INFINITY, 0);
+        };
+        let (mut sum, mut counted, mut inliers) = (0.0, 0usize, 0usize);
+        for &s in set.segments {
+            let seg = &self.model.segments[s as usize];
+            let pred = Predicted::new(&[seg.a, seg.b], pose, &self.centres);
+            if pred.length_rad < self.opts.min_length_rad {
+                continue;
+            }
+            counted += 1;
+            match best_edge(&pred, &self.centres, edges, &gate) {
+                Some((_, a)) => {
+                    sum += a * a;
+                    inliers += 1;
+                }
+                None => sum += cap * cap,
+            }
+        }
+        if counted == 0 {
+            (f64::INFINITY, 0)
+        } else {
+            (sum / counted as f64, inliers)
+        }
+    }
+
+    /// The correspondences of the last [`Self::polish`] (inliers at its pose).
+    pub fn correspondences(&self) -> &[Correspondence] {
+        &self.corr
+    }
+}
+
+/// Angle (rad, [0, π/2]) between two planes given their unit normals.
+#[inline]
+fn dihedral(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
+    a.cross(b).norm().atan2(a.dot(b).abs())
+}
+
+#[inline]
+fn dihedral_v(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
+    dihedral(a, b)
+}
+
+#[inline]
+fn bin(d: f64) -> usize {
+    ((d / BIN_RAD).floor().max(0.0) as usize).min(BINS - 1)
+}
+
+/// Edges whose dihedral angle with the mask's edge lies in `range` ± `tol` (conservative to the
+/// bin; the exact test is the overlap score).
+#[inline]
+fn range_mask(le: &[u64], range: (f32, f32), tol: f32) -> u64 {
+    let lo = (range.0 - tol) as f64;
+    let hi = (range.1 + tol) as f64;
+    if hi < 0.0 {
+        return 0;
+    }
+    let bh = bin(hi);
+    let upper = le[bh];
+    if lo <= 0.0 {
+        return upper;
+    }
+    let bl = bin(lo);
+    if bl == 0 {
+        upper
+    } else {
+        upper & !le[bl - 1]
+    }
+}
+
+/// Overlap of [d − tol, d + tol] with `range`, over their union.
+#[inline]
+fn jaccard(d: f32, range: (f32, f32), tol: f32) -> f32 {
+    let inter = (d + tol).min(range.1) - (d - tol).max(range.0);
+    if inter <= 0.0 {
+        return 0.0;
+    }
+    let union = (d + tol).max(range.1) - (d - tol).min(range.0);
+    inter / union
+}
+
+fn weighted_index(weights: &[f64], total: f64, rng: &mut SmallRng) -> usize {
+    let mut x = rng.random_range(0.0..total);
+    for (i, w) in weights.iter().enumerate() {
+        if x < *w {
+            return i;
+        }
+        x -= w;
+    }
+    weights.len() - 1
+}
+
+/// Wahba's problem for R (rig → world) with R (sign·u_k) ≈ v_k: the rotation and its residual.
+fn wahba(u: &[Vector3<f64>; 3], v: &[Vector3<f64>; 3], sign: f64) -> Option<(UnitQuaternion<f64>, f64)> {
+    let mut b = Matrix3::zeros();
+    for k in 0..3 {
+        b += v[k] * (u[k] * sign).transpose();
+    }
+    let svd = b.svd(true, true);
+    let (uu, vt) = (svd.u?, svd.v_t?);
+    let d = (uu * vt).determinant().signum();
+    let r = uu * Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, d)) * vt;
+    let q = UnitQuaternion::from_matrix(&r);
+    let residual = (0..3).map(|k| (q * (u[k] * sign) - v[k]).norm_squared()).sum();
+    Some((q, residual))
+}
+
+/// The yaw ψ with Rz(ψ) (sign·u_k) ≈ v_k in the ground plane (closed form), and its residual.
+fn yaw_fit(u: &[Vector3<f64>; 3], v: &[Vector3<f64>; 3], sign: f64) -> (UnitQuaternion<f64>, f64) {
+    let (mut s, mut c) = (0.0, 0.0);
+    for k in 0..3 {
+        let a = u[k] * sign;
+        s += a.x * v[k].y - a.y * v[k].x;
+        c += a.x * v[k].x + a.y * v[k].y;
+    }
+    let q = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), s.atan2(c));
+    let residual = (0..3).map(|k| (q * (u[k] * sign) - v[k]).norm_squared()).sum();
+    (q, residual)
+}
+
+/// Eq. 9 with the rotation known: every end point P of a segment lies on its edge's plane, whose
+/// world normal is m = R n through the world point t + R c: m · t = m · (P − R c). Upright: z is
+/// the known height and only x, y are solved. `None` if the planes do not fix the position.
+fn translation_given_rotation(
+    c: &[Correspondence],
+    rotation: &UnitQuaternion<f64>,
+    upright_height: Option<f64>,
+    centre: &Point3<f64>,
+) -> Option<Vector3<f64>> {
+    match upright_height {
+        Some(z) => {
+            let mut a = Matrix2::zeros();
+            let mut b = Vector2::zeros();
+            for l in c {
+                let m = rotation * l.edge.normal.into_inner();
+                let rc = rotation * l.edge.centre.coords;
+                for p in &l.segment {
+                    let row = Vector2::new(m.x, m.y);
+                    let rhs = m.dot(&(p.coords - rc)) - m.z * z;
+                    a += row * row.transpose();
+                    b += row * rhs;
+                }
+            }
+            // A little pull towards the cell centre keeps a pair of parallel planes solvable.
+            a += Matrix2::identity() * 1e-6;
+            b += Vector2::new(centre.x, centre.y) * 1e-6;
+            let xy = a.lu().solve(&b)?;
+            Some(Vector3::new(xy.x, xy.y, z))
+        }
+        None => {
+            let mut a = Matrix3::zeros();
+            let mut b = Vector3::zeros();
+            for l in c {
+                let m = rotation * l.edge.normal.into_inner();
+                let rc = rotation * l.edge.centre.coords;
+                for p in &l.segment {
+                    a += m * m.transpose();
+                    b += m * m.dot(&(p.coords - rc));
+                }
+            }
+            a += Matrix3::identity() * 1e-6;
+            b += centre.coords * 1e-6;
+            a.lu().solve(&b)
+        }
+    }
+}
+
+/// Half the spacing between the table's node layers (0.25 m if there is one layer).
+fn layer_half_height(heights: &[f64]) -> f64 {
+    if heights.len() < 2 {
+        return 0.25;
+    }
+    let mut gap = f64::INFINITY;
+    for w in heights.windows(2) {
+        gap = gap.min((w[1] - w[0]).abs());
+    }
+    0.5 * gap
+}
+
+fn nearest_layer_z(floor: f64, heights: &[f64], z: f64) -> f64 {
+    heights
+        .iter()
+        .map(|h| floor + h)
+        .min_by(|a, b| (a - z).abs().total_cmp(&(b - z).abs()))
+        .unwrap_or(z)
+}
+
+/// Whether two poses are within `pos` metres and `rot` radians of each other.
+pub fn same_pose(a: &Pose, b: &Pose, pos: f64, rot: f64) -> bool {
+    (a.translation.vector - b.translation.vector).norm() < pos && a.rotation.angle_to(&b.rotation) < rot
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn masks_select_edges_by_dihedral_range_and_jaccard_prefers_narrow_ranges() {
+        // Cumulative masks of one edge whose partners sit at 10°, 30° and 60°.
+        let mut le = vec![0u64; BINS];
+        for (t, deg) in [(1usize, 10.0f64), (2, 30.0), (3, 60.0)] {
+            le[bin(deg.to_radians())] |= 1 << t;
+        }
+        for b in 1..BINS {
+            le[b] |= le[b - 1];
+        }
+        let r = |a: f64, b: f64| (a.to_radians() as f32, b.to_radians() as f32);
+        let tol = 1f64.to_radians() as f32;
+        assert_eq!(range_mask(&le, r(25.0, 35.0), tol), 1 << 2);
+        assert_eq!(range_mask(&le, r(0.0, 31.0), tol), (1 << 1) | (1 << 2));
+        assert_eq!(range_mask(&le, r(40.0, 50.0), tol), 0);
+        let d = 30f64.to_radians() as f32;
+        assert!(jaccard(d, r(29.0, 31.0), tol) > jaccard(d, r(10.0, 50.0), tol));
+        assert_eq!(jaccard(d, r(40.0, 50.0), tol), 0.0);
+    }
+
+    #[test]
+    fn wahba_recovers_a_rotation_from_three_normals() {
+        let truth = UnitQuaternion::from_euler_angles(0.1, -0.2, 2.0);
+        let u = [
+            Vector3::new(1.0, 0.2, 0.0).normalize(),
+            Vector3::new(0.0, 1.0, 0.3).normalize(),
+            Vector3::new(0.3, 0.0, 1.0).normalize(),
+        ];
+        let v = u.map(|x| truth * x);
+        let (q, res) = wahba(&u, &v, 1.0).unwrap();
+        assert!(q.angle_to(&truth) < 1e-9 && res < 1e-18);
+        let up = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), -1.3);
+        let (q, _) = yaw_fit(&u, &u.map(|x| up * x), 1.0);
+        assert!(q.angle_to(&up) < 1e-12);
+    }
+}

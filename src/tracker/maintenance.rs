@@ -1,0 +1,379 @@
+//! Maintenance: Koch–Teller §4.2, Figure 7, one frame at a time.
+//!
+//! In: S_t (the correspondence table with its held edges and hue signatures), the pose at t and
+//! the motion prior, the edges of frame t+1. Out: the pose at t+1 with its covariance, S_{t+1}.
+//!
+//! 1. Prediction: constant velocity from the last two tracked poses (KT §6.2 suggests a motion
+//!    model), or the pose at t.
+//! 2. Fig. 7 lines 3–5: each pending or accepted correspondence looks for its edge in the new
+//!    frame: the smallest α to the segment at the predicted pose within the angular gate (10°),
+//!    hue distance to the held signature below the hue gate (0.03), and overlapping the segment.
+//! 3. Lines 6–10: from the accepted ones (S̄_t), s_t samples of λ (eq. 2, capped by `max_samples`
+//!    and the time budget) in the consensus sampler; each sample is fitted by R_and_T (or its
+//!    upright form, or the ξ simplex when `solver.method = "xi"`) from the predicted pose and
+//!    scored over the rest; the winner's inliers are refitted.
+//! 4. Line 11: every correspondence is checked at the new pose — observed when an edge lies
+//!    within the inlier angle (and the hue gate for a held signature) — and Figure 8 updates it.
+//!    Checking at the solved pose (rather than at the prediction) means an unknown correspondence
+//!    is only promoted by an edge the consensus pose agrees with.
+//! 5. The covariance (KH §5) of the final fit over the observed accepted correspondences.
+//! 6. Lines 12–13: VIS(T_{t+1}) updates S_{t+1}.
+//!
+//! Nothing here allocates: all buffers belong to the [`Tracker`].
+
+use super::matching::{best_edge, Gate, Predicted};
+use super::Tracker;
+use super::{CorrespondenceState, FrameResult, HeldEdge, SearchVolume, TrackerEvent, TrackerState};
+use crate::config::SolverMethod;
+use crate::edges::Edge;
+use crate::geometry::{xi, Correspondence, Pose};
+use crate::solver::{
+    covariance, minimise_xi, r_and_t_refine, refine_upright, sample_count, SamplingBudget, SimplexOptions,
+};
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion};
+use std::time::{Duration, Instant};
+
+/// The pose and S_t the next frame will be predicted from.
+fn constant_velocity(previous: &Pose, previous_t: u64, current: &Pose, current_t: u64, next_t: u64) -> Pose {
+    let dt_prev = current_t.saturating_sub(previous_t) as f64;
+    let dt = next_t.saturating_sub(current_t) as f64;
+    if dt_prev <= 0.0 || dt <= 0.0 {
+        return *current;
+    }
+    let f = (dt / dt_prev).min(3.0);
+    // The motion from `previous` to `current` in the rig frame, scaled to the coming interval.
+    let delta = previous.inverse() * current;
+    let rot = UnitQuaternion::from_scaled_axis(delta.rotation.scaled_axis() * f);
+    let step = Isometry3::from_parts(Translation3::from(delta.translation.vector * f), rot);
+    current * step
+}
+
+/// `pose` turned by `angle` (rad) about the world vertical through its position.
+fn turned(pose: &Pose, angle: f64) -> Pose {
+    if angle == 0.0 {
+        return *pose;
+    }
+    let r = UnitQuaternion::from_axis_angle(&nalgebra::Vector3::z_axis(), angle);
+    Pose::from_parts(pose.translation, r * pose.rotation)
+}
+
+/// Refits `c` from `start` with the configured solver.
+fn fit(
+    tracker_upright: bool,
+    method: SolverMethod,
+    o: &crate::solver::SolverOptions,
+    c: &[Correspondence],
+    start: &Pose,
+) -> Option<Pose> {
+    if tracker_upright {
+        return refine_upright(c, start, o);
+    }
+    match method {
+        SolverMethod::Xi => {
+            let opts = SimplexOptions {
+                max_iterations: 400,
+                restarts: 0,
+                ..SimplexOptions::default()
+            };
+            Some(minimise_xi(c, start, &opts).0)
+        }
+        _ => r_and_t_refine(c, start, o),
+    }
+}
+
+impl Tracker<'_> {
+    /// A local search around `predicted` (diameter `relocalise_diameter_m`); on success the
+    /// tracker continues from the found pose with a fresh S_t, as after initialisation.
+    fn relocalise(&mut self, edges: &[Edge], predicted: &Pose, timestamp_ns: u64) -> Option<FrameResult> {
+        let d = self.cfg.maintenance.relocalise_diameter_m;
+        if d <= 0.0 {
+            return None;
+        }
+        let volume = SearchVolume {
+            centre: Point3::from(predicted.translation.vector),
+            diameter_m: Some(d),
+        };
+        let budget = Duration::from_secs_f64(self.cfg.initialisation.time_budget_ms / 1e3);
+        self.init.set_time_budget(budget);
+        let (candidates, _) = self.init.run(edges, &volume, &mut self.rng);
+        let m = &self.cfg.maintenance;
+        let best = candidates.first().copied().filter(|c| {
+            c.inliers >= m.min_inliers as usize
+                && (c.pose.translation.vector - predicted.translation.vector).norm() <= 0.5 * d + m.max_jump_m
+        })?;
+        self.stats.relocalisations += 1;
+        let mut r = self.commit(&best.pose, edges, timestamp_ns);
+        r.event = Some(TrackerEvent::Relocalised);
+        Some(r)
+    }
+
+    /// Fig. 7 lines 3–10 from the prediction `predicted`: the correspondence update (angular and
+    /// hue gates) and the robust pose of S̄. Returns the pose and the samples drawn.
+    fn match_and_solve(&mut self, edges: &[Edge], predicted: &Pose) -> (Option<Pose>, u64, Duration) {
+        let started = Instant::now();
+        let mcfg = self.cfg.maintenance.clone();
+        let upright = self.cfg.motion.upright;
+        let method = self.cfg.solver.method;
+        let inlier_rad = mcfg.inlier_angle_deg.to_radians();
+        let min_len = self.cfg.edges.min_edge_length_deg.to_radians();
+        // 2. Correspondence update at the prediction.
+        let gate_cos = mcfg.angular_gate_deg.to_radians().cos();
+        let hue_gate = mcfg.hue_gate as f32;
+        let n_tracks = self.tracks.tracks().len();
+        self.set.clear();
+        self.set_track.clear();
+        let mut pending_matches = 0;
+        for i in 0..n_tracks {
+            self.matched[i] = None;
+            let t = self.tracks.tracks()[i];
+            let Some(held) = t.edge else { continue };
+            let seg = &self.model.segments[t.segment as usize];
+            let ends = [seg.a, seg.b];
+            let pred = Predicted::new(&ends, predicted, &self.centres);
+            if pred.length_rad < min_len {
+                continue;
+            }
+            let gate = Gate {
+                cos_alpha: gate_cos,
+                min_overlap: 0.5,
+                hue: Some((held.hue, hue_gate)),
+            };
+            if let Some((e, a)) = best_edge(&pred, &self.centres, edges, &gate) {
+                self.matched[i] = Some((e as u32, a));
+                if t.state == CorrespondenceState::Accepted {
+                    self.set.push(Correspondence {
+                        edge: edges[e].plane,
+                        segment: ends,
+                    });
+                    self.set_track.push(i);
+                } else {
+                    pending_matches += 1;
+                }
+            }
+        }
+        // Too few accepted (e.g. soon after a commit far from where S_0 was seen): the pending
+        // matches join, still to be checked by the consensus.
+        if self.set.len() < mcfg.min_inliers as usize && pending_matches > 0 {
+            for i in 0..n_tracks {
+                let t = self.tracks.tracks()[i];
+                if t.state != CorrespondenceState::Pending {
+                    continue;
+                }
+                if let Some((e, _)) = self.matched[i] {
+                    let seg = &self.model.segments[t.segment as usize];
+                    self.set.push(Correspondence {
+                        edge: edges[e as usize].plane,
+                        segment: [seg.a, seg.b],
+                    });
+                    self.set_track.push(i);
+                }
+            }
+        }
+        let match_time = started.elapsed();
+        // 3. Robust pose from S̄.
+        let lambda = self.sampler.lambda();
+        let mut samples = 0;
+        let solved: Option<Pose> = if self.set.len() >= lambda + 2 {
+            let s_t = sample_count(lambda, self.set.len(), mcfg.outlier_percent, mcfg.success_probability);
+            let budget = SamplingBudget {
+                max_samples: s_t,
+                time_budget: Duration::from_secs_f64(mcfg.time_budget_ms / 1e3),
+                inlier_alpha_rad: inlier_rad,
+            };
+            let solver = &self.solver;
+            let mut f = |c: &[Correspondence], start: &Pose| fit(upright, method, solver, c, start);
+            match self.sampler.run(&self.set, predicted, &budget, &mut self.rng, &mut f) {
+                Ok(out) => {
+                    samples = out.samples;
+                    Some(out.pose)
+                }
+                Err(_) => None,
+            }
+        } else if self.set.len() >= 4 {
+            fit(upright, method, &self.solver, &self.set, predicted)
+        } else {
+            None
+        };
+
+        (solved, samples, match_time)
+    }
+
+    /// How many held correspondences have an edge within the inlier angle (and hue gate) at
+    /// `pose`: the support a solved pose has before Figure 8 runs.
+    fn consistent_count(&self, edges: &[Edge], pose: &Pose) -> usize {
+        let m = &self.cfg.maintenance;
+        let cos = m.inlier_angle_deg.to_radians().cos();
+        let min_len = self.cfg.edges.min_edge_length_deg.to_radians();
+        let mut n = 0;
+        for t in self.tracks.tracks() {
+            let Some(held) = t.edge else { continue };
+            let seg = &self.model.segments[t.segment as usize];
+            let pred = Predicted::new(&[seg.a, seg.b], pose, &self.centres);
+            if pred.length_rad < min_len {
+                continue;
+            }
+            let gate = Gate {
+                cos_alpha: cos,
+                min_overlap: 0.5,
+                hue: Some((held.hue, m.hue_gate as f32)),
+            };
+            if best_edge(&pred, &self.centres, edges, &gate).is_some() {
+                n += 1;
+            }
+        }
+        n
+    }
+
+    /// Figure 7 for one frame.
+    pub(super) fn maintain(&mut self, edges: &[Edge], timestamp_ns: u64) -> FrameResult {
+        let mcfg = self.cfg.maintenance.clone();
+        let k = mcfg.accept_after_frames;
+        let upright = self.cfg.motion.upright;
+        let method = self.cfg.solver.method;
+        let inlier_rad = mcfg.inlier_angle_deg.to_radians();
+        let min_len = self.cfg.edges.min_edge_length_deg.to_radians();
+
+        // 1. Prediction.
+        let predicted = match (self.cfg.maintenance.constant_velocity_prior, self.previous) {
+            (true, Some((prev, prev_t))) if prev_t < self.last_time => {
+                constant_velocity(&prev, prev_t, &self.pose, self.last_time, timestamp_ns)
+            }
+            _ => self.pose,
+        };
+
+        // 2–3 from the prediction; if its pose does not hold (too few consistent correspondences),
+        // again from the prediction turned about the vertical by ± one and two gate widths: a turn
+        // faster than the motion model moves every plane out of the gate at once.
+        let solve_started = Instant::now();
+        let mut samples = 0;
+        let mut match_time = Duration::ZERO;
+        let mut solved = None;
+        let mut prior = predicted;
+        let gate_rad = mcfg.angular_gate_deg.to_radians();
+        // A pose that keeps three quarters of the last frame's inliers is taken at once;
+        // otherwise every turn is tried and the best supported pose wins.
+        let enough = (mcfg.min_inliers as usize).max(3 * self.last_inliers as usize / 4);
+        let mut best_support = 0;
+        for turn in [0.0, 1.0, -1.0, 2.0, -2.0] {
+            let start = turned(&predicted, turn * gate_rad);
+            let (pose, n, m) = self.match_and_solve(edges, &start);
+            samples += n;
+            match_time += m;
+            if let Some(p) = pose {
+                let support = self.consistent_count(edges, &p);
+                if support > best_support || solved.is_none() {
+                    best_support = support;
+                    solved = Some(p);
+                    prior = start;
+                }
+                if support >= enough {
+                    break;
+                }
+            }
+        }
+        let hue_gate = mcfg.hue_gate as f32;
+        let n_tracks = self.tracks.tracks().len();
+
+        // 4. Observations at the solved pose and Figure 8.
+        let mut result = FrameResult::empty(TrackerState::Tracking);
+        result.samples = samples;
+        let check_pose = solved.unwrap_or(predicted);
+        let tight = inlier_rad.cos();
+        self.set.clear();
+        self.set_track.clear();
+        for i in 0..n_tracks {
+            let t = self.tracks.tracks()[i];
+            let seg = &self.model.segments[t.segment as usize];
+            let ends = [seg.a, seg.b];
+            let pred = Predicted::new(&ends, &check_pose, &self.centres);
+            let observed = if solved.is_some() && pred.length_rad >= min_len {
+                let gate = Gate {
+                    cos_alpha: tight,
+                    min_overlap: 0.5,
+                    hue: t.edge.map(|h| (h.hue, hue_gate)),
+                };
+                best_edge(&pred, &self.centres, edges, &gate)
+            } else {
+                None
+            };
+            let track = &mut self.tracks.tracks_mut()[i];
+            match observed {
+                Some((e, _)) => {
+                    let was_accepted = track.state == CorrespondenceState::Accepted;
+                    track.observe(HeldEdge::from(&edges[e]), k);
+                    if was_accepted || track.state == CorrespondenceState::Accepted {
+                        self.set.push(Correspondence {
+                            edge: edges[e].plane,
+                            segment: ends,
+                        });
+                        self.set_track.push(i);
+                    }
+                }
+                None => track.miss(k),
+            }
+        }
+
+        // 5. Final fit and the health of the frame.
+        let mut pose = solved;
+        if let Some(p) = pose {
+            if self.set.len() >= 4 {
+                pose = fit(upright, method, &self.solver, &self.set, &p).or(Some(p));
+            }
+        }
+        let max_jump_rad = mcfg.max_jump_deg.to_radians();
+        let good = match &pose {
+            Some(p) => {
+                self.set.len() >= mcfg.min_inliers as usize
+                    && (p.translation.vector - prior.translation.vector).norm() <= mcfg.max_jump_m
+                    && p.rotation.angle_to(&prior.rotation) <= max_jump_rad
+            }
+            None => false,
+        };
+        if !good {
+            // The prior failed (typically a turn faster than the motion model expects, which
+            // moves every plane out of the angular gate): search a small volume around the
+            // prediction with the initialisation's triplet matching, which needs no rotation.
+            if let Some(r) = self.relocalise(edges, &predicted, timestamp_ns) {
+                let mut r = r;
+                r.match_time += match_time;
+                r.solve_time = solve_started.elapsed().saturating_sub(match_time);
+                r.samples += samples;
+                return r;
+            }
+        }
+        result.solve_time = solve_started.elapsed().saturating_sub(match_time);
+        result.match_time = match_time;
+        result.states = self.state_counts();
+        if good {
+            let p = pose.expect("a good frame has a pose");
+            self.bad_frames = 0;
+            result.pose = Some(p);
+            result.inliers = self.set.len() as u32;
+            self.last_inliers = result.inliers;
+            result.covariance = covariance(&self.set, &p, &self.solver);
+            result.xi_rad2 = xi(&self.set, &p);
+            self.previous = Some((self.pose, self.last_time));
+            self.pose = p;
+            self.last_good = Some(p);
+            // 6. VIS(T_{t+1}).
+            if let Some(set) = self.table.query(&Point3::from(p.translation.vector)) {
+                self.tracks.update_visible(set.segments);
+            }
+        } else {
+            self.bad_frames += 1;
+            // Coast on the prediction so that the gate follows the motion.
+            self.previous = Some((self.pose, self.last_time));
+            self.pose = predicted;
+            if self.bad_frames >= mcfg.lost_after_frames {
+                self.state = TrackerState::Lost;
+                self.stats.losses += 1;
+                self.search_attempts = 0;
+                self.confirm_count = 0;
+                self.tracks.clear();
+                result.state = TrackerState::Lost;
+                result.event = Some(TrackerEvent::LostLock);
+            }
+        }
+        result
+    }
+}

@@ -1,0 +1,459 @@
+//! The tracker: Koch–Teller §4.1 (initialisation, Figures 4 and 5) and §4.2 (maintenance,
+//! Figures 7 and 8) on the edges, the prior visibility table and the pose solvers.
+//!
+//! In: per frame, the frame's [`Edge`]s (all sensors) and its capture time. Out: a
+//! [`FrameResult`]: the tracker state (initializing → tracking → lost → tracking), the pose
+//! `T_world_rig` with its covariance when tracking, and what the frame cost.
+//!
+//! States:
+//! - **Initializing / Lost**: [`init::Initialiser`] searches a volume (the `--init` hint, the
+//!   whole model without one, or after a loss a volume around the last good pose that grows with
+//!   every failed attempt). Its best distinct candidates are then scored on the next frames
+//!   (`confirm_frames`) before one is committed — the paper's admitted weakness is ambiguity from
+//!   repeated structure (doorways along a corridor): a single frame may prefer the wrong one.
+//! - **Tracking**: [`maintenance`] per Figure 7.
+//!
+//! A frame is "bad" when the solve fails, leaves fewer than `min_inliers` accepted inliers, or
+//! jumps more than `max_jump_m` / `max_jump_deg` from the motion prior; `lost_after_frames`
+//! consecutive bad frames lose lock.
+//!
+//! Memory: everything is sized in [`Tracker::new`]; [`Tracker::process`] allocates nothing in
+//! the tracking state (counted by a test). The initialisation's tables are also preallocated.
+
+pub mod correspondence;
+pub mod init;
+mod maintenance;
+pub mod matching;
+
+pub use correspondence::{CorrespondenceState, CorrespondenceTable, HeldEdge, Track};
+pub use init::{Candidate, InitOptions, InitReport, Initialiser, SearchVolume};
+
+use crate::config::TrackerConfig;
+use crate::edges::Edge;
+use crate::geometry::{Correspondence, Pose};
+use crate::model::Model;
+use crate::rig::Rig;
+use crate::solver::{ConsensusSampler, SolverOptions};
+use crate::visibility::VisibilityTable;
+use matching::{best_edge, Gate, Predicted};
+use nalgebra::{Matrix6, Point3};
+use rand::rngs::SmallRng;
+use rand::SeedableRng;
+use std::time::{Duration, Instant};
+
+/// Where the tracker is (the `status` of the pose message).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum TrackerState {
+    Initializing,
+    Tracking,
+    Lost,
+}
+
+/// Something that happened on a frame, for logs and benchmarks.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum TrackerEvent {
+    /// An initialisation search ran.
+    Searched(InitReport),
+    /// A candidate was committed: tracking starts. `changed_mind`: the committed candidate was
+    /// not the best on the search frame (the confirmation frames overruled it).
+    Committed { candidates: usize, changed_mind: bool },
+    /// Tracking was lost on this frame.
+    LostLock,
+    /// The motion prior failed on this frame and a local search found the pose.
+    Relocalised,
+}
+
+/// The tracker's answer for one frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FrameResult {
+    pub state: TrackerState,
+    /// `T_world_rig` when this frame was tracked.
+    pub pose: Option<Pose>,
+    /// Over (tx, ty, tz, rx, ry, rz), world frame (Kumar–Hanson §5).
+    pub covariance: Matrix6<f64>,
+    /// Accepted correspondences consistent with the pose.
+    pub inliers: u32,
+    /// Correspondences per state after the frame: unknown, pending, accepted.
+    pub states: [u32; 3],
+    pub xi_rad2: f64,
+    /// Consensus samples drawn.
+    pub samples: u64,
+    pub match_time: Duration,
+    pub solve_time: Duration,
+    pub event: Option<TrackerEvent>,
+}
+
+impl FrameResult {
+    fn empty(state: TrackerState) -> FrameResult {
+        FrameResult {
+            state,
+            pose: None,
+            covariance: Matrix6::from_diagonal_element(f64::INFINITY),
+            inliers: 0,
+            states: [0; 3],
+            xi_rad2: f64::NAN,
+            samples: 0,
+            match_time: Duration::ZERO,
+            solve_time: Duration::ZERO,
+            event: None,
+        }
+    }
+}
+
+/// Totals over a run.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct TrackerStats {
+    pub frames: u64,
+    pub tracked: u64,
+    /// Initialisation searches after the first (re-initialisations after a loss).
+    pub reinitialisations: u64,
+    pub losses: u64,
+    /// Frames rescued by a local search after the motion prior failed.
+    pub relocalisations: u64,
+    /// Wall time of the first search and of all searches.
+    pub first_search: Option<Duration>,
+    pub search_time: Duration,
+    /// Commits where the confirmation frames overruled the search frame's best candidate.
+    pub changed_mind: u64,
+}
+
+/// A candidate under confirmation.
+#[derive(Debug, Clone, Copy)]
+struct Confirming {
+    pose: Pose,
+    score_sum: f64,
+    frames: u32,
+    alive: bool,
+}
+
+/// The tracker for one rig, model and visibility table.
+pub struct Tracker<'m> {
+    model: &'m Model,
+    table: &'m VisibilityTable,
+    cfg: TrackerConfig,
+    solver: SolverOptions,
+    centres: Vec<Point3<f64>>,
+    init: Initialiser<'m>,
+    tracks: CorrespondenceTable,
+    sampler: ConsensusSampler,
+    /// S̄ for the solver and, per entry, its track.
+    set: Vec<Correspondence>,
+    set_track: Vec<usize>,
+    /// Per track: the edge matched this frame and its α.
+    matched: Vec<Option<(u32, f64)>>,
+    rng: SmallRng,
+    state: TrackerState,
+    hint: Option<SearchVolume>,
+    pose: Pose,
+    /// Previous tracked pose and its time, for the constant-velocity prior.
+    previous: Option<(Pose, u64)>,
+    last_time: u64,
+    last_good: Option<Pose>,
+    confirming: [Confirming; 4],
+    confirm_count: usize,
+    search_attempts: u32,
+    bad_frames: u32,
+    /// Inliers of the last good frame.
+    last_inliers: u32,
+    stats: TrackerStats,
+}
+
+impl<'m> Tracker<'m> {
+    /// A tracker that starts by searching `hint` (`None`: the whole model). `seed` drives the
+    /// random sampling (same seed and input, same output).
+    pub fn new(
+        rig: &Rig,
+        model: &'m Model,
+        table: &'m VisibilityTable,
+        cfg: &TrackerConfig,
+        hint: Option<SearchVolume>,
+        seed: u64,
+    ) -> Tracker<'m> {
+        let solver = cfg.solver_options();
+        let max_edges = rig.sensors.len() * cfg.edges.max_edges_per_sensor as usize;
+        let i = &cfg.initialisation;
+        let m = &cfg.maintenance;
+        let upright = cfg.motion.upright.then_some(cfg.motion.upright_height_m);
+        let opts = InitOptions {
+            edges_considered: i.edges_considered as usize,
+            segments_considered: i.segments_considered as usize,
+            best_edges_per_segment: i.best_edges_per_segment as usize,
+            samples_per_cell: i.samples_per_cell as usize,
+            time_budget: Duration::from_secs_f64(i.time_budget_ms / 1e3),
+            dihedral_tolerance_rad: i.dihedral_tolerance_deg.to_radians(),
+            max_range_rad: i.max_dihedral_range_deg.to_radians(),
+            inlier_alpha_rad: m.inlier_angle_deg.to_radians(),
+            min_length_rad: cfg.edges.min_edge_length_deg.to_radians(),
+            upright_height_m: upright,
+            simplex_refinement: i.simplex_refinement,
+            candidates: 3,
+        };
+        let init = Initialiser::new(rig, model, table, opts, solver.clone(), max_edges);
+        let max_set = (0..table.node_count() as u32)
+            .map(|n| table.node_set(n).segments.len())
+            .max()
+            .unwrap_or(0);
+        // Twice the largest set: seen correspondences outlive their node's set (module doc of
+        // `correspondence`).
+        let capacity = (2 * max_set).max(16);
+        let lambda = (m.sample_size as usize).min(capacity);
+        Tracker {
+            model,
+            table,
+            cfg: cfg.clone(),
+            solver,
+            centres: rig.sensors.iter().map(|s| s.centre()).collect(),
+            init,
+            tracks: CorrespondenceTable::new(capacity),
+            sampler: ConsensusSampler::new(capacity, lambda, m.max_samples as u64),
+            set: Vec::with_capacity(capacity),
+            set_track: Vec::with_capacity(capacity),
+            matched: vec![None; capacity],
+            rng: SmallRng::seed_from_u64(seed),
+            state: TrackerState::Initializing,
+            hint,
+            pose: Pose::identity(),
+            previous: None,
+            last_time: 0,
+            last_good: None,
+            confirming: [Confirming {
+                pose: Pose::identity(),
+                score_sum: 0.0,
+                frames: 0,
+                alive: false,
+            }; 4],
+            confirm_count: 0,
+            search_attempts: 0,
+            bad_frames: 0,
+            last_inliers: 0,
+            stats: TrackerStats::default(),
+        }
+    }
+
+    pub fn state(&self) -> TrackerState {
+        self.state
+    }
+
+    pub fn stats(&self) -> &TrackerStats {
+        &self.stats
+    }
+
+    /// S_t.
+    pub fn correspondences(&self) -> &[Track] {
+        self.tracks.tracks()
+    }
+
+    /// The candidates being weighed while initialising: pose, mean score so far (truncated ξ,
+    /// rad²), frames scored, and whether it is still in the running.
+    pub fn candidates(&self) -> impl Iterator<Item = (Pose, f64, u32, bool)> + '_ {
+        self.confirming[..self.confirm_count]
+            .iter()
+            .map(|c| (c.pose, c.score_sum / c.frames.max(1) as f64, c.frames, c.alive))
+    }
+
+    /// The current pose estimate (meaningful when tracking).
+    pub fn pose(&self) -> &Pose {
+        &self.pose
+    }
+
+    /// One frame: initialisation or maintenance depending on the state.
+    pub fn process(&mut self, edges: &[Edge], timestamp_ns: u64) -> FrameResult {
+        self.stats.frames += 1;
+        let result = match self.state {
+            TrackerState::Tracking => self.maintain(edges, timestamp_ns),
+            TrackerState::Initializing | TrackerState::Lost => self.initialise(edges, timestamp_ns),
+        };
+        if result.pose.is_some() {
+            self.stats.tracked += 1;
+        }
+        self.last_time = timestamp_ns;
+        result
+    }
+
+    /// Figure 5 plus the confirmation of candidates over the next frames.
+    fn initialise(&mut self, edges: &[Edge], timestamp_ns: u64) -> FrameResult {
+        let started = Instant::now();
+        let mut result = FrameResult::empty(self.state);
+        if self.confirm_count == 0 {
+            let volume = self.search_volume();
+            let budget = if volume.diameter_m.is_none() {
+                self.cfg.initialisation.whole_model_time_budget_ms
+            } else {
+                self.cfg.initialisation.time_budget_ms
+            };
+            self.init.set_time_budget(Duration::from_secs_f64(budget / 1e3));
+            let (candidates, report) = self.init.run(edges, &volume, &mut self.rng);
+            let min = self.cfg.maintenance.min_inliers as usize;
+            let mut n = 0;
+            for c in candidates
+                .iter()
+                .filter(|c| c.inliers >= min)
+                .take(self.confirming.len())
+            {
+                self.confirming[n] = Confirming {
+                    pose: c.pose,
+                    score_sum: c.score,
+                    frames: 1,
+                    alive: true,
+                };
+                n += 1;
+            }
+            self.confirm_count = n;
+            if self.search_attempts > 0 || self.stats.first_search.is_some() {
+                self.stats.reinitialisations += 1;
+            }
+            self.search_attempts += 1;
+            self.stats.search_time += report.elapsed;
+            self.stats.first_search.get_or_insert(report.elapsed);
+            result.event = Some(TrackerEvent::Searched(report));
+            if n == 0 {
+                result.match_time = started.elapsed();
+                return result;
+            }
+        } else {
+            for k in 0..self.confirm_count {
+                if !self.confirming[k].alive {
+                    continue;
+                }
+                match self.init.polish(&self.confirming[k].pose, edges) {
+                    Some(c) if c.inliers >= self.cfg.maintenance.min_inliers as usize => {
+                        let slot = &mut self.confirming[k];
+                        slot.pose = c.pose;
+                        slot.score_sum += c.score;
+                        slot.frames += 1;
+                    }
+                    _ => self.confirming[k].alive = false,
+                }
+            }
+        }
+        let alive = self.confirming[..self.confirm_count].iter().filter(|c| c.alive).count();
+        let frames = self.confirming[..self.confirm_count]
+            .iter()
+            .filter(|c| c.alive)
+            .map(|c| c.frames)
+            .max()
+            .unwrap_or(0);
+        if alive == 0 {
+            self.confirm_count = 0;
+        } else if alive == 1 || frames >= self.cfg.initialisation.confirm_frames || self.clear_winner() {
+            let (k, winner) = self.confirming[..self.confirm_count]
+                .iter()
+                .enumerate()
+                .filter(|(_, c)| c.alive)
+                .min_by(|a, b| (a.1.score_sum / a.1.frames as f64).total_cmp(&(b.1.score_sum / b.1.frames as f64)))
+                .map(|(k, c)| (k, *c))
+                .expect("one candidate is alive");
+            let changed_mind = k != 0;
+            if changed_mind {
+                self.stats.changed_mind += 1;
+            }
+            let candidates = self.confirm_count;
+            self.confirm_count = 0;
+            result = self.commit(&winner.pose, edges, timestamp_ns);
+            result.event = Some(TrackerEvent::Committed {
+                candidates,
+                changed_mind,
+            });
+        }
+        result.match_time = started.elapsed();
+        result
+    }
+
+    /// Whether the best candidate so far beats every other by the configured margin (mean score
+    /// below `clear_winner_ratio` × theirs): no further frames are needed to decide.
+    fn clear_winner(&self) -> bool {
+        let live = || self.confirming[..self.confirm_count].iter().filter(|c| c.alive);
+        let mean = |c: &Confirming| c.score_sum / c.frames.max(1) as f64;
+        let best = live().map(mean).fold(f64::INFINITY, f64::min);
+        let ratio = self.cfg.initialisation.clear_winner_ratio;
+        live().filter(|c| mean(c) > best).all(|c| best < ratio * mean(c))
+    }
+
+    /// Where to search now: the hint or the whole model at first; after a loss, around the
+    /// last good pose, the volume doubling in diameter with every failed attempt.
+    fn search_volume(&self) -> SearchVolume {
+        match (self.state, self.last_good) {
+            (TrackerState::Lost, Some(p)) => {
+                let base = self.cfg.initialisation.search_diameter_m;
+                let grow = 2f64.powi(self.search_attempts.min(6) as i32);
+                SearchVolume {
+                    centre: Point3::from(p.translation.vector),
+                    diameter_m: Some(base * grow).filter(|d| *d < 64.0 * base),
+                }
+            }
+            _ => self.hint.unwrap_or(SearchVolume {
+                centre: Point3::origin(),
+                diameter_m: None,
+            }),
+        }
+    }
+
+    /// Tracking starts at `pose`: S_0 is VIS(pose), the matched ones accepted.
+    fn commit(&mut self, pose: &Pose, edges: &[Edge], timestamp_ns: u64) -> FrameResult {
+        self.state = TrackerState::Tracking;
+        self.search_attempts = 0;
+        self.bad_frames = 0;
+        self.pose = *pose;
+        self.previous = None;
+        self.last_good = Some(*pose);
+        let gate = Gate {
+            cos_alpha: self.cfg.maintenance.inlier_angle_deg.to_radians().cos(),
+            min_overlap: 0.5,
+            hue: None,
+        };
+        let min_len = self.cfg.edges.min_edge_length_deg.to_radians();
+        self.tracks.clear();
+        if let Some(set) = self.table.query(&Point3::from(pose.translation.vector)) {
+            let (model, centres) = (self.model, &self.centres);
+            self.tracks.reset_with(set.segments.iter().map(|&s| {
+                let seg = &model.segments[s as usize];
+                let pred = Predicted::new(&[seg.a, seg.b], pose, centres);
+                match (pred.length_rad >= min_len)
+                    .then(|| best_edge(&pred, centres, edges, &gate))
+                    .flatten()
+                {
+                    Some((e, _)) => Track::accepted(s, HeldEdge::from(&edges[e])),
+                    None => Track::unknown(s),
+                }
+            }));
+        }
+        let mut result = FrameResult::empty(TrackerState::Tracking);
+        self.collect_accepted_set(edges, pose, true);
+        result.inliers = self.set.len() as u32;
+        self.last_inliers = result.inliers;
+        result.covariance = crate::solver::covariance(&self.set, pose, &self.solver);
+        result.xi_rad2 = crate::geometry::xi(&self.set, pose);
+        result.pose = Some(*pose);
+        result.states = self.state_counts();
+        self.previous = Some((*pose, timestamp_ns));
+        result
+    }
+
+    fn state_counts(&self) -> [u32; 3] {
+        let mut n = [0u32; 3];
+        for t in self.tracks.tracks() {
+            n[t.state.code() as usize] += 1;
+        }
+        n
+    }
+
+    /// `set` ← the accepted tracks' held edges with their segments (used right after a commit,
+    /// where the held edges are this frame's).
+    fn collect_accepted_set(&mut self, _edges: &[Edge], _pose: &Pose, accepted_only: bool) {
+        self.set.clear();
+        self.set_track.clear();
+        for (i, t) in self.tracks.tracks().iter().enumerate() {
+            if accepted_only && t.state != CorrespondenceState::Accepted {
+                continue;
+            }
+            if let Some(e) = &t.edge {
+                let seg = &self.model.segments[t.segment as usize];
+                self.set.push(Correspondence {
+                    edge: e.plane,
+                    segment: [seg.a, seg.b],
+                });
+                self.set_track.push(i);
+            }
+        }
+    }
+}

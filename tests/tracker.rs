@@ -1,0 +1,267 @@
+//! The tracker end to end on a rendered `lab` recording (Koch–Teller §4.1, §4.2): initialisation
+//! from a 3 m search volume, 100 frames without loss of lock, recovery after the rig is occluded
+//! for a second, and no heap allocation while tracking.
+#![cfg(feature = "desk")]
+
+use nalgebra::{Point3, Vector3};
+use omnitrack::capture::{FrameSet, FrameSource, Pacing, ReplaySource, SourceError, SourceStats};
+use omnitrack::config::TrackerConfig;
+use omnitrack::desk::recording::{cached_scenario, RecordingOptions};
+use omnitrack::desk::scenario::{Scenario, ScenarioName};
+use omnitrack::edges::EdgeDetector;
+use omnitrack::runtime::{track, RunOptions};
+use omnitrack::tracker::{SearchVolume, Tracker, TrackerState};
+use omnitrack::trajectory::Stamped;
+use omnitrack::visibility::build::{build_table, BuildOptions};
+use omnitrack::visibility::VisibilityTable;
+use omnitrack::{Model, Rig};
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
+struct Counting;
+
+thread_local! {
+    static COUNTING: Cell<bool> = const { Cell::new(false) };
+    static COUNT: Cell<usize> = const { Cell::new(0) };
+}
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        if COUNTING.with(Cell::get) {
+            COUNT.with(|c| c.set(c.get() + 1));
+        }
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+}
+
+#[global_allocator]
+static ALLOCATOR: Counting = Counting;
+
+const FRAMES: usize = 100;
+
+/// One recording and table for all tests of this binary (rendering is the slow part).
+struct Fixture {
+    _dir: tempfile::TempDir,
+    rec: PathBuf,
+    model: Model,
+    table: VisibilityTable,
+    truth: Vec<Stamped>,
+}
+
+fn fixture() -> &'static Fixture {
+    static F: OnceLock<Fixture> = OnceLock::new();
+    F.get_or_init(|| {
+        let dir = tempfile::tempdir().unwrap();
+        let rig = Rig::load(Path::new(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/firmware_config/ladybug2.toml"
+        )))
+        .unwrap();
+        let scenario = Scenario::get(ScenarioName::Lab);
+        let (rec, _) = cached_scenario(
+            dir.path(),
+            &scenario,
+            FRAMES,
+            11,
+            "default",
+            &rig,
+            &RecordingOptions::default(),
+            |_, _| {},
+        )
+        .unwrap();
+        let model = Model::load(&rec.join("model.obj")).unwrap();
+        let table = build_table(&model, "model.obj", &BuildOptions::default());
+        let truth = ReplaySource::open(&rec, Pacing::AsFastAsPossible)
+            .unwrap()
+            .ground_truth()
+            .unwrap()
+            .to_vec();
+        Fixture {
+            _dir: dir,
+            rec,
+            model,
+            table,
+            truth,
+        }
+    })
+}
+
+/// A 3 m search volume whose centre is 1 m from the first true position (not on it).
+fn hint(f: &Fixture) -> SearchVolume {
+    let p = f.truth[0].pose.translation.vector + Vector3::new(0.8, -0.6, 0.0);
+    SearchVolume {
+        centre: Point3::from(p),
+        diameter_m: Some(3.0),
+    }
+}
+
+fn errors(f: &Fixture, timestamp_ns: u64, pose: &omnitrack::Pose) -> (f64, f64) {
+    let g = f
+        .truth
+        .iter()
+        .find(|s| s.timestamp_ns.abs_diff(timestamp_ns) < 1_000_000)
+        .expect("a ground-truth pose for every frame");
+    (
+        (pose.translation.vector - g.pose.translation.vector).norm(),
+        pose.rotation.angle_to(&g.pose.rotation).to_degrees(),
+    )
+}
+
+/// A recording whose images are all uniform grey for a range of frames: a hand over the rig.
+struct Occluded {
+    inner: ReplaySource,
+    frame: usize,
+    from: usize,
+    to: usize,
+}
+
+impl FrameSource for Occluded {
+    fn rig(&self) -> &Rig {
+        self.inner.rig()
+    }
+    fn next_frame(&mut self, out: &mut FrameSet) -> Result<bool, SourceError> {
+        let more = self.inner.next_frame(out)?;
+        if more && (self.from..self.to).contains(&self.frame) {
+            for s in out.sensors_mut() {
+                s.pixels_mut().iter_mut().for_each(|p| *p = 40);
+            }
+        }
+        self.frame += 1;
+        Ok(more)
+    }
+    fn stats(&self) -> &SourceStats {
+        self.inner.stats()
+    }
+}
+
+#[test]
+fn initialises_from_a_3m_volume_within_10cm_and_1deg_and_tracks_100_frames_without_loss() {
+    let f = fixture();
+    let mut source = ReplaySource::open(&f.rec, Pacing::AsFastAsPossible).unwrap();
+    let opts = RunOptions {
+        hint: Some(hint(f)),
+        ..RunOptions::default()
+    };
+    let mut first: Option<(f64, f64)> = None;
+    let mut worst = (0.0f64, 0.0f64);
+    let mut sum2 = 0.0;
+    let mut n = 0;
+    let stats = track(
+        &mut source,
+        &f.model,
+        &f.table,
+        &TrackerConfig::default(),
+        &opts,
+        &mut |r, _| {
+            if let Some(p) = &r.result.pose {
+                let (dp, dr) = errors(f, r.timestamp_ns, p);
+                first.get_or_insert((dp, dr));
+                worst = (worst.0.max(dp), worst.1.max(dr));
+                sum2 += dp * dp;
+                n += 1;
+            }
+            Ok(())
+        },
+    )
+    .unwrap();
+    let (dp, dr) = first.expect("initialised");
+    assert!(dp < 0.10 && dr < 1.0, "first pose {:.1} cm, {dr:.2}°", dp * 100.0);
+    assert_eq!(stats.frames, FRAMES as u64);
+    assert_eq!(stats.losses, 0, "{stats:?}");
+    assert!(stats.tracked as usize >= FRAMES - 3, "{stats:?}");
+    let rmse = (sum2 / n as f64).sqrt();
+    assert!(
+        rmse < 0.05,
+        "RMSE {:.1} cm, worst {:.1} cm {:.2}°",
+        rmse * 100.0,
+        worst.0 * 100.0,
+        worst.1
+    );
+}
+
+#[test]
+fn recovers_after_the_rig_is_occluded_for_a_second() {
+    let f = fixture();
+    // Frames 40..45 at 5 Hz: one second of grey images.
+    let mut source = Occluded {
+        inner: ReplaySource::open(&f.rec, Pacing::AsFastAsPossible).unwrap(),
+        frame: 0,
+        from: 40,
+        to: 45,
+    };
+    let opts = RunOptions {
+        hint: Some(hint(f)),
+        ..RunOptions::default()
+    };
+    let mut states = Vec::new();
+    let mut late = Vec::new();
+    let stats = track(
+        &mut source,
+        &f.model,
+        &f.table,
+        &TrackerConfig::default(),
+        &opts,
+        &mut |r, _| {
+            states.push(r.result.state);
+            if r.sequence >= 60 {
+                if let Some(p) = &r.result.pose {
+                    late.push(errors(f, r.timestamp_ns, p));
+                }
+            }
+            Ok(())
+        },
+    )
+    .unwrap();
+    let lost_at = states
+        .iter()
+        .position(|s| *s == TrackerState::Lost)
+        .expect("lock is lost");
+    assert!((40..48).contains(&lost_at), "lost at frame {lost_at}");
+    assert!(
+        states[lost_at..].contains(&TrackerState::Tracking),
+        "tracking resumes: {states:?}"
+    );
+    assert!(stats.losses >= 1 && stats.reinitialisations >= 1, "{stats:?}");
+    assert!(late.len() >= 35, "frames tracked after recovery: {}", late.len());
+    let worst = late.iter().fold(0.0f64, |m, e| m.max(e.0));
+    assert!(worst < 0.15, "worst error after recovery {:.1} cm", worst * 100.0);
+}
+
+#[test]
+fn tracking_allocates_nothing_per_frame() {
+    let f = fixture();
+    let mut source = ReplaySource::open(&f.rec, Pacing::AsFastAsPossible).unwrap();
+    let rig = source.rig().clone();
+    let cfg = TrackerConfig::default();
+    let mut frame = FrameSet::for_rig(&rig);
+    let mut detector = EdgeDetector::new(&rig, &cfg.edges);
+    let mut tracker = Tracker::new(&rig, &f.model, &f.table, &cfg, Some(hint(f)), 1);
+    // The counter itself must work.
+    COUNTING.with(|c| c.set(true));
+    let v = vec![1u8];
+    COUNTING.with(|c| c.set(false));
+    assert_eq!(COUNT.with(Cell::get), 1);
+    drop(v);
+    COUNT.with(|c| c.set(0));
+    let mut counted = 0;
+    let mut tracking_frames = 0;
+    while source.next_frame(&mut frame).unwrap() {
+        let ts = frame.timestamp_ns().unwrap();
+        let edges = detector.detect(&frame);
+        let tracking = tracker.state() == TrackerState::Tracking;
+        COUNTING.with(|c| c.set(tracking));
+        let r = tracker.process(edges, ts);
+        COUNTING.with(|c| c.set(false));
+        if tracking {
+            counted += 1;
+            tracking_frames += r.pose.is_some() as usize;
+        }
+    }
+    assert!(counted >= 90 && tracking_frames >= 90, "{counted} frames counted");
+    assert_eq!(COUNT.with(Cell::get), 0, "allocations while tracking");
+}
