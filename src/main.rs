@@ -162,10 +162,16 @@ fn main() -> ExitCode {
 
 fn run(command: Command) -> Result<(), String> {
     match command {
+        #[cfg(feature = "desk")]
+        Command::Demo => {
+            let report = omnitrack::desk::demo::run_demo(&omnitrack::desk::demo::DemoOptions::default())?;
+            println!("{report}");
+            Ok(())
+        }
+        #[cfg(not(feature = "desk"))]
         Command::Demo => Err(
-            "demo is not available yet: it waits for the tracker (issue 7); synthetic recordings, the \
-             pose solvers, edge extraction and the visibility table are in (try `omnitrack-desk \
-             scenario lab`, `omnitrack pose`, `omnitrack edges` and `omnitrack visibility`)"
+            "demo needs the `desk` feature, which this device build leaves out (`cargo run --release -- demo` \
+             has it by default)"
                 .into(),
         ),
         Command::Run {

@@ -242,20 +242,28 @@ impl Tracker<'_> {
         };
 
         // 2–3 from the prediction; if its pose does not hold (too few consistent correspondences),
-        // again from the prediction turned about the vertical by ± one and two gate widths: a turn
-        // faster than the motion model moves every plane out of the gate at once.
+        // again from the last pose and from the prediction turned about the vertical by ± one and
+        // two gate widths: a turn faster (or stopping sooner) than the motion model expects moves
+        // every plane out of the gate at once.
         let solve_started = Instant::now();
         let mut samples = 0;
         let mut match_time = Duration::ZERO;
         let mut solved = None;
         let mut prior = predicted;
         let gate_rad = mcfg.angular_gate_deg.to_radians();
-        // A pose that keeps three quarters of the last frame's inliers is taken at once;
+        // A pose that keeps nine tenths of the last frame's inliers is taken at once;
         // otherwise every turn is tried and the best supported pose wins.
-        let enough = (mcfg.min_inliers as usize).max(3 * self.last_inliers as usize / 4);
+        let enough = (mcfg.min_inliers as usize).max(9 * self.last_inliers as usize / 10);
         let mut best_support = 0;
-        for turn in [0.0, 1.0, -1.0, 2.0, -2.0] {
-            let start = turned(&predicted, turn * gate_rad);
+        // Starts: the prediction, the last pose (a turn or a walk that stopped short), then
+        // the prediction turned about the vertical.
+        let last = self.pose;
+        for attempt in 0..6 {
+            let start = match attempt {
+                0 => predicted,
+                1 => last,
+                a => turned(&predicted, [1.0, -1.0, 2.0, -2.0][a - 2] * gate_rad),
+            };
             let (pose, n, m) = self.match_and_solve(edges, &start);
             samples += n;
             match_time += m;
