@@ -147,7 +147,11 @@ mod bench {
                 r_xi += y;
                 trials += 1;
             }
-            let t = trials.max(1) as f64;
+            if trials == 0 {
+                println!("| {n} | n/a (no frame sees {n}) | | | |");
+                continue;
+            }
+            let t = trials as f64;
             println!(
                 "| {n} | {:.1} | {:.2} | {:.1} | {:.2} |",
                 (p_kh / t).sqrt() * 100.0,
@@ -211,6 +215,7 @@ mod bench {
                 seed: 1,
                 max_frames: None,
             };
+            let mut estimate: Vec<Stamped> = Vec::new();
             let mut pos_err = Vec::new();
             let mut rot_err = Vec::new();
             let mut latency = Vec::new();
@@ -247,6 +252,12 @@ mod bench {
                             );
                         }
                     }
+                }
+                if let Some(p) = &r.result.pose {
+                    estimate.push(Stamped {
+                        timestamp_ns: r.timestamp_ns,
+                        pose: *p,
+                    });
                 }
                 let err = match (&r.result.pose, gt) {
                     (Some(p), Some(g)) => {
@@ -289,6 +300,25 @@ mod bench {
             })
             .unwrap();
             let init_ms = stats.first_search.map_or(f64::NAN, |d| d.as_secs_f64() * 1e3);
+            // The table's ATE is desk::eval's (the same numbers as `evo_ape tum`, checked by
+            // tools/check_evo.py); the estimate is written beside the recording for evo itself.
+            let est_path = dir.join("estimate.tum");
+            std::fs::write(&est_path, omnitrack::trajectory::to_tum_string(&estimate)).unwrap();
+            let ev = omnitrack::desk::eval::evaluate(&truth, &estimate, &omnitrack::desk::eval::EvalOptions::default())
+                .unwrap();
+            eprintln!(
+                "{name}: evo_ape tum {} {} (ATE {:.4} m RMSE over {} poses)",
+                dir.join("groundtruth.tum").display(),
+                est_path.display(),
+                ev.ate.translation_m.rmse,
+                ev.ate.translation_m.count
+            );
+            let (pos_err, rot_err): (Vec<f64>, Vec<f64>) = ev
+                .ate
+                .per_pose
+                .iter()
+                .map(|e| (e.translation_m, e.rotation_deg))
+                .unzip();
             let rmse = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64).sqrt();
             let max = |v: &[f64]| v.iter().cloned().fold(0.0, f64::max);
             latency.sort_by(f64::total_cmp);

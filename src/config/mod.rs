@@ -188,7 +188,7 @@ impl Default for SolverConfig {
     fn default() -> Self {
         Self {
             method: SolverMethod::RAndT, // Kumar–Hanson §6: R_and_T beats R_then_T
-            error: LineError::E1,        // Kumar–Hanson eq. 10
+            error: LineError::E2,        // Kumar–Hanson eq. 11 (best in the tracker benchmark)
             max_iterations: 50,          // Kumar–Hanson §3.1 step 4
             convergence_rad: 1e-10,
             initial_rotation_samples: 24,  // Kumar–Hanson §3.2 (Horn: 12, 24 or 60)
