@@ -103,6 +103,16 @@ pub struct BudgetConfig {
     pub frame_ms: f64,
     pub edges_ms: f64,
     pub frame_sync_tolerance_ms: f64,
+    /// One grab: a whole-rig `next_frame` or one sensor's read (runtime::pipeline).
+    pub capture_ms: f64,
+    /// Tracker (matching + solve) per frame.
+    pub track_ms: f64,
+    /// Loan, write and send of one pose sample.
+    pub publish_ms: f64,
+    /// Longest wait for the other sensors' images of one instant once the first has arrived.
+    pub frame_assembly_wait_ms: f64,
+    /// Time between two status samples.
+    pub status_interval_ms: f64,
 }
 
 /// Every tunable of the tracker, grouped by the stage that reads it.
@@ -224,6 +234,11 @@ impl Default for BudgetConfig {
             frame_ms: 33.0,
             edges_ms: 10.0,
             frame_sync_tolerance_ms: 5.0,
+            capture_ms: 40.0,
+            track_ms: 20.0,
+            publish_ms: 0.5,
+            frame_assembly_wait_ms: 10.0,
+            status_interval_ms: 250.0,
         }
     }
 }
@@ -388,6 +403,11 @@ impl TrackerConfig {
         positive("budgets.frame_ms", self.budgets.frame_ms)?;
         positive("budgets.edges_ms", self.budgets.edges_ms)?;
         positive("budgets.frame_sync_tolerance_ms", self.budgets.frame_sync_tolerance_ms)?;
+        positive("budgets.capture_ms", self.budgets.capture_ms)?;
+        positive("budgets.track_ms", self.budgets.track_ms)?;
+        positive("budgets.publish_ms", self.budgets.publish_ms)?;
+        positive("budgets.frame_assembly_wait_ms", self.budgets.frame_assembly_wait_ms)?;
+        positive("budgets.status_interval_ms", self.budgets.status_interval_ms)?;
         Ok(())
     }
 }
