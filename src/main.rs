@@ -429,12 +429,54 @@ fn parse_init(text: &str, default_diameter: f64) -> Result<omnitrack::tracker::S
 }
 
 fn run_tracker(a: RunArgs) -> Result<(), String> {
-    use omnitrack::capture::{open_source_with, Pacing, SourceOptions};
-    use omnitrack::publish::{PosePublisher, PoseStatus, POSE_SERVICE};
-    use omnitrack::runtime::{load_or_build_table, track, RunOptions};
-    use omnitrack::tracker::{TrackerEvent, TrackerState};
-    use omnitrack::trajectory::{tum_line, Stamped};
+    use omnitrack::capture::{Pacing, SourceOptions};
+    use omnitrack::publish::{POSE_SERVICE, STATUS_SERVICE};
+    use omnitrack::runtime::load_or_build_table;
+    use omnitrack::runtime::pipeline::{
+        init_logging, open_pipeline_source, run_pipeline, FrameSink, PipelineOptions, TumSink,
+    };
+    use omnitrack::runtime::{FrameRecord, RunOptions};
+    use omnitrack::tracker::TrackerEvent;
 
+    /// Progress lines on standard error and, if asked, the TUM trajectory.
+    struct RunSink {
+        tum: Option<TumSink>,
+    }
+    impl FrameSink for RunSink {
+        fn frame(&mut self, r: &FrameRecord) -> Result<(), String> {
+            match r.result.event {
+                Some(TrackerEvent::Searched(rep)) => eprintln!(
+                    "omnitrack: frame {}: searched {} of {} cells in {:.0} ms",
+                    r.sequence,
+                    rep.cells_searched,
+                    rep.cells_in_volume,
+                    rep.elapsed.as_secs_f64() * 1e3
+                ),
+                Some(TrackerEvent::Committed { candidates, .. }) => {
+                    eprintln!(
+                        "omnitrack: frame {}: tracking ({candidates} candidates weighed)",
+                        r.sequence
+                    )
+                }
+                Some(TrackerEvent::LostLock) => {
+                    eprintln!("omnitrack: frame {}: lost lock, re-initialising", r.sequence)
+                }
+                Some(TrackerEvent::Relocalised) | None => {}
+            }
+            match &mut self.tum {
+                Some(t) => t.frame(r),
+                None => Ok(()),
+            }
+        }
+        fn finish(&mut self) -> Result<(), String> {
+            match &mut self.tum {
+                Some(t) => t.finish(),
+                None => Ok(()),
+            }
+        }
+    }
+
+    init_logging();
     let cfg = match &a.config {
         Some(p) => TrackerConfig::load(p).map_err(|e| e.to_string())?,
         None => TrackerConfig::default(),
@@ -453,103 +495,39 @@ fn run_tracker(a: RunArgs) -> Result<(), String> {
         },
         ..SourceOptions::default()
     };
-    let mut source = open_source_with(&a.source, rig.as_ref(), &options).map_err(|e| e.to_string())?;
+    let source = open_pipeline_source(&a.source, rig.as_ref(), &options).map_err(|e| e.to_string())?;
     let model = Model::load(&a.model).map_err(|e| e.to_string())?;
     let (table, origin) =
         load_or_build_table(&a.model, &model, a.visibility.as_deref(), &cfg).map_err(|e| e.to_string())?;
     eprintln!("omnitrack: {origin}");
-    let publisher = if a.no_publish {
-        None
-    } else {
-        omnitrack::publish::quiet_iceoryx2_logs();
-        match PosePublisher::create(POSE_SERVICE) {
-            Ok(p) => Some(p),
-            Err(e) => {
-                eprintln!("omnitrack: warning: not publishing poses: {e}");
-                None
-            }
-        }
+    let mut sink = RunSink {
+        tum: a.trajectory.as_deref().map(TumSink::create).transpose()?,
     };
-    let mut out = match &a.trajectory {
-        Some(p) => {
-            let f = std::fs::File::create(p).map_err(|e| format!("{}: cannot create: {e}", p.display()))?;
-            let mut w = std::io::BufWriter::new(f);
-            writeln!(w, "# timestamp_s tx ty tz qx qy qz qw (T_world_rig)")
-                .map_err(|e| format!("{}: cannot write: {e}", p.display()))?;
-            Some(w)
-        }
-        None => None,
+    let publish = (!a.no_publish).then_some(());
+    let opts = PipelineOptions {
+        run: RunOptions {
+            hint,
+            seed: 1,
+            max_frames: a.frames,
+        },
+        handle_signals: true,
+        pose_service: publish.map(|_| POSE_SERVICE.to_string()),
+        status_service: publish.map(|_| STATUS_SERVICE.to_string()),
+        // A replay not paced in real time would otherwise race ahead while the tracker works.
+        lossless: !a.realtime && a.source.starts_with("replay:"),
+        ..PipelineOptions::default()
     };
-    let opts = RunOptions {
-        hint,
-        seed: 1,
-        max_frames: a.frames,
-    };
-    let mut last_pose = omnitrack::Pose::identity();
-    let trajectory_name = a
-        .trajectory
-        .as_ref()
-        .map(|p| p.display().to_string())
-        .unwrap_or_default();
-    let stats = track(source.as_mut(), &model, &table, &cfg, &opts, &mut |r, _| {
-        match r.result.event {
-            Some(TrackerEvent::Searched(rep)) => eprintln!(
-                "omnitrack: frame {}: searched {} of {} cells in {:.0} ms",
-                r.sequence,
-                rep.cells_searched,
-                rep.cells_in_volume,
-                rep.elapsed.as_secs_f64() * 1e3
-            ),
-            Some(TrackerEvent::Committed { candidates, .. }) => {
-                eprintln!(
-                    "omnitrack: frame {}: tracking ({candidates} candidates weighed)",
-                    r.sequence
-                )
-            }
-            Some(TrackerEvent::LostLock) => eprintln!("omnitrack: frame {}: lost lock, re-initialising", r.sequence),
-            Some(TrackerEvent::Relocalised) => {}
-            None => {}
-        }
-        if let Some(p) = &r.result.pose {
-            last_pose = *p;
-            if let Some(w) = out.as_mut() {
-                let line = tum_line(&Stamped {
-                    timestamp_ns: r.timestamp_ns,
-                    pose: *p,
-                });
-                writeln!(w, "{line}").map_err(|e| format!("{trajectory_name}: cannot write: {e}"))?;
-            }
-        }
-        if let Some(publ) = &publisher {
-            let status = match r.result.state {
-                TrackerState::Initializing => PoseStatus::Initializing,
-                TrackerState::Tracking if r.result.pose.is_some() => PoseStatus::Tracking,
-                TrackerState::Tracking | TrackerState::Lost => PoseStatus::Lost,
-            };
-            let _ = publ.publish_pose(
-                r.timestamp_ns,
-                r.sequence,
-                status,
-                &last_pose,
-                &r.result.covariance,
-                r.result.inliers,
-                r.result.xi_rad2,
-            );
-        }
-        Ok(())
-    });
-    if let Some(mut w) = out {
-        w.flush().map_err(|e| format!("{trajectory_name}: cannot write: {e}"))?;
-    }
-    let stats = stats.map_err(|e| e.to_string())?;
+    let summary = run_pipeline(source, &model, &table, &cfg, &opts, &mut sink).map_err(|e| e.to_string())?;
+    let stats = &summary.tracker;
     eprintln!(
-        "omnitrack: {} frames, {} tracked ({:.1} %), {} losses, {} re-initialisations; {}",
+        "omnitrack: {} frames, {} tracked ({:.1} %), {} losses, {} re-initialisations, {} relocalisations",
         stats.frames,
         stats.tracked,
         100.0 * stats.tracked as f64 / stats.frames.max(1) as f64,
         stats.losses,
         stats.reinitialisations,
-        source.stats()
+        stats.relocalisations
     );
+    eprintln!("omnitrack: {summary}");
     Ok(())
 }
