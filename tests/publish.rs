@@ -2,8 +2,6 @@
 //! C layout other languages rely on, and no heap allocation per publish. Every test uses its own
 //! service name; every wait is bounded.
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
 use std::mem::{align_of, offset_of, size_of};
 use std::time::Duration;
 
@@ -13,33 +11,10 @@ use omnitrack::publish::{
     StatusSample, StatusSubscriber, STATUS_MAX_SENSORS,
 };
 
-struct Counting;
-
-thread_local! {
-    static COUNTING: Cell<bool> = const { Cell::new(false) };
-    static COUNT: Cell<usize> = const { Cell::new(0) };
-}
-
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        if COUNTING.with(Cell::get) {
-            COUNT.with(|c| c.set(c.get() + 1));
-        }
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        if COUNTING.with(Cell::get) {
-            COUNT.with(|c| c.set(c.get() + 1));
-        }
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        unsafe { System.dealloc(ptr, layout) }
-    }
-}
+mod common;
 
 #[global_allocator]
-static ALLOCATOR: Counting = Counting;
+static ALLOCATOR: common::Counting = common::Counting;
 
 const WAIT: Duration = Duration::from_secs(5);
 
@@ -249,41 +224,30 @@ fn publishing_allocates_at_most_iceoryx2s_one_loan_arc() {
         publisher.publish(s).unwrap();
         subscriber.receive().unwrap();
     }
-    // The counter itself must work.
-    COUNTING.with(|c| c.set(true));
-    let v = vec![1u8];
-    COUNTING.with(|c| c.set(false));
-    assert_eq!(COUNT.with(Cell::get), 1);
-    drop(v);
-    COUNT.with(|c| c.set(0));
-
-    COUNTING.with(|c| c.set(true));
-    for s in &samples[10..] {
-        publisher.publish(s).unwrap();
-    }
-    COUNTING.with(|c| c.set(false));
-    let publish_allocs = COUNT.with(Cell::get);
-    COUNT.with(|c| c.set(0));
-    COUNTING.with(|c| c.set(true));
+    common::assert_counter_works();
+    let ((), publish_allocs) = common::allocations_in(|| {
+        for s in &samples[10..] {
+            publisher.publish(s).unwrap();
+        }
+    });
     let mut received = 0;
-    while subscriber.receive().unwrap().is_some() {
-        received += 1;
-    }
-    COUNTING.with(|c| c.set(false));
-    let receive_allocs = COUNT.with(Cell::get);
+    let ((), receive_allocs) = common::allocations_in(|| {
+        while subscriber.receive().unwrap().is_some() {
+            received += 1;
+        }
+    });
     // iceoryx2 0.10 allocates one small Arc per loan (ChunkMutSharedState::new), freed at send; no
     // public API avoids it. Anything beyond that one is ours and fails here.
     assert!(
         publish_allocs <= 190,
         "publish allocated {publish_allocs} times in 190 publishes"
     );
-    COUNT.with(|c| c.set(0));
-    COUNTING.with(|c| c.set(true));
-    for _ in 0..100 {
-        publisher.update_connections().unwrap();
-    }
-    COUNTING.with(|c| c.set(false));
-    assert_eq!(COUNT.with(Cell::get), 0, "update_connections allocated");
+    let ((), update_allocs) = common::allocations_in(|| {
+        for _ in 0..100 {
+            publisher.update_connections().unwrap();
+        }
+    });
+    assert_eq!(update_allocs, 0, "update_connections allocated");
     assert_eq!(receive_allocs, 0, "receive allocated {receive_allocs} times");
     assert!(received > 0);
 }

@@ -6,60 +6,15 @@
 use image::{GrayAlphaImage, GrayImage, ImageBuffer, Rgb, RgbImage, RgbaImage};
 use omnitrack::capture::{FrameSet, FrameSource, ImageFault, Pacing, ReplaySource, SourceError};
 use omnitrack::rig::Rig;
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
 use std::fmt::Write as _;
 use std::path::Path;
 use std::time::Instant;
 use tempfile::TempDir;
 
-// ---------------------------------------------------------------------------------------------
-// Allocation counting: every allocation on a thread whose COUNTING flag is set is counted.
-
-struct CountingAlloc;
-
-thread_local! {
-    static COUNTING: Cell<bool> = const { Cell::new(false) };
-    static ALLOCATIONS: Cell<u64> = const { Cell::new(0) };
-}
-
-fn note_allocation() {
-    let _ = COUNTING.try_with(|on| {
-        if on.get() {
-            let _ = ALLOCATIONS.try_with(|n| n.set(n.get() + 1));
-        }
-    });
-}
-
-unsafe impl GlobalAlloc for CountingAlloc {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        note_allocation();
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
-        note_allocation();
-        unsafe { System.alloc_zeroed(layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        note_allocation();
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        unsafe { System.dealloc(ptr, layout) }
-    }
-}
+mod common;
 
 #[global_allocator]
-static GLOBAL: CountingAlloc = CountingAlloc;
-
-/// Allocations made on this thread while running `f`.
-fn count_allocations<T>(f: impl FnOnce() -> T) -> (T, u64) {
-    ALLOCATIONS.with(|n| n.set(0));
-    COUNTING.with(|c| c.set(true));
-    let out = f();
-    COUNTING.with(|c| c.set(false));
-    (out, ALLOCATIONS.with(|n| n.get()))
-}
+static ALLOCATOR: common::Counting = common::Counting;
 
 // ---------------------------------------------------------------------------------------------
 // Recordings.
@@ -635,7 +590,7 @@ fn steady_state_allocations_per_frame_are_constant_and_only_the_decoders() {
 
     let mut counts = Vec::new();
     loop {
-        let (more, allocations) = count_allocations(|| source.next_frame(&mut frame).unwrap());
+        let (more, allocations) = common::allocations_in(|| source.next_frame(&mut frame).unwrap());
         if !more {
             assert_eq!(allocations, 0, "end of stream allocates nothing");
             break;

@@ -11,62 +11,15 @@ use omnitrack::solver::{
 use omnitrack::Rig;
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
 use std::path::Path;
-use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
 // ---------------------------------------------------------------- allocation counting
 
-struct CountingAlloc;
-
-static ALLOCATIONS: AtomicU64 = AtomicU64::new(0);
-
-thread_local! {
-    static COUNTING: Cell<bool> = const { Cell::new(false) };
-}
-
-fn counting() -> bool {
-    COUNTING.try_with(|c| c.get()).unwrap_or(false)
-}
-
-unsafe impl GlobalAlloc for CountingAlloc {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        if counting() {
-            ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-        }
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
-        if counting() {
-            ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-        }
-        unsafe { System.alloc_zeroed(layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        if counting() {
-            ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-        }
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        unsafe { System.dealloc(ptr, layout) }
-    }
-}
+mod common;
 
 #[global_allocator]
-static GLOBAL: CountingAlloc = CountingAlloc;
-
-/// Heap allocations made by this thread while running `f`.
-fn allocations_in<T>(f: impl FnOnce() -> T) -> (T, u64) {
-    let before = ALLOCATIONS.load(Ordering::SeqCst);
-    COUNTING.with(|c| c.set(true));
-    let out = f();
-    COUNTING.with(|c| c.set(false));
-    // Other threads never count (the flag is per thread), so the difference is ours.
-    (out, ALLOCATIONS.load(Ordering::SeqCst) - before)
-}
+static ALLOCATOR: common::Counting = common::Counting;
 
 // ---------------------------------------------------------------- synthetic observations
 
@@ -426,13 +379,13 @@ fn consensus_run_allocates_nothing_after_construction() {
     let mut fit = simplex_fit();
     let b = budget(30, Duration::from_secs(600));
     for _ in 0..2 {
-        let (out, allocations) = allocations_in(|| sampler.run(&c, &truth(), &b, &mut rng, &mut fit));
+        let (out, allocations) = common::allocations_in(|| sampler.run(&c, &truth(), &b, &mut rng, &mut fit));
         let out = out.unwrap();
         assert_eq!(out.samples, 30);
         assert_eq!(allocations, 0, "run allocated {allocations} times");
     }
     // The counter does count (the test could fail): a Vec allocates.
-    let (v, allocations) = allocations_in(|| vec![1u8; 16]);
+    let (v, allocations) = common::allocations_in(|| vec![1u8; 16]);
     assert_eq!(v.len(), 16);
     assert_eq!(allocations, 1);
 }

@@ -5,45 +5,11 @@
 use omnitrack::capture::u3v::{PixelFormat, RejectReason, U3vEvent, U3vStream, LEADER_MAGIC, TRAILER_MAGIC};
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
 
-// Allocation counting: every allocation on a thread whose COUNTING flag is set is counted.
-struct CountingAlloc;
-
-thread_local! {
-    static COUNTING: Cell<bool> = const { Cell::new(false) };
-    static ALLOCATIONS: Cell<u64> = const { Cell::new(0) };
-}
-
-fn note_allocation() {
-    let _ = COUNTING.try_with(|on| {
-        if on.get() {
-            let _ = ALLOCATIONS.try_with(|n| n.set(n.get() + 1));
-        }
-    });
-}
-
-unsafe impl GlobalAlloc for CountingAlloc {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        note_allocation();
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
-        note_allocation();
-        unsafe { System.alloc_zeroed(layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        note_allocation();
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        unsafe { System.dealloc(ptr, layout) }
-    }
-}
+mod common;
 
 #[global_allocator]
-static GLOBAL: CountingAlloc = CountingAlloc;
+static ALLOCATOR: common::Counting = common::Counting;
 
 const W: u32 = 8;
 const H: u32 = 6;
@@ -504,22 +470,22 @@ fn parsing_and_converting_allocate_nothing() {
     garbage.extend_from_slice(&bytes);
     let mut parser = U3vStream::new(W, H);
     let mut rgb = vec![0u8; (W * H * 3) as usize];
-    ALLOCATIONS.with(|n| n.set(0));
-    COUNTING.with(|c| c.set(true));
+    common::assert_counter_works();
     let mut frames = 0;
-    for round in 0..50 {
-        // Chunks of a few sizes, without a random generator (nothing else runs while counting).
-        let size = [1usize, 13, 512, 4096][round % 4];
-        for chunk in garbage.chunks(size) {
-            parser.push(chunk, |event| {
-                if let U3vEvent::Frame(frame) = event {
-                    frame.to_rgb(&mut rgb).unwrap();
-                    frames += 1;
-                }
-            });
+    let ((), allocated) = common::allocations_in(|| {
+        for round in 0..50 {
+            // Chunks of a few sizes, without a random generator (nothing else runs while counting).
+            let size = [1usize, 13, 512, 4096][round % 4];
+            for chunk in garbage.chunks(size) {
+                parser.push(chunk, |event| {
+                    if let U3vEvent::Frame(frame) = event {
+                        frame.to_rgb(&mut rgb).unwrap();
+                        frames += 1;
+                    }
+                });
+            }
         }
-    }
-    COUNTING.with(|c| c.set(false));
+    });
     assert_eq!(frames, 250);
-    assert_eq!(ALLOCATIONS.with(|n| n.get()), 0);
+    assert_eq!(allocated, 0);
 }

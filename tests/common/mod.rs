@@ -1,0 +1,60 @@
+//! Shared by the allocation tests: a global allocator that counts the allocations (and
+//! reallocations) made on threads that asked for it, so that one test can assert that a code
+//! path allocates nothing while other threads (the test harness, worker pools) go on freely.
+//!
+//! A test binary that uses it declares the allocator itself (a global allocator is per binary):
+//! `#[global_allocator] static ALLOCATOR: common::Counting = common::Counting;`.
+#![allow(dead_code)] // each test binary uses a different part
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+
+pub struct Counting;
+
+thread_local! {
+    static ON: Cell<bool> = const { Cell::new(false) };
+    static COUNT: Cell<u64> = const { Cell::new(0) };
+}
+
+fn note() {
+    // `try_with`: the allocator also runs while thread-locals are being torn down.
+    let _ = ON.try_with(|on| {
+        if on.get() {
+            let _ = COUNT.try_with(|n| n.set(n.get() + 1));
+        }
+    });
+}
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        note();
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
+        note();
+        unsafe { System.alloc_zeroed(layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        note();
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+}
+
+/// Runs `f` and returns its result with the heap allocations this thread made during it.
+pub fn allocations_in<T>(f: impl FnOnce() -> T) -> (T, u64) {
+    let before = COUNT.with(Cell::get);
+    ON.with(|c| c.set(true));
+    let out = f();
+    ON.with(|c| c.set(false));
+    (out, COUNT.with(Cell::get) - before)
+}
+
+/// The counter counts: one boxed value is one allocation (a test that cannot fail is no test).
+pub fn assert_counter_works() {
+    let (b, n) = allocations_in(|| Box::new(std::hint::black_box(7u64)));
+    drop(b);
+    assert_eq!(n, 1, "the allocation counter missed an allocation");
+}
