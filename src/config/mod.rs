@@ -36,6 +36,10 @@ pub struct InitialisationConfig {
     pub max_dihedral_range_deg: f64,
     pub whole_model_time_budget_ms: f64,
     pub clear_winner_ratio: f64,
+    pub accept_explained_fraction: f64,
+    pub wide_edges_considered: u32,
+    pub wide_segments_considered: u32,
+    pub wide_samples_per_cell: u32,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -157,6 +161,10 @@ impl Default for InitialisationConfig {
             max_dihedral_range_deg: 10.0,
             whole_model_time_budget_ms: 10000.0,
             clear_winner_ratio: 0.8,
+            accept_explained_fraction: 0.5,
+            wide_edges_considered: 64,
+            wide_segments_considered: 60,
+            wide_samples_per_cell: 300,
         }
     }
 }
@@ -350,6 +358,35 @@ impl TrackerConfig {
             "initialisation.whole_model_time_budget_ms",
             i.whole_model_time_budget_ms,
         )?;
+        if !(i.clear_winner_ratio > 0.0 && i.clear_winner_ratio <= 1.0) {
+            return Err(format!(
+                "key 'initialisation.clear_winner_ratio': must lie in (0, 1], found {}",
+                i.clear_winner_ratio
+            ));
+        }
+        if !(i.accept_explained_fraction > 0.0 && i.accept_explained_fraction < 1.0) {
+            return Err(format!(
+                "key 'initialisation.accept_explained_fraction': must lie strictly between 0 and 1, found {}",
+                i.accept_explained_fraction
+            ));
+        }
+        at_least(
+            "initialisation.wide_edges_considered",
+            i.wide_edges_considered,
+            i.edges_considered,
+        )?;
+        if i.wide_edges_considered > 64 {
+            return Err(format!(
+                "key 'initialisation.wide_edges_considered': must be at most 64 (one bit per edge), found {}",
+                i.wide_edges_considered
+            ));
+        }
+        at_least(
+            "initialisation.wide_segments_considered",
+            i.wide_segments_considered,
+            i.segments_considered,
+        )?;
+        at_least("initialisation.wide_samples_per_cell", i.wide_samples_per_cell, 1)?;
         positive("maintenance.angular_gate_deg", m.angular_gate_deg)?;
         if !(m.hue_gate > 0.0 && m.hue_gate <= 0.5) {
             return Err(format!(

@@ -99,6 +99,8 @@ pub struct InitOptions {
     pub simplex_refinement: bool,
     /// Distinct candidates returned.
     pub candidates: usize,
+    /// The most segments [`Initialiser::set_breadth`] may ask for (buffers are sized for it).
+    pub wide_segments_considered: usize,
 }
 
 /// Where to search.
@@ -175,9 +177,11 @@ impl<'m> Initialiser<'m> {
     ) -> Initialiser<'m> {
         opts.edges_considered = opts.edges_considered.clamp(3, MAX_EDGES_CONSIDERED);
         opts.segments_considered = opts.segments_considered.max(3);
+        opts.wide_segments_considered = opts.wide_segments_considered.max(opts.segments_considered);
         opts.best_edges_per_segment = opts.best_edges_per_segment.clamp(1, 3);
         opts.candidates = opts.candidates.max(1);
-        let (m, n) = (opts.edges_considered, opts.segments_considered);
+        // Buffers for the widest search `set_breadth` may ask for.
+        let (m, n) = (MAX_EDGES_CONSIDERED, opts.wide_segments_considered);
         let max_set = (0..table.node_count() as u32)
             .map(|i| table.node_set(i).segments.len())
             .max()
@@ -211,6 +215,14 @@ impl<'m> Initialiser<'m> {
 
     pub fn options(&self) -> &InitOptions {
         &self.opts
+    }
+
+    /// Changes how broad the search is: m edges (≤ 64), n segments (≤ the wide size given at
+    /// construction) and samples per cell.
+    pub fn set_breadth(&mut self, edges: usize, segments: usize, samples_per_cell: usize) {
+        self.opts.edges_considered = edges.clamp(3, MAX_EDGES_CONSIDERED);
+        self.opts.segments_considered = segments.clamp(3, self.opts.wide_segments_considered);
+        self.opts.samples_per_cell = samples_per_cell.max(1);
     }
 
     /// Changes the search's time budget (a volume, or the whole model).

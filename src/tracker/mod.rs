@@ -155,6 +155,8 @@ pub struct Tracker<'m> {
     bad_frames: u32,
     /// Inliers of the last good frame.
     last_inliers: u32,
+    /// The last search found no acceptable candidate: search more broadly.
+    widen: bool,
     stats: TrackerStats,
 }
 
@@ -187,6 +189,7 @@ impl<'m> Tracker<'m> {
             upright_height_m: upright,
             simplex_refinement: i.simplex_refinement,
             candidates: 3,
+            wide_segments_considered: i.wide_segments_considered as usize,
         };
         let init = Initialiser::new(rig, model, table, opts, solver.clone(), max_edges);
         let max_set = (0..table.node_count() as u32)
@@ -226,6 +229,7 @@ impl<'m> Tracker<'m> {
             search_attempts: 0,
             bad_frames: 0,
             last_inliers: 0,
+            widen: false,
             stats: TrackerStats::default(),
         }
     }
@@ -282,14 +286,31 @@ impl<'m> Tracker<'m> {
                 self.cfg.initialisation.time_budget_ms
             };
             self.init.set_time_budget(Duration::from_secs_f64(budget / 1e3));
+            let i = &self.cfg.initialisation;
+            if self.widen {
+                self.init.set_breadth(
+                    i.wide_edges_considered as usize,
+                    i.wide_segments_considered as usize,
+                    i.wide_samples_per_cell as usize,
+                );
+            } else {
+                self.init.set_breadth(
+                    i.edges_considered as usize,
+                    i.segments_considered as usize,
+                    i.samples_per_cell as usize,
+                );
+            }
             let (candidates, report) = self.init.run(edges, &volume, &mut self.rng);
             let min = self.cfg.maintenance.min_inliers as usize;
+            // A candidate must explain at least `accept_explained_fraction` of the segments it
+            // predicts (its truncated ξ is ≈ (1 − explained) × cap²); when none does, the next
+            // frame searches more broadly.
+            let cap2 = self.cfg.maintenance.inlier_angle_deg.to_radians().powi(2);
+            let max_score = (1.0 - i.accept_explained_fraction) * cap2;
+            let accepted = |c: &&Candidate| c.inliers >= min && c.score <= max_score;
+            self.widen = !candidates.iter().any(|c| accepted(&c));
             let mut n = 0;
-            for c in candidates
-                .iter()
-                .filter(|c| c.inliers >= min)
-                .take(self.confirming.len())
-            {
+            for c in candidates.iter().filter(accepted).take(self.confirming.len()) {
                 self.confirming[n] = Confirming {
                     pose: c.pose,
                     score_sum: c.score,
