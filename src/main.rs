@@ -40,9 +40,9 @@ enum Command {
         /// replay:DIR, v4l or usb.
         #[arg(long, value_name = "replay:DIR|v4l|usb")]
         source: String,
-        /// Initial search volume: centre x,y,z and optionally its diameter in metres (default
-        /// [initialisation] search_diameter_m of tracker.toml).
-        #[arg(long, value_name = "x,y,z[,diameter_m]", allow_hyphen_values = true)]
+        /// Initial search volume: centre x,y,z and optionally its radius in metres (default: half
+        /// of [initialisation] search_diameter_m of tracker.toml, i.e. a 3 m volume).
+        #[arg(long, value_name = "x,y,z[,radius_m]", allow_hyphen_values = true)]
         init: Option<String>,
         /// Write the trajectory (TUM) here.
         #[arg(long, value_name = "OUT.tum")]
@@ -406,21 +406,22 @@ struct RunArgs {
     realtime: bool,
 }
 
-/// `--init x,y,z[,diameter]`.
+/// `--init x,y,z[,radius_m]` (INTERFACES.md): the search volume's centre and radius; without a
+/// radius, the configured diameter.
 fn parse_init(text: &str, default_diameter: f64) -> Result<omnitrack::tracker::SearchVolume, String> {
     let v: Vec<f64> = text
         .split(',')
         .map(|x| x.trim().parse::<f64>())
         .collect::<Result<_, _>>()
-        .map_err(|_| format!("--init {text:?}: expected x,y,z or x,y,z,diameter_m (numbers)"))?;
+        .map_err(|_| format!("--init {text:?}: expected x,y,z or x,y,z,radius_m (numbers)"))?;
     if !(v.len() == 3 || v.len() == 4) || v.iter().any(|x| !x.is_finite()) {
         return Err(format!(
-            "--init {text:?}: expected x,y,z or x,y,z,diameter_m (finite numbers)"
+            "--init {text:?}: expected x,y,z or x,y,z,radius_m (finite numbers)"
         ));
     }
-    let diameter = v.get(3).copied().unwrap_or(default_diameter);
+    let diameter = v.get(3).map(|r| 2.0 * r).unwrap_or(default_diameter);
     if diameter <= 0.0 {
-        return Err(format!("--init {text:?}: the diameter must be positive"));
+        return Err(format!("--init {text:?}: the radius must be positive"));
     }
     Ok(omnitrack::tracker::SearchVolume {
         centre: nalgebra::Point3::new(v[0], v[1], v[2]),

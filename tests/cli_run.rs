@@ -1,0 +1,104 @@
+//! `omnitrack run` as a black box: bad arguments and inputs are one line and a non-zero exit,
+//! and a short replay writes a TUM trajectory (INTERFACES.md, "Command line").
+
+use std::process::Command;
+
+fn omnitrack(args: &[&str]) -> (i32, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_omnitrack"))
+        .args(args)
+        .output()
+        .unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8(out.stdout).unwrap(),
+        String::from_utf8(out.stderr).unwrap(),
+    )
+}
+
+fn last_line(s: &str) -> &str {
+    s.trim_end().lines().last().unwrap_or("")
+}
+
+#[test]
+fn bad_arguments_and_inputs_are_one_line_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = dir.path().join("room.obj");
+    std::fs::write(&model, "v 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2 3\n").unwrap();
+    let model = model.to_str().unwrap();
+    let missing = dir.path().join("nope");
+    let replay = format!("replay:{}", missing.display());
+    for (args, expected) in [
+        (vec!["--source", "bogus"], "unknown source"),
+        (vec!["--source", "replay:"], "recording directory"),
+        (vec!["--source", &replay], "nope"),
+        (vec!["--source", &replay, "--init", "1,2"], "x,y,z"),
+        (
+            vec!["--source", &replay, "--init", "1,2,3,-1"],
+            "radius must be positive",
+        ),
+        (vec!["--source", &replay, "--init", "a,b,c"], "numbers"),
+    ] {
+        let mut full = vec!["run", "--model", model, "--no-publish"];
+        full.extend(args.iter().copied());
+        let (code, stdout, stderr) = omnitrack(&full);
+        assert_ne!(code, 0, "{full:?} should fail");
+        assert!(stdout.is_empty(), "{full:?} printed on stdout: {stdout}");
+        let line = last_line(&stderr);
+        assert!(
+            line.contains(expected),
+            "{full:?}: {line:?} should mention {expected:?}"
+        );
+        assert!(!stderr.contains("panicked"), "{full:?} panicked: {stderr}");
+    }
+}
+
+#[cfg(feature = "desk")]
+#[test]
+fn a_short_replay_writes_a_tum_trajectory_near_the_truth() {
+    use omnitrack::desk::recording::{cached_scenario, RecordingOptions};
+    use omnitrack::desk::scenario::{Scenario, ScenarioName};
+    use omnitrack::trajectory::load_tum;
+    let dir = tempfile::tempdir().unwrap();
+    let rig = omnitrack::Rig::load(std::path::Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/firmware_config/ladybug2.toml"
+    )))
+    .unwrap();
+    let (rec, _) = cached_scenario(
+        dir.path(),
+        &Scenario::get(ScenarioName::Lab),
+        6,
+        11,
+        "default",
+        &rig,
+        &RecordingOptions::default(),
+        |_, _| {},
+    )
+    .unwrap();
+    let truth = load_tum(&rec.join("groundtruth.tum")).unwrap();
+    let t0 = truth[0].pose.translation.vector;
+    // A 1.5 m radius around a point 0.8 m from the true start.
+    let init = format!("{},{},{},1.5", t0.x + 0.8, t0.y, t0.z);
+    let out = dir.path().join("est.tum");
+    let (code, stdout, stderr) = omnitrack(&[
+        "run",
+        "--model",
+        rec.join("model.obj").to_str().unwrap(),
+        "--source",
+        &format!("replay:{}", rec.display()),
+        "--init",
+        &init,
+        "--trajectory",
+        out.to_str().unwrap(),
+        "--no-publish",
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    assert!(stdout.is_empty());
+    let est = load_tum(&out).unwrap();
+    assert!(est.len() >= 5, "{} poses: {stderr}", est.len());
+    for e in &est {
+        let g = truth.iter().find(|g| g.timestamp_ns == e.timestamp_ns).unwrap();
+        let d = (e.pose.translation.vector - g.pose.translation.vector).norm();
+        assert!(d < 0.15, "{d} m off at {}", e.timestamp_ns);
+    }
+}
