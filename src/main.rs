@@ -28,38 +28,7 @@ enum Command {
     Demo,
     /// Tracks: frames from the source, poses on the iceoryx2 pose service and, if asked, a TUM
     /// trajectory. Without --init the whole model is searched.
-    Run {
-        /// The rig (a replay recording's own rig.toml is used when this is omitted).
-        #[arg(long, value_name = "RIG.toml")]
-        rig: Option<PathBuf>,
-        #[arg(long, value_name = "MODEL.obj")]
-        model: PathBuf,
-        /// Prior visibility table (default: MODEL.vis beside the model, built if absent).
-        #[arg(long, value_name = "TABLE.vis")]
-        visibility: Option<PathBuf>,
-        /// replay:DIR, v4l or usb.
-        #[arg(long, value_name = "replay:DIR|v4l|usb")]
-        source: String,
-        /// Initial search volume: centre x,y,z and optionally its radius in metres (default: half
-        /// of [initialisation] search_diameter_m of tracker.toml, i.e. a 3 m volume).
-        #[arg(long, value_name = "x,y,z[,radius_m]", allow_hyphen_values = true)]
-        init: Option<String>,
-        /// Write the trajectory (TUM) here.
-        #[arg(long, value_name = "OUT.tum")]
-        trajectory: Option<PathBuf>,
-        /// Tracker tunables (default: the shipped firmware_config/tracker.toml values).
-        #[arg(long, value_name = "tracker.toml")]
-        config: Option<PathBuf>,
-        /// Stop after N frames.
-        #[arg(long)]
-        frames: Option<u64>,
-        /// Do not publish on iceoryx2.
-        #[arg(long)]
-        no_publish: bool,
-        /// Replay at the recorded frame rate (default: as fast as the tracker goes).
-        #[arg(long)]
-        realtime: bool,
-    },
+    Run(RunArgs),
     /// Validates a rig, and optionally a model and a tracker config, and summarises them.
     Check {
         #[arg(long)]
@@ -174,29 +143,7 @@ fn run(command: Command) -> Result<(), String> {
              has it by default)"
                 .into(),
         ),
-        Command::Run {
-            rig,
-            model,
-            visibility,
-            source,
-            init,
-            trajectory,
-            config,
-            frames,
-            no_publish,
-            realtime,
-        } => run_tracker(RunArgs {
-            rig,
-            model,
-            visibility,
-            source,
-            init,
-            trajectory,
-            config,
-            frames,
-            no_publish,
-            realtime,
-        }),
+        Command::Run(args) => run_tracker(args),
         Command::Check { rig, model, config } => {
             if rig.is_none() && model.is_none() && config.is_none() {
                 return Err("check needs at least one of --rig, --model, --config".into());
@@ -393,16 +340,38 @@ fn lens_name(lens: &omnitrack::geometry::Lens) -> &'static str {
     }
 }
 
+/// `omnitrack run` (INTERFACES.md).
+#[derive(clap::Args)]
 struct RunArgs {
+    /// The rig (a replay recording's own rig.toml is used when this is omitted).
+    #[arg(long, value_name = "RIG.toml")]
     rig: Option<PathBuf>,
+    #[arg(long, value_name = "MODEL.obj")]
     model: PathBuf,
+    /// Prior visibility table (default: MODEL.vis beside the model, built if absent).
+    #[arg(long, value_name = "TABLE.vis")]
     visibility: Option<PathBuf>,
+    /// replay:DIR, v4l or usb.
+    #[arg(long, value_name = "replay:DIR|v4l|usb")]
     source: String,
+    /// Initial search volume: centre x,y,z and optionally its radius in metres (default: half
+    /// of [initialisation] search_diameter_m of tracker.toml, i.e. a 3 m volume).
+    #[arg(long, value_name = "x,y,z[,radius_m]", allow_hyphen_values = true)]
     init: Option<String>,
+    /// Write the trajectory (TUM) here.
+    #[arg(long, value_name = "OUT.tum")]
     trajectory: Option<PathBuf>,
+    /// Tracker tunables (default: the shipped firmware_config/tracker.toml values).
+    #[arg(long, value_name = "tracker.toml")]
     config: Option<PathBuf>,
+    /// Stop after N frames.
+    #[arg(long)]
     frames: Option<u64>,
+    /// Do not publish on iceoryx2.
+    #[arg(long)]
     no_publish: bool,
+    /// Replay at the recorded frame rate (default: as fast as the tracker goes).
+    #[arg(long)]
     realtime: bool,
 }
 

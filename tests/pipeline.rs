@@ -10,14 +10,14 @@
 //! test and run.
 #![cfg(feature = "desk")]
 
+mod common;
+
 use nalgebra::Point3;
 use omnitrack::capture::open::{FailureDetail, LiveCamera, ReadFailure};
 use omnitrack::capture::{
     FrameSet, FrameSource, ImageFault, Pacing, ReplaySource, SensorImage, SourceError, SourceOptions, SourceStats,
 };
 use omnitrack::config::TrackerConfig;
-use omnitrack::desk::recording::{cached_scenario, RecordingOptions};
-use omnitrack::desk::scenario::{Scenario, ScenarioName};
 use omnitrack::publish::{PoseStatus, PoseSubscriber, StatusSample, StatusSubscriber};
 use omnitrack::rig::Sensor;
 use omnitrack::runtime::pipeline::{
@@ -27,7 +27,6 @@ use omnitrack::runtime::pipeline::{
 use omnitrack::runtime::{FrameRecord, RunOptions};
 use omnitrack::tracker::SearchVolume;
 use omnitrack::trajectory::{load_tum, Stamped};
-use omnitrack::visibility::build::{build_table, BuildOptions};
 use omnitrack::visibility::VisibilityTable;
 use omnitrack::{Model, Rig};
 use std::alloc::{GlobalAlloc, Layout, System};
@@ -112,39 +111,16 @@ fn serial() -> MutexGuard<'static, ()> {
 fn fixture() -> &'static Fixture {
     static F: OnceLock<Fixture> = OnceLock::new();
     F.get_or_init(|| {
-        let dir = tempfile::tempdir().unwrap();
-        let rig = Rig::load(Path::new(concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/firmware_config/ladybug2.toml"
-        )))
-        .unwrap();
-        let (rec, _) = cached_scenario(
-            dir.path(),
-            &Scenario::get(ScenarioName::Lab),
-            RENDERED,
-            11,
-            "default",
-            &rig,
-            &RecordingOptions::default(),
-            |_, _| {},
-        )
-        .unwrap();
-        let model = Model::load(&rec.join("model.obj")).unwrap();
-        let table = build_table(&model, "model.obj", &BuildOptions::default());
-        let first = ReplaySource::open(&rec, Pacing::AsFastAsPossible)
-            .unwrap()
-            .ground_truth()
-            .unwrap()[0]
-            .pose;
+        let lab = common::lab_recording(RENDERED);
         let hint = SearchVolume {
-            centre: Point3::from(first.translation.vector),
+            centre: Point3::from(lab.truth[0].pose.translation.vector),
             diameter_m: Some(3.0),
         };
         Fixture {
-            dir,
-            rec,
-            model,
-            table,
+            dir: lab.dir,
+            rec: lab.rec,
+            model: lab.model,
+            table: lab.table,
             hint,
         }
     })

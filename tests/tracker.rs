@@ -6,19 +6,14 @@
 use nalgebra::{Point3, Vector3};
 use omnitrack::capture::{FrameSet, FrameSource, Pacing, ReplaySource, SourceError, SourceStats};
 use omnitrack::config::TrackerConfig;
-use omnitrack::desk::recording::{cached_scenario, RecordingOptions};
-use omnitrack::desk::scenario::{Scenario, ScenarioName};
 use omnitrack::edges::EdgeDetector;
 use omnitrack::runtime::{track, RunOptions};
 use omnitrack::tracker::{SearchVolume, Tracker, TrackerState};
-use omnitrack::trajectory::Stamped;
-use omnitrack::visibility::build::{build_table, BuildOptions};
-use omnitrack::visibility::VisibilityTable;
-use omnitrack::{Model, Rig};
-use std::path::{Path, PathBuf};
+use omnitrack::Rig;
 use std::sync::OnceLock;
 
 mod common;
+use common::LabRecording;
 
 #[global_allocator]
 static ALLOCATOR: common::Counting = common::Counting;
@@ -26,54 +21,13 @@ static ALLOCATOR: common::Counting = common::Counting;
 const FRAMES: usize = 100;
 
 /// One recording and table for all tests of this binary (rendering is the slow part).
-struct Fixture {
-    _dir: tempfile::TempDir,
-    rec: PathBuf,
-    model: Model,
-    table: VisibilityTable,
-    truth: Vec<Stamped>,
-}
-
-fn fixture() -> &'static Fixture {
-    static F: OnceLock<Fixture> = OnceLock::new();
-    F.get_or_init(|| {
-        let dir = tempfile::tempdir().unwrap();
-        let rig = Rig::load(Path::new(concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/firmware_config/ladybug2.toml"
-        )))
-        .unwrap();
-        let scenario = Scenario::get(ScenarioName::Lab);
-        let (rec, _) = cached_scenario(
-            dir.path(),
-            &scenario,
-            FRAMES,
-            11,
-            "default",
-            &rig,
-            &RecordingOptions::default(),
-            |_, _| {},
-        )
-        .unwrap();
-        let model = Model::load(&rec.join("model.obj")).unwrap();
-        let table = build_table(&model, "model.obj", &BuildOptions::default());
-        let truth = ReplaySource::open(&rec, Pacing::AsFastAsPossible)
-            .unwrap()
-            .ground_truth()
-            .unwrap()
-            .to_vec();
-        Fixture {
-            _dir: dir,
-            rec,
-            model,
-            table,
-            truth,
-        }
-    })
+fn fixture() -> &'static LabRecording {
+    static F: OnceLock<LabRecording> = OnceLock::new();
+    F.get_or_init(|| common::lab_recording(FRAMES))
 }
 
 /// A 3 m search volume whose centre is 1 m from the first true position (not on it).
-fn hint(f: &Fixture) -> SearchVolume {
+fn hint(f: &LabRecording) -> SearchVolume {
     let p = f.truth[0].pose.translation.vector + Vector3::new(0.8, -0.6, 0.0);
     SearchVolume {
         centre: Point3::from(p),
@@ -81,7 +35,7 @@ fn hint(f: &Fixture) -> SearchVolume {
     }
 }
 
-fn errors(f: &Fixture, timestamp_ns: u64, pose: &omnitrack::Pose) -> (f64, f64) {
+fn errors(f: &LabRecording, timestamp_ns: u64, pose: &omnitrack::Pose) -> (f64, f64) {
     let g = f
         .truth
         .iter()

@@ -58,3 +58,53 @@ pub fn assert_counter_works() {
     drop(b);
     assert_eq!(n, 1, "the allocation counter missed an allocation");
 }
+
+/// A rendered `lab` recording (default appearance, seed 11) in a temporary directory, with its
+/// model, visibility table and ground truth: the fixture of the end-to-end tests.
+#[cfg(feature = "desk")]
+pub struct LabRecording {
+    pub dir: tempfile::TempDir,
+    pub rec: std::path::PathBuf,
+    pub model: omnitrack::Model,
+    pub table: omnitrack::visibility::VisibilityTable,
+    pub truth: Vec<omnitrack::trajectory::Stamped>,
+}
+
+#[cfg(feature = "desk")]
+pub fn lab_recording(frames: usize) -> LabRecording {
+    use omnitrack::capture::{Pacing, ReplaySource};
+    use omnitrack::desk::recording::{cached_scenario, RecordingOptions};
+    use omnitrack::desk::scenario::{Scenario, ScenarioName};
+    use omnitrack::visibility::build::{build_table, BuildOptions};
+    let dir = tempfile::tempdir().unwrap();
+    let rig = omnitrack::Rig::load(std::path::Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/firmware_config/ladybug2.toml"
+    )))
+    .unwrap();
+    let (rec, _) = cached_scenario(
+        dir.path(),
+        &Scenario::get(ScenarioName::Lab),
+        frames,
+        11,
+        "default",
+        &rig,
+        &RecordingOptions::default(),
+        |_, _| {},
+    )
+    .unwrap();
+    let model = omnitrack::Model::load(&rec.join("model.obj")).unwrap();
+    let table = build_table(&model, "model.obj", &BuildOptions::default());
+    let truth = ReplaySource::open(&rec, Pacing::AsFastAsPossible)
+        .unwrap()
+        .ground_truth()
+        .unwrap()
+        .to_vec();
+    LabRecording {
+        dir,
+        rec,
+        model,
+        table,
+        truth,
+    }
+}
