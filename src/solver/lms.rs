@@ -6,20 +6,22 @@
 //!
 //! Steps (§4): (1) 3-line (or 3-landmark) subsets: all of them when there are no more than the
 //! Monte-Carlo count m = ⌈log(1 − P) / log(1 − (1 − ε)³)⌉, otherwise m random ones; subsets whose
-//! three unit 3D line directions have |det| < `degenerate_subset_det` are skipped. (2) A pose per
-//! subset by R_and_T (from the guess, or from R_then_T's rotation stage started at Horn's 12
-//! tetrahedral samples, translation by eq. 9, then R_and_T), scored by the median over all lines
-//! of the line's squared error (`o.error`, both end points) — precisely Rousseeuw's LMS order
-//! statistic h = ⌊n/2⌋ + 2 for 3-line elemental subsets (see [`lms_rank`]); when the caller
-//! expects more outliers than LMS's 50 % breakdown allows (`lms_outlier_fraction` > 1/3), the
-//! ⌊(1 − ε) n⌋-th instead (least k-th squares, [`lms_rank_for`]). (3) With the least-median pose,
-//! σ̂ = 1.4826 (1 + 5 / (n − 6)) √median (Rousseeuw's robust scale; from the k-th order statistic
-//! when k is not the median rank), and a line is an outlier when its error's square root exceeds
-//! `lms_outlier_threshold` · σ̂. (4) R_and_T on the rest, with rejection and refit repeated (σ
-//! from the inliers) until the inlier set is stable.
+//! three unit 3D line directions have |det| < `degenerate_subset_det` are skipped. (2) Every pose
+//! a subset allows (from the guess by R_and_T; without one, every root of R_then_T's rotation
+//! stage reached from Horn's 12 tetrahedral samples, translation by eq. 9), scored by the median
+//! over all lines of the line's squared error (`o.error`, both end points) — precisely
+//! Rousseeuw's LMS order statistic h = ⌊n/2⌋ + 2 for 3-line elemental subsets (see [`lms_rank`]);
+//! when the caller expects more outliers than LMS's 50 % breakdown allows
+//! (`lms_outlier_fraction` > 1/3), the ⌊(1 − ε) n⌋-th instead (least k-th squares,
+//! [`lms_rank_for`]). A line whose model segment lies behind its edge scores +∞: planes through
+//! the centre cannot tell a scene from its mirror image behind the camera. (3)–(4), the outlier
+//! threshold and R_and_T on the rest, are where we go past the paper (see `Search::finish`): the
+//! few best poses are concentrated (FAST-LTS), their lines re-judged with an F-test from the
+//! fit's own σ̂, refitted until stable, and the most likely candidate wins.
 //!
-//! Scratch (per-line errors, the inlier copy) is allocated once per call; the subset loop itself
-//! allocates nothing.
+//! Scratch (per-line errors, the candidates' line sets) is allocated per call, never per subset:
+//! the subset loop itself allocates nothing. This solver is for `omnitrack pose` and whole-frame
+//! solves; the tracker's per-frame path uses the fixed-capacity [`super::ConsensusSampler`].
 
 use super::horn::tetrahedral;
 use super::kumar_hanson::{
@@ -28,7 +30,7 @@ use super::kumar_hanson::{
 };
 use super::{LineError, Solution, SolveError, SolverOptions};
 use crate::geometry::{Correspondence, Pose};
-use nalgebra::{Matrix3, UnitQuaternion, Vector3};
+use nalgebra::{Complex, Matrix3, Rotation3, Unit, UnitQuaternion, Vector3};
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 
@@ -45,13 +47,6 @@ pub fn monte_carlo_count(p: f64, epsilon: f64) -> u64 {
         return MAX_SUBSETS;
     }
     (m.max(1.0) as u64).min(MAX_SUBSETS)
-}
-
-/// Rousseeuw's small-sample robust σ from the median squared residual (p = 6 unknowns). For
-/// n ≤ 6 the correction uses n − 6 = 1.
-pub fn robust_sigma(median_squared: f64, n: usize) -> f64 {
-    let dof = (n as f64 - 6.0).max(1.0);
-    1.4826 * (1.0 + 5.0 / dof) * median_squared.max(0.0).sqrt()
 }
 
 fn c3(n: usize) -> u64 {
@@ -92,90 +87,359 @@ pub fn lms_rank_for(n: usize, epsilon: f64) -> usize {
     lms_rank(n).min(expected_inliers.max(4) - 1).min(n.saturating_sub(1))
 }
 
-/// Φ⁻¹(p), the standard normal quantile (Acklam's rational approximation, relative error
-/// < 1.2e-9), for the consistency factor of an order-statistic scale.
-fn normal_quantile(p: f64) -> f64 {
-    const A: [f64; 6] = [
-        -39.69683028665376,
-        220.9460984245205,
-        -275.9285104469687,
-        138.357751867269,
-        -30.66479806614716,
-        2.506628277459239,
-    ];
-    const B: [f64; 5] = [
-        -54.47609879822406,
-        161.5858368580409,
-        -155.6989798598866,
-        66.80131188771972,
-        -13.28068155288572,
-    ];
-    const C: [f64; 6] = [
-        -0.007784894002430293,
-        -0.3223964580411365,
-        -2.400758277161838,
-        -2.549732539343734,
-        4.374664141464968,
-        2.938163982698783,
-    ];
-    const D: [f64; 4] = [
-        0.007784695709041462,
-        0.3224671290700398,
-        2.445134137142996,
-        3.754408661907416,
-    ];
-    let p = p.clamp(1e-12, 1.0 - 1e-12);
-    let tail = |q: f64| {
-        (((((C[0] * q + C[1]) * q + C[2]) * q + C[3]) * q + C[4]) * q + C[5])
-            / ((((D[0] * q + D[1]) * q + D[2]) * q + D[3]) * q + 1.0)
-    };
-    if p < 0.02425 {
-        tail((-2.0 * p.ln()).sqrt())
-    } else if p > 1.0 - 0.02425 {
-        -tail((-2.0 * (1.0 - p).ln()).sqrt())
+/// How many of the best subset poses are polished by concentration before one is chosen
+/// (FAST-LTS's several starts): with noisy lines the order statistic of a raw 3-line pose is
+/// itself noisy, and a wrong pose can win it by luck while the right one is a close second.
+const POLISHED: usize = 8;
+
+/// Concentration steps per candidate; each lowers the trimmed sum or stops, so this only bounds
+/// the time (they converge in 2–4 steps).
+const MAX_C_STEPS: usize = 6;
+
+/// One subset pose: its order statistic, rotation and translation (`T_rig_world`).
+type Candidate = (f64, UnitQuaternion<f64>, Vector3<f64>);
+
+/// Whether the model segment lies wholly behind the observed edge: both end points, seen from
+/// the sensor, are more than 90° from the edge's mid ray. A plane through the centre cannot tell
+/// a line from its mirror image behind the camera, so without this test a 3-line subset's
+/// "camera looking backwards" pose (the whole scene turned 180°) fits its lines exactly and can
+/// win the order statistic when n is small. An edge spanning less than 180° has a mid ray; a
+/// segment partly in front (one end behind, a long corridor line) is not rejected.
+#[inline]
+fn behind(l: &Correspondence, q: &UnitQuaternion<f64>, s: &Vector3<f64>) -> bool {
+    let mid = l.edge.ends[0].into_inner() + l.edge.ends[1].into_inner();
+    l.segment
+        .iter()
+        .all(|p| (q * p.coords + s - l.edge.centre.coords).dot(&mid) <= 0.0)
+}
+
+/// The error Med_R_and_T ranks: the line error, or +∞ for a line behind its edge or a NaN.
+#[inline]
+fn ranked_error(l: &Correspondence, q: &UnitQuaternion<f64>, s: &Vector3<f64>, error: LineError) -> f64 {
+    let v = line_error_of(l, q, s, error);
+    if v.is_nan() || behind(l, q, s) {
+        f64::INFINITY
     } else {
-        let q = p - 0.5;
-        let r = q * q;
-        (((((A[0] * r + A[1]) * r + A[2]) * r + A[3]) * r + A[4]) * r + A[5]) * q
-            / (((((B[0] * r + B[1]) * r + B[2]) * r + B[3]) * r + B[4]) * r + 1.0)
+        v
     }
 }
 
-/// Robust σ from the `k`-th smallest (1-based) of `n` squared line errors, read as the k/n
-/// quantile of |error|. When some of the n are outliers this overestimates σ (the k smallest are
-/// then a lower quantile of the inliers), never underestimates it, so the first rejection is
-/// loose rather than throwing good lines away; the refits in `finish` then tighten σ from the
-/// inliers. Unlike the median, the k-th statistic stays inside the inliers up to ε = 1 − k/n.
-fn order_statistic_sigma(kth_squared: f64, k: usize, n: usize) -> f64 {
-    let quantile = (k as f64 / n.max(1) as f64).clamp(0.25, 0.95);
-    kth_squared.max(0.0).sqrt() / normal_quantile(0.5 + 0.5 * quantile)
+/// F(2, d)'s upper quantile at tail probability `tail` (closed form for 2 numerator degrees of
+/// freedom: P(F > x) = (1 + 2x / d)^(−d/2)).
+fn f2_quantile(tail: f64, dof: f64) -> f64 {
+    0.5 * dof * (tail.powf(-2.0 / dof) - 1.0)
 }
 
-/// The least-median search state: the best pose so far and the per-line error scratch.
+/// Every rotation that puts three model lines into their observed planes, n_i · R d_i = 0 (R_then_T's
+/// rotation stage, eq. 8, solved exactly for three lines), written into `out`; returns how many.
+///
+/// Iterating from Horn's starts (§3.2) is chaotic for three lines: we measured that 12
+/// tetrahedral starts miss the true rotation of 4 % of exact subsets, and even 60 icosahedral
+/// starts miss some. Solved in closed form instead: the first constraint puts R d₁ on the great
+/// circle ⊥ n₁, so R = Rot(n₁, θ) A₀ Rot(d₁, φ) with A₀ any rotation taking d₁ onto that circle.
+/// For fixed θ the other two constraints are linear in (cos φ, sin φ); asking that these be a
+/// unit vector gives one trigonometric polynomial of degree 4 in θ, i.e. a polynomial of degree
+/// 8 in t = tan(θ/2), whose roots [`polynomial_roots`] finds. A complex pair
+/// with a small imaginary part is what noise makes of two nearby real roots, so its real part
+/// is kept too (the least-squares rotation there); every rotation is then polished by Newton's
+/// method on the three equations.
+fn three_line_rotations(sub: &[Correspondence; 3], out: &mut [Matrix3<f64>; 12]) -> usize {
+    let [a, b, c] = sub;
+    let n = [
+        a.edge.normal.into_inner(),
+        b.edge.normal.into_inner(),
+        c.edge.normal.into_inner(),
+    ];
+    let dir = |l: &Correspondence| (l.segment[1] - l.segment[0]).try_normalize(1e-12);
+    let (Some(d1), Some(d2), Some(d3)) = (dir(a), dir(b), dir(c)) else {
+        return 0;
+    };
+    let d = [d1, d2, d3];
+    // A₀: d₁ onto e₁ ⊥ n₁, as the product of two right-handed frames.
+    let perpendicular = |v: &Vector3<f64>| {
+        let helper = if v.x.abs() < 0.6 { Vector3::x() } else { Vector3::y() };
+        v.cross(&helper).normalize()
+    };
+    let e1 = perpendicular(&n[0]);
+    let p = perpendicular(&d1);
+    let frame_e = Matrix3::from_columns(&[e1, n[0], e1.cross(&n[0])]);
+    let frame_d = Matrix3::from_columns(&[d1, p, d1.cross(&p)]);
+    let a0 = frame_e * frame_d.transpose();
+    // Constraint i (i = 2, 3) is m_i(θ) · w_i(φ) = 0 with m_i = Rot(n₁, −θ) n_i and
+    // w_i = A₀ Rot(d₁, φ) d_i, each affine in (cos, sin) of its angle.
+    let mut forms = [[[0.0; 3]; 3]; 2]; // [constraint][α β γ][1, cos θ, sin θ]
+    for (k, i) in [1usize, 2].into_iter().enumerate() {
+        let along = n[0].dot(&n[i]);
+        let m = [n[0] * along, n[i] - n[0] * along, n[i].cross(&n[0])];
+        let dd = d1.dot(&d[i]);
+        let w_const = a0 * (d1 * dd);
+        let w_cos = a0 * (d[i] - d1 * dd);
+        let w_sin = a0 * d1.cross(&d[i]);
+        for (slot, w) in [w_cos, w_sin, w_const].iter().enumerate() {
+            for (j, mj) in m.iter().enumerate() {
+                forms[k][slot][j] = mj.dot(w);
+            }
+        }
+    }
+    let mut count = 0;
+    let mut push = |r: Matrix3<f64>, count: &mut usize| {
+        if r.iter().all(|v| v.is_finite())
+            && *count < out.len()
+            && out[..*count].iter().all(|k| (r - k).norm_squared() > 2e-6)
+        {
+            out[*count] = r;
+            *count += 1;
+        }
+    };
+    // θ is measured from an offset δ; a second δ is used if the first puts a root at t = ∞.
+    for offset in [0.0f64, 0.61] {
+        let (co, so) = (offset.cos(), offset.sin());
+        // A form l₀ + l₁ cos θ + l₂ sin θ, θ = θ' + δ, as a quadratic in t = tan(θ'/2) over 1 + t².
+        let quadratic = |l: &[f64; 3]| {
+            let (l1, l2) = (l[1] * co + l[2] * so, -l[1] * so + l[2] * co);
+            [l[0] + l1, 2.0 * l2, l[0] - l1]
+        };
+        let [al2, be2, ga2] = forms[0].map(|l| quadratic(&l));
+        let [al3, be3, ga3] = forms[1].map(|l| quadratic(&l));
+        let cos_num = sub_poly(&mul2(&ga3, &be2), &mul2(&ga2, &be3));
+        let sin_num = sub_poly(&mul2(&al3, &ga2), &mul2(&al2, &ga3));
+        let det = sub_poly(&mul2(&al2, &be3), &mul2(&al3, &be2));
+        let mut g = [0.0; 9];
+        for (k, v) in g.iter_mut().enumerate() {
+            *v = square_coeff(&cos_num, k) + square_coeff(&sin_num, k) - square_coeff(&det, k);
+        }
+        let scale = g.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        if !scale.is_finite() || scale <= 0.0 {
+            return 0;
+        }
+        if g[8].abs() < 1e-9 * scale && offset == 0.0 {
+            continue;
+        }
+        for root in polynomial_roots(&g).iter() {
+            if !root.re.is_finite() || !root.im.is_finite() || root.im.abs() > 1e-2 * (1.0 + root.re.abs()) {
+                continue;
+            }
+            let theta = 2.0 * root.re.atan() + offset;
+            let (ct, st) = (theta.cos(), theta.sin());
+            // The two remaining constraints at this θ: rows (α, β, γ) of α cos φ + β sin φ + γ = 0.
+            let rows = forms.map(|f| Vector3::from(f.map(|l| l[0] + l[1] * ct + l[2] * st)));
+            let rotation = |cphi: f64, sphi: f64| {
+                // Off a real root (a complex pair's real part) (cos φ, sin φ) is not quite unit.
+                let norm = cphi.hypot(sphi);
+                let (cphi, sphi) = (cphi / norm, sphi / norm);
+                let r = Rotation3::from_axis_angle(&Unit::new_unchecked(n[0]), theta).into_inner()
+                    * a0
+                    * rodrigues(&d1, cphi, sphi);
+                polish(&r, &n, &d)
+            };
+            let v = rows[0].cross(&rows[1]);
+            // At a root, v = k (cos φ, sin φ, 1): its first two components are as large as the
+            // third. When they vanish the rows are (nearly) parallel, the roots of the polynomial
+            // are double and known to ~1e-8 only, so the test is relative to that.
+            if v.x.hypot(v.y) > 1e-6 * rows[0].norm() * rows[1].norm() {
+                if v.z.abs() > 1e-12 * v.norm() {
+                    push(rotation(v.x / v.z, v.y / v.z), &mut count);
+                }
+            } else {
+                // Dependent rows (e.g. mutually perpendicular lines, where γ vanishes): the one
+                // line α cos φ + β sin φ = −γ meets the unit circle in up to two points.
+                let row = if rows[0].norm() >= rows[1].norm() {
+                    rows[0]
+                } else {
+                    rows[1]
+                };
+                let radius = row.x.hypot(row.y);
+                if radius > 1e-12 && row.z.abs() <= radius * (1.0 + 1e-9) {
+                    let psi = row.y.atan2(row.x);
+                    let spread = (-row.z / radius).clamp(-1.0, 1.0).acos();
+                    for phi in [psi + spread, psi - spread] {
+                        push(rotation(phi.cos(), phi.sin()), &mut count);
+                    }
+                }
+            }
+        }
+        break;
+    }
+    count
+}
+
+/// The 8 complex roots of g₀ + g₁ t + … + g₈ t⁸ (g₈ ≠ 0) by the Aberth–Ehrlich iteration: all
+/// roots at once, cubically convergent, about 1 µs. (It replaced the companion matrix's
+/// eigenvalues, which cost a third of Med_R_and_T's time.)
+fn polynomial_roots(g: &[f64; 9]) -> [Complex<f64>; 8] {
+    let monic: [f64; 9] = std::array::from_fn(|k| g[k] / g[8]);
+    let eval = |z: Complex<f64>| {
+        let mut p = Complex::new(1.0, 0.0);
+        let mut dp = Complex::new(0.0, 0.0);
+        for k in (0..8).rev() {
+            dp = dp * z + p;
+            p = p * z + monic[k];
+        }
+        (p, dp)
+    };
+    // Start on a circle of the roots' geometric mean radius, off the real axis.
+    let radius = monic[0].abs().powf(1.0 / 8.0).clamp(1e-3, 1e3);
+    let mut z: [Complex<f64>; 8] =
+        std::array::from_fn(|k| Complex::from_polar(radius, 0.4 + k as f64 * std::f64::consts::TAU / 8.0));
+    let mut done = [false; 8];
+    for _ in 0..60 {
+        let mut all_done = true;
+        for i in 0..8 {
+            if done[i] {
+                continue;
+            }
+            let (p, dp) = eval(z[i]);
+            let ratio = p / dp;
+            let mut repulsion = Complex::new(0.0, 0.0);
+            for j in (0..8).filter(|&j| j != i) {
+                repulsion += (z[i] - z[j]).inv();
+            }
+            let step = ratio / (Complex::new(1.0, 0.0) - ratio * repulsion);
+            if !(step.re.is_finite() && step.im.is_finite()) {
+                done[i] = true;
+                continue;
+            }
+            z[i] -= step;
+            // Converged to rounding: further steps only wander.
+            done[i] = step.norm_sqr() <= 1e-26 * (1.0 + z[i].norm_sqr());
+            all_done &= done[i];
+        }
+        if all_done {
+            break;
+        }
+    }
+    z
+}
+
+/// Rot(axis, φ) from cos φ and sin φ.
+fn rodrigues(axis: &Vector3<f64>, c: f64, s: f64) -> Matrix3<f64> {
+    let k = axis.cross_matrix();
+    Matrix3::identity() + k * s + k * k * (1.0 - c)
+}
+
+/// Newton's method on n_i · R d_i = 0 (three equations, three unknowns), a few steps: closed-form
+/// roots are accurate to about 1e-8, and this takes them to rounding.
+fn polish(r: &Matrix3<f64>, n: &[Vector3<f64>; 3], d: &[Vector3<f64>; 3]) -> Matrix3<f64> {
+    let mut r = *r;
+    for _ in 0..3 {
+        let mut rows = [Vector3::zeros(); 3];
+        let mut res = [0.0; 3];
+        for i in 0..3 {
+            let rd = r * d[i];
+            res[i] = n[i].dot(&rd);
+            rows[i] = rd.cross(&n[i]);
+        }
+        let adj = [
+            rows[1].cross(&rows[2]),
+            rows[2].cross(&rows[0]),
+            rows[0].cross(&rows[1]),
+        ];
+        let det = rows[0].dot(&adj[0]);
+        let size = rows[0].norm() * rows[1].norm() * rows[2].norm();
+        if det.is_nan() || det.abs() <= 1e-9 * size {
+            break;
+        }
+        let step = -(adj[0] * res[0] + adj[1] * res[1] + adj[2] * res[2]) / det;
+        // A polish, not a search: a complex pair's real part is no root, and a step longer
+        // than this would leave the place the polynomial pointed to.
+        if step.norm().is_nan() || step.norm() >= 1e-2 {
+            break;
+        }
+        r = Rotation3::new(step).into_inner() * r;
+        if step.norm() < 1e-15 {
+            break;
+        }
+    }
+    r
+}
+
+/// The product of two quadratics (ascending coefficients).
+fn mul2(a: &[f64; 3], b: &[f64; 3]) -> [f64; 5] {
+    let mut p = [0.0; 5];
+    for i in 0..3 {
+        for j in 0..3 {
+            p[i + j] += a[i] * b[j];
+        }
+    }
+    p
+}
+
+fn sub_poly(a: &[f64; 5], b: &[f64; 5]) -> [f64; 5] {
+    std::array::from_fn(|k| a[k] - b[k])
+}
+
+/// The coefficient of t^k in p(t)² for a quartic p.
+fn square_coeff(p: &[f64; 5], k: usize) -> f64 {
+    (0..5).filter(|&i| k >= i && k - i < 5).map(|i| p[i] * p[k - i]).sum()
+}
+
+/// The least-median search state: the best poses so far and the per-line scratch.
 struct Search<'a> {
     all: &'a [Correspondence],
     o: &'a SolverOptions,
     guess: Option<Unknowns>,
     errors: Vec<f64>,
-    best: Option<(f64, UnitQuaternion<f64>, Vector3<f64>)>,
+    /// The `POLISHED` best distinct candidates, best first.
+    top: [Option<Candidate>; POLISHED],
 }
 
 impl Search<'_> {
-    /// The LMS objective at `(q, s)`: the `lms_rank`-th smallest squared line error over all lines.
-    fn median(&mut self, q: &UnitQuaternion<f64>, s: &Vector3<f64>) -> f64 {
-        for (e, l) in self.errors.iter_mut().zip(self.all) {
-            let v = line_error_of(l, q, s, self.o.error);
-            *e = if v.is_nan() { f64::INFINITY } else { v };
+    fn new<'a>(all: &'a [Correspondence], o: &'a SolverOptions, guess: Option<Unknowns>) -> Search<'a> {
+        Search {
+            all,
+            o,
+            guess,
+            errors: vec![0.0; all.len()],
+            top: [None; POLISHED],
         }
-        let h = lms_rank_for(self.errors.len(), self.o.lms_outlier_fraction);
+    }
+
+    /// The order statistic minimised (see [`lms_rank_for`]): 0-based rank.
+    fn rank(&self) -> usize {
+        lms_rank_for(self.all.len(), self.o.lms_outlier_fraction)
+    }
+
+    /// The LMS objective at `(q, s)`: the `lms_rank`-th smallest squared line error over all
+    /// lines, or +∞ as soon as more than n − rank − 1 lines exceed `bound` (the pose cannot then
+    /// beat the candidates already held, and most subset poses are wrong ones).
+    fn median(&mut self, q: &UnitQuaternion<f64>, s: &Vector3<f64>, bound: f64) -> f64 {
+        let h = self.rank();
+        let allowed = self.all.len() - h - 1;
+        let mut over = 0;
+        for (e, l) in self.errors.iter_mut().zip(self.all) {
+            *e = ranked_error(l, q, s, self.o.error);
+            if *e > bound {
+                over += 1;
+                if over > allowed {
+                    return f64::INFINITY;
+                }
+            }
+        }
         *self.errors.select_nth_unstable_by(h, f64::total_cmp).1
     }
 
     fn consider(&mut self, q: UnitQuaternion<f64>, s: Vector3<f64>) {
-        let med = self.median(&q, &s);
-        if med.is_finite() && self.best.is_none_or(|b| med < b.0) {
-            self.best = Some((med, q, s));
+        let bound = self.top[POLISHED - 1].map_or(f64::INFINITY, |c| c.0);
+        let med = self.median(&q, &s, bound);
+        if !med.is_finite() {
+            return;
         }
+        // The same pose found from another subset is one candidate, not two.
+        let scale = 1.0 + s.norm();
+        let same = |c: &Candidate| c.1.angle_to(&q) < 1e-2 && (c.2 - s).norm() < 1e-2 * scale;
+        let slot = match self.top.iter().position(|c| c.as_ref().is_some_and(same)) {
+            Some(i) if self.top[i].is_some_and(|c| c.0 <= med) => return,
+            Some(i) => i,
+            None => match self.top.iter().position(|c| c.is_none_or(|c| med < c.0)) {
+                Some(_) => POLISHED - 1,
+                None => return,
+            },
+        };
+        self.top[slot] = Some((med, q, s));
+        self.top.sort_by(|a, b| {
+            a.map_or(f64::INFINITY, |c| c.0)
+                .total_cmp(&b.map_or(f64::INFINITY, |c| c.0))
+        });
     }
 
     /// Step 2 for one subset: its pose(s) by R_and_T, each scored by the median over all lines.
@@ -187,89 +451,254 @@ impl Search<'_> {
             }
             return;
         }
-        // No guess: a few rotation-stage starts (a 3-line subset allows several rotations, so
-        // every distinct one is kept and the median over all lines chooses).
-        let mut seen = [UnitQuaternion::identity(); 12];
-        let mut count = 0;
-        for q0 in tetrahedral() {
-            let coarse = rotation_stage(sub, *q0, o.max_iterations.min(15), o.convergence_rad.max(1e-6));
-            let Some((q, _, _)) = coarse else {
-                continue;
-            };
-            if seen[..count].iter().any(|p| p.angle_to(&q) < 1e-3) {
-                continue;
+        // No guess: every rotation the subset allows (three lines have up to 8), each scored by
+        // the order statistic over all lines. A landmark subset has more than three lines and
+        // is overdetermined: R_then_T's rotation stage from each start, distinct minima kept.
+        let mut roots = [UnitQuaternion::identity(); 12];
+        let count = if let [a, b, c] = sub {
+            let mut matrices = [Matrix3::zeros(); 12];
+            let count = three_line_rotations(&[*a, *b, *c], &mut matrices);
+            for (q, r) in roots.iter_mut().zip(&matrices[..count]) {
+                *q = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(*r));
             }
-            seen[count] = q;
-            count += 1;
-            // Three lines fix the rotation exactly (three constraints, three unknowns) and eq. 9
-            // then fixes the translation, so the subset's pose needs no R_and_T polish before it
-            // is scored: only the winner is refined, on all its inliers.
-            let Some(s) = translation_stage(sub, &q) else {
+            count
+        } else {
+            let mut count = 0;
+            for q0 in tetrahedral() {
+                let coarse = rotation_stage(sub, *q0, o.max_iterations.min(15), o.convergence_rad.max(1e-6));
+                if let Some((q, _, _)) = coarse.filter(|(q, _, _)| roots[..count].iter().all(|p| p.angle_to(q) >= 1e-3))
+                {
+                    roots[count] = q;
+                    count += 1;
+                }
+            }
+            count
+        };
+        for q in &roots[..count] {
+            // The rotation fixes eq. 9's translation, so a subset's pose needs no R_and_T polish
+            // before it is scored: only the winners are refined, on their inliers.
+            let Some(s) = translation_stage(sub, q) else {
                 continue;
             };
-            self.consider(q, s);
+            self.consider(*q, s);
         }
     }
 
-    /// Steps 3–4: outliers from the least-median pose, then R_and_T on the inliers. The scale
-    /// comes from the same order statistic that was minimised (with the default ε this is the
-    /// paper's median rule); the rejection and refit are repeated with σ re-estimated (by the
-    /// same median rule) over the inliers until the inlier set stops changing (at most 4 passes), so that an outlier that
-    /// slipped under the first, robust but loose, threshold is caught once the fit is clean.
-    fn finish(mut self) -> Result<Solution, SolveError> {
-        let (_, q, s) = self.best.ok_or(SolveError::NoSolution)?;
+    /// Indices of the `h` lines with the smallest errors at `(q, s)` (into `order`), and the sum
+    /// of those errors (the least-trimmed-squares objective).
+    fn smallest(&mut self, q: &UnitQuaternion<f64>, s: &Vector3<f64>, h: usize, order: &mut Vec<usize>) -> f64 {
+        for (e, l) in self.errors.iter_mut().zip(self.all) {
+            *e = ranked_error(l, q, s, self.o.error);
+        }
+        order.clear();
+        order.extend(0..self.all.len());
+        let errors = &self.errors;
+        order.select_nth_unstable_by(h - 1, |&a, &b| errors[a].total_cmp(&errors[b]));
+        order.truncate(h);
+        order.sort_unstable();
+        order.iter().map(|&i| errors[i]).sum()
+    }
+
+    /// Rousseeuw & Van Driessen's concentration step, repeated: refit R_and_T on the `h` lines
+    /// that fit the current pose best, until the trimmed sum stops falling. Each step cannot
+    /// raise the trimmed sum, so this turns a noisy 3-line pose into the least-trimmed-squares
+    /// pose of its basin. Returns (trimmed sum, pose).
+    fn concentrate(
+        &mut self,
+        start: Candidate,
+        h: usize,
+        order: &mut Vec<usize>,
+        kept: &mut Vec<Correspondence>,
+    ) -> Candidate {
+        let (_, mut q, mut s) = start;
+        let mut sum = self.smallest(&q, &s, h, order);
+        for _ in 0..MAX_C_STEPS {
+            kept.clear();
+            kept.extend(order.iter().map(|&i| self.all[i]));
+            let Ok(r) = refine(kept, q, s, self.o) else {
+                break;
+            };
+            let previous = order.clone();
+            let next = self.smallest(&r.q, &r.s, h, order);
+            if next.is_nan() || next >= sum {
+                order.clone_from(&previous);
+                break;
+            }
+            (sum, q, s) = (next, r.q, r.s);
+            if *order == previous {
+                break;
+            }
+        }
+        (sum, q, s)
+    }
+
+    /// Reweighting from one concentrated candidate: the lines whose error is within the gate,
+    /// R_and_T on them, repeated until the set is stable (at most 5 refits). σ̂² starts from the
+    /// h-set's errors over their degrees of freedom, made consistent for the truncation the
+    /// caller's outlier fraction implies ([`start_gate`]), and is re-estimated from each new set.
+    /// A set is never let shrink below h lines, or it could fit itself. Returns the fit and its set.
+    fn reweight(&mut self, c: &Concentrated, kept: &mut Vec<Correspondence>) -> Option<(Solution, Vec<usize>)> {
         let o = self.o;
         let n = self.all.len();
-        for (e, l) in self.errors.iter_mut().zip(self.all) {
-            *e = line_error_of(l, &q, &s, o.error);
+        let h = c.set.len();
+        let tail = gate_tail(o);
+        let trimmed = c.trimmed.max(c.floor * dof(h));
+        let mut set = c.set.clone();
+        kept.clear();
+        kept.extend(set.iter().map(|&i| self.all[i]));
+        let mut sol = r_and_t(kept, Some(&pose_of(&c.q, &c.s)), o).ok()?;
+        let mut gate = start_gate(trimmed, h, n, o);
+        for _ in 0..5 {
+            let (fq, fs) = unknowns_of(&sol.pose);
+            for (e, l) in self.errors.iter_mut().zip(self.all) {
+                *e = ranked_error(l, &fq, &fs, o.error);
+            }
+            let next: Vec<usize> = (0..n).filter(|&i| self.errors[i] <= gate).collect();
+            // Fewer lines than the concentration kept would let a set fit itself (3 lines always
+            // do): the caller's ε promised at least h inliers.
+            if next.len() < h || next == set {
+                break;
+            }
+            kept.clear();
+            kept.extend(next.iter().map(|&i| self.all[i]));
+            let Ok(fitted) = r_and_t(kept, Some(&sol.pose), o) else {
+                break;
+            };
+            let (nq, ns) = unknowns_of(&fitted.pose);
+            let sum: f64 = next
+                .iter()
+                .map(|&i| line_error_of(&self.all[i], &nq, &ns, o.error))
+                .sum();
+            let sigma2 = (sum / dof(next.len())).max(c.floor);
+            gate = 2.0 * sigma2 * f2_quantile(tail, dof(next.len()));
+            set = next;
+            sol = fitted;
         }
-        let k = lms_rank_for(n, o.lms_outlier_fraction);
-        let kth = *self.errors.select_nth_unstable_by(k, f64::total_cmp).1;
-        // A floor on σ̂ so that rounding-level residuals of noise-free data are not told apart.
-        let unit = match o.error {
-            LineError::E1 => mean_distance(self.all, &q, &s),
-            LineError::E2 | LineError::E3 => 1.0,
+        Some((sol, set))
+    }
+
+    /// Steps 3–4. The paper takes σ̂ from the least-median pose of one 3-line subset and keeps
+    /// the lines within 2.5 σ̂. With noisy lines that pose is itself noisy, σ̂ from an order
+    /// statistic is loose when many lines are outliers, and one wrong winner decides alone; we
+    /// measured a few percent of failures at 50 % outliers from these alone. So:
+    /// - the `POLISHED` best subset poses are concentrated on the h = rank + 1 lines that fit
+    ///   them best (Rousseeuw & Van Driessen's FAST-LTS);
+    /// - each is reweighted ([`Search::reweight`]): a line is kept when its error, as an
+    ///   F(2, dof) statistic against the fit's own σ̂², is below the quantile that
+    ///   `lms_outlier_threshold` (t σ per end point) picks in the large-sample limit, tail
+    ///   e^(−t²); with few lines σ̂ is itself uncertain and the F quantile widens the gate rather
+    ///   than throwing good lines away;
+    /// - the winner has the highest likelihood over all lines: its set's errors as χ²₂ with its
+    ///   σ̂², every other line an outlier with its error uniform over the error's range. A pose
+    ///   that overfits h lines but explains no more loses to one that explains them all, and one
+    ///   that takes in outliers pays for them in σ̂.
+    fn finish(mut self) -> Result<Solution, SolveError> {
+        let o = self.o;
+        let n = self.all.len();
+        let h = self.rank() + 1;
+        let mut order = Vec::with_capacity(n);
+        let mut kept: Vec<Correspondence> = Vec::with_capacity(n);
+        let mut concentrated: Vec<Concentrated> = Vec::with_capacity(POLISHED);
+        for start in self.top.into_iter().flatten() {
+            let (trimmed, q, s) = self.concentrate(start, h, &mut order, &mut kept);
+            // A floor on σ̂ so that rounding-level residuals of noise-free data are not told apart.
+            let unit = match o.error {
+                LineError::E1 => mean_distance(self.all, &q, &s),
+                LineError::E2 | LineError::E3 => 1.0,
+            };
+            concentrated.push(Concentrated {
+                trimmed,
+                q,
+                s,
+                set: order.clone(),
+                unit,
+                floor: (1e-9 * unit).powi(2),
+            });
+        }
+        concentrated.sort_by(|a, b| a.trimmed.total_cmp(&b.trimmed));
+        let mut fits = Vec::with_capacity(concentrated.len());
+        for (k, c) in concentrated.iter().enumerate() {
+            // Candidates often concentrate onto the same lines: one reweighting each.
+            if concentrated[..k].iter().any(|d| d.set == c.set) {
+                continue;
+            }
+            if let Some(fit) = self.reweight(c, &mut kept) {
+                fits.push(fit);
+            }
+        }
+        // The errors' range, for the density of an outlier's error: E2 and E3 are sums of two
+        // squared sines (at most 2); E1 is E2 times a squared distance.
+        let range = 2.0 * concentrated.first().map_or(1.0, |c| c.unit).powi(2);
+        let likelihood = |(sol, set): &(Solution, Vec<usize>)| {
+            let (q, s) = unknowns_of(&sol.pose);
+            let errors = set.iter().map(|&i| ranked_error(&self.all[i], &q, &s, o.error));
+            let floor = concentrated.first().map_or(0.0, |c| c.floor);
+            let sigma2 = (errors.clone().sum::<f64>() / dof(set.len())).max(floor);
+            let inliers: f64 = errors.map(|e| -(2.0 * sigma2).ln() - e / (2.0 * sigma2)).sum();
+            let log_likelihood = inliers - (n - set.len()) as f64 * range.ln();
+            if log_likelihood.is_nan() {
+                f64::NEG_INFINITY
+            } else {
+                log_likelihood
+            }
         };
-        let floor = 1e-9 * unit;
-        let mut sigma = if k == lms_rank(n) && o.lms_outlier_fraction <= 1.0 / 3.0 {
-            let med = *self.errors.select_nth_unstable_by(n / 2, f64::total_cmp).1;
-            robust_sigma(med, n)
-        } else {
-            order_statistic_sigma(kth, k + 1, n)
-        }
-        .max(floor);
-        let mut pose = pose_of(&q, &s);
-        let mut inliers: Vec<usize> = Vec::new();
-        let mut sol = None;
-        for _ in 0..4 {
-            let limit = o.lms_outlier_threshold * sigma;
-            let (uq, us) = unknowns_of(&pose);
-            let next: Vec<usize> = (0..n)
-                .filter(|&i| line_error_of(&self.all[i], &uq, &us, o.error).sqrt() <= limit)
-                .collect();
-            if next.len() < 3 {
-                break;
-            }
-            if next == inliers && sol.is_some() {
-                break;
-            }
-            inliers = next;
-            let kept: Vec<Correspondence> = inliers.iter().map(|&i| self.all[i]).collect();
-            let fitted = r_and_t(&kept, Some(&pose), o)?;
-            pose = fitted.pose;
-            let (fq, fs) = unknowns_of(&pose);
-            // The paper's median scale again, now over the current inliers at the refitted pose:
-            // robust to the few outliers a loose first threshold may have let in.
-            let mut errs: Vec<f64> = kept.iter().map(|l| line_error_of(l, &fq, &fs, o.error)).collect();
-            let mid = errs.len() / 2;
-            let med = *errs.select_nth_unstable_by(mid, f64::total_cmp).1;
-            sigma = robust_sigma(med, kept.len()).max(floor);
-            sol = Some(fitted);
-        }
-        let mut sol = sol.ok_or(SolveError::NoSolution)?;
-        sol.inliers = inliers;
+        let (mut sol, set) = fits
+            .into_iter()
+            .map(|f| (likelihood(&f), f))
+            .max_by(|a, b| a.0.total_cmp(&b.0))
+            .map(|(_, f)| f)
+            .ok_or(SolveError::NoSolution)?;
+        sol.inliers = set;
         Ok(sol)
     }
+}
+
+/// A candidate after concentration: its trimmed sum, pose (`T_rig_world`), h-set and σ̂² floor.
+struct Concentrated {
+    trimmed: f64,
+    q: UnitQuaternion<f64>,
+    s: Vector3<f64>,
+    set: Vec<usize>,
+    /// The unit of a line error's square root: 1 for the angular errors E2 and E3, the mean
+    /// distance for E1.
+    unit: f64,
+    floor: f64,
+}
+
+/// Degrees of freedom of a fit to `m` lines: two residuals each, six unknowns (at least 1).
+fn dof(m: usize) -> f64 {
+    (2 * m).saturating_sub(6).max(1) as f64
+}
+
+/// How many of `n` lines the caller's outlier fraction leaves as inliers (at least `h`).
+fn expected_inliers(n: usize, h: usize, o: &SolverOptions) -> f64 {
+    ((1.0 - o.lms_outlier_fraction.clamp(0.0, 0.95)) * n as f64).max(h as f64)
+}
+
+/// The F(2, dof) tail probability of the inlier gate: the one at which, with σ known, the gate is
+/// `lms_outlier_threshold` σ per end point (χ²₂ / 2 ~ Exp(1), so the tail is e^(−t²)).
+fn gate_tail(o: &SolverOptions) -> f64 {
+    (-o.lms_outlier_threshold.powi(2)).exp()
+}
+
+/// The first inlier gate on a line's error, from the trimmed sum of the `h` best-fitting of `n`
+/// lines: σ̂² over their degrees of freedom, made consistent for the truncation the caller's
+/// outlier fraction implies, times the F(2, dof) quantile.
+fn start_gate(trimmed: f64, h: usize, n: usize, o: &SolverOptions) -> f64 {
+    let sigma2 = trimmed / dof(h) * truncation_consistency(h as f64 / expected_inliers(n, h, o));
+    2.0 * sigma2 * f2_quantile(gate_tail(o), dof(h))
+}
+
+/// 1 / E[X | X below its p-quantile] for X = χ²₂ / 2 ~ Exp(1): the factor that makes a variance
+/// estimated from the fraction `p` of smallest squared errors consistent (LTS's consistency
+/// factor, for two residuals per line). 1 at p = 1.
+fn truncation_consistency(p: f64) -> f64 {
+    if p >= 1.0 {
+        return 1.0;
+    }
+    let p = p.max(1e-3);
+    let x = -(1.0 - p).ln();
+    1.0 / (1.0 - x * (1.0 - p) / p)
 }
 
 fn check(c: &[Correspondence], guess: Option<&Pose>) -> Result<Option<Unknowns>, SolveError> {
@@ -301,13 +730,7 @@ pub fn med_r_and_t(
 ) -> Result<Solution, SolveError> {
     let guess = check(c, guess)?;
     let n = c.len();
-    let mut search = Search {
-        all: c,
-        o,
-        guess,
-        errors: vec![0.0; n],
-        best: None,
-    };
+    let mut search = Search::new(c, o, guess);
     let wanted = monte_carlo_count(o.lms_success_probability, o.lms_outlier_fraction);
     let degenerate = |i: usize, j: usize, k: usize| direction_det(&c[i], &c[j], &c[k]) < o.degenerate_subset_det;
     if c3(n) <= wanted {
@@ -358,13 +781,7 @@ pub fn med_r_and_t_landmarks(
     ids.sort_unstable();
     ids.dedup();
     let m = ids.len();
-    let mut search = Search {
-        all: c,
-        o,
-        guess,
-        errors: vec![0.0; n],
-        best: None,
-    };
+    let mut search = Search::new(c, o, guess);
     let mut union: Vec<Correspondence> = Vec::with_capacity(n);
     let mut run = |search: &mut Search, chosen: &[u32]| {
         union.clear();
@@ -404,4 +821,229 @@ pub fn med_r_and_t_landmarks(
         }
     }
     search.finish()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::EdgePlane;
+    use nalgebra::{Point3, Unit};
+    use rand::Rng;
+
+    /// A pinhole observation (centre at the origin, looking down +z) of the world segment `a`–`b`
+    /// under `T_rig_world = (q, s)`.
+    fn seen(q: &UnitQuaternion<f64>, s: &Vector3<f64>, a: Point3<f64>, b: Point3<f64>) -> Correspondence {
+        let (ra, rb) = (q * a.coords + s, q * b.coords + s);
+        Correspondence {
+            edge: EdgePlane::from_rays(Point3::origin(), &ra, &rb).expect("a plane"),
+            segment: [a, b],
+        }
+    }
+
+    fn random_scene(rng: &mut SmallRng, n: usize) -> (UnitQuaternion<f64>, Vector3<f64>, Vec<Correspondence>) {
+        let q = UnitQuaternion::from_scaled_axis(Vector3::new(
+            rng.random_range(-3.0..3.0),
+            rng.random_range(-3.0..3.0),
+            rng.random_range(-3.0..3.0),
+        ));
+        let s = Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), 6.0);
+        let lines = (0..n)
+            .map(|_| {
+                // End points in front of the camera, at depth 4–8 m, put back into the world.
+                let mut end = || {
+                    let depth = rng.random_range(4.0..8.0);
+                    let p = Vector3::new(rng.random_range(-0.4..0.4), rng.random_range(-0.3..0.3), 1.0) * depth;
+                    Point3::from(q.inverse() * (p - s))
+                };
+                let (a, b) = (end(), end());
+                seen(&q, &s, a, b)
+            })
+            .collect();
+        (q, s, lines)
+    }
+
+    #[test]
+    fn f2_quantile_matches_tables() {
+        // Upper 1 % and 5 % points of F(2, d) from standard tables.
+        assert!((f2_quantile(0.01, 10.0) - 7.559).abs() < 1e-3);
+        assert!((f2_quantile(0.05, 4.0) - 6.944).abs() < 1e-3);
+        // Large d: F(2, ∞) = χ²₂ / 2 ~ Exp(1), so the quantile tends to −ln(tail).
+        assert!((f2_quantile(0.01, 1e7) - 0.01f64.ln().abs()).abs() < 1e-5);
+    }
+
+    #[test]
+    fn truncation_consistency_is_the_inverse_truncated_mean() {
+        assert_eq!(truncation_consistency(1.0), 1.0);
+        // Exp(1) below its median: E = 1 − ln 2.
+        assert!((truncation_consistency(0.5) - 1.0 / (1.0 - 2f64.ln())).abs() < 1e-12);
+        // Against a numerical integral at p = 0.3.
+        let x = -(0.7f64).ln();
+        let steps = 100_000;
+        let mean: f64 = (0..steps)
+            .map(|i| {
+                let t = (i as f64 + 0.5) / steps as f64 * x;
+                t * (-t).exp() * x / steps as f64
+            })
+            .sum::<f64>()
+            / 0.3;
+        assert!((truncation_consistency(0.3) - 1.0 / mean).abs() < 1e-6);
+    }
+
+    #[test]
+    fn a_segment_is_behind_only_when_both_ends_are() {
+        let q = UnitQuaternion::identity();
+        let s = Vector3::zeros();
+        let c = seen(&q, &s, Point3::new(-1.0, 0.0, 5.0), Point3::new(1.0, 0.5, 6.0));
+        assert!(!behind(&c, &q, &s));
+        // The segment mirrored through the centre lies in the same plane, behind the camera.
+        let mirrored = Correspondence {
+            segment: [-c.segment[0].coords, -c.segment[1].coords].map(Point3::from),
+            ..c
+        };
+        assert!(behind(&mirrored, &q, &s));
+        assert!(
+            line_error_of(&mirrored, &q, &s, LineError::E2) < 1e-20,
+            "the plane cannot tell"
+        );
+        assert_eq!(ranked_error(&mirrored, &q, &s, LineError::E2), f64::INFINITY);
+        // A long line passing beside the camera, one end behind it, is not rejected.
+        let long = Correspondence {
+            segment: [Point3::new(-1.0, 0.0, 5.0), Point3::new(-1.0, 0.0, -20.0)],
+            ..c
+        };
+        assert!(!behind(&long, &q, &s));
+    }
+
+    #[test]
+    fn three_line_rotations_find_the_truth_and_nearly_every_root() {
+        let mut rng = SmallRng::seed_from_u64(5);
+        let mut found_truth = 0;
+        let mut tried = 0;
+        let (mut covered, mut reference_roots) = (0, 0);
+        for _ in 0..300 {
+            let (q, _, lines) = random_scene(&mut rng, 3);
+            let sub = [lines[0], lines[1], lines[2]];
+            if direction_det(&sub[0], &sub[1], &sub[2]) < 0.05 {
+                continue;
+            }
+            tried += 1;
+            let mut roots = [Matrix3::zeros(); 12];
+            let count = three_line_rotations(&sub, &mut roots);
+            let d = |l: &Correspondence| (l.segment[1] - l.segment[0]).normalize();
+            // Roots, but for a complex pair's real part now and then (a least-squares rotation).
+            let not_roots = roots[..count]
+                .iter()
+                .filter(|r| sub.iter().any(|l| l.edge.normal.dot(&(*r * d(l))).abs() > 1e-9))
+                .count();
+            assert!(not_roots <= 1, "{not_roots} of {count} are not roots");
+            for r in &roots[..count] {
+                assert!(
+                    (r.transpose() * r - Matrix3::identity()).norm() < 1e-9,
+                    "not a rotation"
+                );
+            }
+            let truth = *q.to_rotation_matrix().matrix();
+            if roots[..count].iter().any(|r| (r - truth).norm() < 1e-6) {
+                found_truth += 1;
+            }
+            // Reference: the exact roots Gauss–Newton reaches from 60 icosahedral starts.
+            let mut reference: Vec<Matrix3<f64>> = Vec::new();
+            for q0 in super::super::horn::icosahedral() {
+                if let Some((g, _, _)) = rotation_stage(&sub, *q0, 100, 1e-12) {
+                    let g = *g.to_rotation_matrix().matrix();
+                    let residual: f64 = sub.iter().map(|l| l.edge.normal.dot(&(g * d(l))).powi(2)).sum();
+                    if residual < 1e-20 && reference.iter().all(|r| (r - g).norm() > 1e-5) {
+                        reference.push(g);
+                    }
+                }
+            }
+            reference_roots += reference.len();
+            if !roots[..count].iter().any(|r| (r - truth).norm() < 1e-6) {
+                let in_ref = reference.iter().any(|r| (r - truth).norm() < 1e-6);
+                let rows: Vec<Vector3<f64>> = sub.iter().map(|l| (truth * d(l)).cross(&l.edge.normal)).collect();
+                let det = rows[0].dot(&rows[1].cross(&rows[2]));
+                let nearest = roots[..count]
+                    .iter()
+                    .map(|r| (r - truth).norm())
+                    .fold(f64::INFINITY, f64::min);
+                eprintln!("truth missed: in reference {in_ref}, det at truth {det:.3e}, count {count}, nearest {nearest:.3e}, refs {}", reference.len());
+            }
+            covered += reference
+                .iter()
+                .filter(|g| roots[..count].iter().any(|r| (*r - **g).norm() < 1e-5))
+                .count();
+        }
+        eprintln!("{covered} of {reference_roots} reference roots found");
+        assert!(tried > 200);
+        assert_eq!(found_truth, tried, "the true rotation is always among the roots");
+        assert!(covered as f64 >= 0.95 * reference_roots as f64, "too few roots found");
+    }
+
+    #[test]
+    fn three_line_rotations_handle_perpendicular_lines() {
+        // A building's lines run along three perpendicular axes; the closed form then meets
+        // dependent constraints (its γ terms vanish) and must still return the truth.
+        let mut rng = SmallRng::seed_from_u64(3);
+        for _ in 0..50 {
+            let (q, s, _) = random_scene(&mut rng, 0);
+            let centre = q.inverse() * (Vector3::new(0.0, 0.0, 6.0) - s);
+            let mut sub = Vec::new();
+            for axis in [Vector3::x(), Vector3::y(), Vector3::z()] {
+                let offset = Vector3::new(
+                    rng.random_range(-1.5..1.5),
+                    rng.random_range(-1.5..1.5),
+                    rng.random_range(-1.5..1.5),
+                );
+                let mid = Point3::from(centre + offset);
+                sub.push(seen(&q, &s, mid - axis * 0.8, mid + axis * 0.8));
+            }
+            let sub = [sub[0], sub[1], sub[2]];
+            let mut roots = [Matrix3::zeros(); 12];
+            let count = three_line_rotations(&sub, &mut roots);
+            let truth = *q.to_rotation_matrix().matrix();
+            assert!(
+                roots[..count].iter().any(|r| (r - truth).norm() < 1e-8),
+                "truth not among {count} roots"
+            );
+        }
+    }
+
+    #[test]
+    fn noisy_lines_without_outliers_are_all_kept() {
+        // 1 px of end-point noise at f = 800 px, told to expect up to 50 % outliers: the gate
+        // must come from the fit's own scale without throwing good lines away (a loose order
+        // statistic or an overfitted h-set used to drop one line in ten).
+        let o = SolverOptions {
+            error: LineError::E2,
+            lms_outlier_fraction: 0.5,
+            lms_success_probability: 0.999,
+            ..SolverOptions::default()
+        };
+        let mut rng = SmallRng::seed_from_u64(9);
+        let mut dropped = 0;
+        for trial in 0..40 {
+            let (q, s, exact) = random_scene(&mut rng, 10);
+            let noisy: Vec<Correspondence> = exact
+                .iter()
+                .map(|c| {
+                    let mut jitter = |r: &Unit<Vector3<f64>>| {
+                        let v = r.into_inner() / r.z;
+                        let j = Vector3::new(rng.random_range(-1.7..1.7), rng.random_range(-1.7..1.7), 0.0) / 800.0;
+                        v + j
+                    };
+                    let (a, b) = (jitter(&c.edge.ends[0]), jitter(&c.edge.ends[1]));
+                    Correspondence {
+                        edge: EdgePlane::from_rays(Point3::origin(), &a, &b).unwrap(),
+                        ..*c
+                    }
+                })
+                .collect();
+            let sol = med_r_and_t(&noisy, None, &o, trial).unwrap();
+            let (q_est, s_est) = unknowns_of(&sol.pose);
+            assert!(q_est.angle_to(&q) < 1f64.to_radians(), "trial {trial}: wrong pose");
+            assert!((s_est - s).norm() < 0.2, "trial {trial}: wrong position");
+            dropped += 10 - sol.inliers.len();
+        }
+        assert!(dropped <= 2, "{dropped} of 400 good lines rejected");
+    }
 }

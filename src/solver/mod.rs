@@ -57,7 +57,8 @@ pub struct SolverOptions {
     pub lms_success_probability: f64,
     /// … assuming at most this fraction of outliers (Monte-Carlo subset count, §4).
     pub lms_outlier_fraction: f64,
-    /// Med_R_and_T: residuals beyond this many robust σ (from the median) are outliers.
+    /// Med_R_and_T: a line is an outlier beyond this many σ̂ per end point (as an F-test against
+    /// the fit's own σ̂, so wider when few lines fix σ̂).
     pub lms_outlier_threshold: f64,
     /// Med_R_and_T: subsets whose 3D line directions have |det| below this are degenerate.
     pub degenerate_subset_det: f64,

@@ -59,8 +59,10 @@ struct Cli {
     /// minimised). The benchmark runs every cell with one setting, sized for its worst cell.
     #[arg(long, default_value_t = 0.5)]
     epsilon: f64,
-    /// Med_R_and_T's probability that some random subset is outlier-free.
-    #[arg(long, default_value_t = 0.999)]
+    /// Med_R_and_T's probability that some random subset is outlier-free. 0.99999 (87 subsets
+    /// at ε = 0.5) is what zero failures at 50 % outliers takes; at 0.999 (52 subsets) about
+    /// 0.2 % of those trials draw no good subset.
+    #[arg(long, default_value_t = 0.99999)]
     success: f64,
     /// Line error minimised (Kumar–Hanson eqs. 10–12). E2 measures angles, closest to the pixel
     /// error PoseLib minimises; the benchmark found it the more accurate of E1/E2.
