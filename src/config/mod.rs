@@ -99,6 +99,9 @@ pub struct NoiseConfig {
 pub struct MotionConfig {
     pub upright: bool,
     pub upright_height_m: f64,
+    /// Fastest plausible turn of the rig (deg/s): a relocalised or re-initialised pose that
+    /// turned further since the last good frame (beyond `maintenance.max_jump_deg`) is refused.
+    pub max_turn_rate_deg_s: f64,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -232,6 +235,7 @@ impl Default for MotionConfig {
         Self {
             upright: false,
             upright_height_m: 1.2,
+            max_turn_rate_deg_s: 360.0, // ours: heads turn at up to ~300–400°/s
         } // Koch–Teller §5.4
     }
 }
@@ -437,6 +441,7 @@ impl TrackerConfig {
         positive("solver.degenerate_subset_det", s.degenerate_subset_det)?;
         positive("noise.edge_normal_sigma_deg", self.noise.edge_normal_sigma_deg)?;
         positive("motion.upright_height_m", self.motion.upright_height_m)?;
+        positive("motion.max_turn_rate_deg_s", self.motion.max_turn_rate_deg_s)?;
         positive("budgets.frame_ms", self.budgets.frame_ms)?;
         positive("budgets.edges_ms", self.budgets.edges_ms)?;
         positive("budgets.frame_sync_tolerance_ms", self.budgets.frame_sync_tolerance_ms)?;

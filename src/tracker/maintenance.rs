@@ -95,11 +95,14 @@ impl Tracker<'_> {
         };
         let budget = Duration::from_secs_f64(self.cfg.initialisation.time_budget_ms / 1e3);
         self.init.set_time_budget(budget);
+        let turn_limit = self.max_turn_rad(timestamp_ns);
+        let turned_from = self.last_good.map_or(predicted.rotation, |p| p.rotation);
         let (candidates, _) = self.init.run(edges, &volume, &mut self.rng);
         let m = &self.cfg.maintenance;
         let best = candidates.first().copied().filter(|c| {
             c.inliers >= m.min_inliers as usize
                 && (c.pose.translation.vector - predicted.translation.vector).norm() <= 0.5 * d + m.max_jump_m
+                && c.pose.rotation.angle_to(&turned_from) <= turn_limit
         })?;
         self.stats.relocalisations += 1;
         let mut r = self.commit(&best.pose, edges, timestamp_ns);
@@ -363,6 +366,7 @@ impl Tracker<'_> {
             self.previous = Some((self.pose, self.last_time));
             self.pose = p;
             self.last_good = Some(p);
+            self.last_good_time = timestamp_ns;
             // 6. VIS(T_{t+1}).
             if let Some(set) = self.table.query(&Point3::from(p.translation.vector)) {
                 self.tracks.update_visible(set.segments);

@@ -149,6 +149,10 @@ pub struct Tracker<'m> {
     previous: Option<(Pose, u64)>,
     last_time: u64,
     last_good: Option<Pose>,
+    /// When `last_good` was seen (ns).
+    last_good_time: u64,
+    /// Post-loss searches double their volume after each widened attempt fails.
+    volume_level: u32,
     confirming: [Confirming; 4],
     confirm_count: usize,
     search_attempts: u32,
@@ -219,6 +223,8 @@ impl<'m> Tracker<'m> {
             previous: None,
             last_time: 0,
             last_good: None,
+            last_good_time: 0,
+            volume_level: 0,
             confirming: [Confirming {
                 pose: Pose::identity(),
                 score_sum: 0.0,
@@ -300,6 +306,12 @@ impl<'m> Tracker<'m> {
                     i.samples_per_cell as usize,
                 );
             }
+            // After a loss the rig cannot have turned further than its turn rate allows since
+            // the last good frame: the mirror twin of a symmetric room is refused.
+            let turn_limit = match (self.state, self.last_good) {
+                (TrackerState::Lost, Some(p)) => Some((p.rotation, self.max_turn_rad(timestamp_ns))),
+                _ => None,
+            };
             let (candidates, report) = self.init.run(edges, &volume, &mut self.rng);
             let min = self.cfg.maintenance.min_inliers as usize;
             // A candidate must explain at least `accept_explained_fraction` of the segments it
@@ -307,8 +319,16 @@ impl<'m> Tracker<'m> {
             // frame searches more broadly.
             let cap2 = self.cfg.maintenance.inlier_angle_deg.to_radians().powi(2);
             let max_score = (1.0 - i.accept_explained_fraction) * cap2;
-            let accepted = |c: &&Candidate| c.inliers >= min && c.score <= max_score;
-            self.widen = !candidates.iter().any(|c| accepted(&c));
+            let plausible = |c: &Candidate| turn_limit.is_none_or(|(r, limit)| c.pose.rotation.angle_to(&r) <= limit);
+            let accepted = |c: &&Candidate| c.inliers >= min && c.score <= max_score && plausible(c);
+            // A failed search is repeated once more broadly on the same volume; if that fails
+            // too, the volume doubles and the breadth is normal again (widening a large volume
+            // only lets the time budget cover fewer cells).
+            let failed = !candidates.iter().any(|c| accepted(&c));
+            if failed && self.widen {
+                self.volume_level += 1;
+            }
+            self.widen = failed && !self.widen;
             let mut n = 0;
             for c in candidates.iter().filter(accepted).take(self.confirming.len()) {
                 self.confirming[n] = Confirming {
@@ -390,13 +410,19 @@ impl<'m> Tracker<'m> {
         live().filter(|c| mean(c) > best).all(|c| best < ratio * mean(c))
     }
 
+    /// The largest turn since the last good frame that is still plausible at `timestamp_ns`.
+    fn max_turn_rad(&self, timestamp_ns: u64) -> f64 {
+        let elapsed_s = timestamp_ns.saturating_sub(self.last_good_time) as f64 * 1e-9;
+        self.cfg.maintenance.max_jump_deg.to_radians() + self.cfg.motion.max_turn_rate_deg_s.to_radians() * elapsed_s
+    }
+
     /// Where to search now: the hint or the whole model at first; after a loss, around the
     /// last good pose, the volume doubling in diameter with every failed attempt.
     fn search_volume(&self) -> SearchVolume {
         match (self.state, self.last_good) {
             (TrackerState::Lost, Some(p)) => {
                 let base = self.cfg.initialisation.search_diameter_m;
-                let grow = 2f64.powi(self.search_attempts.min(6) as i32);
+                let grow = 2f64.powi(self.volume_level.min(6) as i32);
                 SearchVolume {
                     centre: Point3::from(p.translation.vector),
                     diameter_m: Some(base * grow).filter(|d| *d < 64.0 * base),
@@ -417,6 +443,8 @@ impl<'m> Tracker<'m> {
         self.pose = *pose;
         self.previous = None;
         self.last_good = Some(*pose);
+        self.last_good_time = timestamp_ns;
+        self.volume_level = 0;
         let gate = Gate {
             cos_alpha: self.cfg.maintenance.inlier_angle_deg.to_radians().cos(),
             min_overlap: 0.5,
