@@ -1,19 +1,9 @@
 //! `omnitrack run` as a black box: bad arguments and inputs are one line and a non-zero exit,
 //! and a short replay writes a TUM trajectory (INTERFACES.md, "Command line").
 
-use std::process::Command;
+mod common;
 
-fn omnitrack(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_omnitrack"))
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8(out.stdout).unwrap(),
-        String::from_utf8(out.stderr).unwrap(),
-    )
-}
+use common::omnitrack;
 
 fn last_line(s: &str) -> &str {
     s.trim_end().lines().last().unwrap_or("")
@@ -55,27 +45,9 @@ fn bad_arguments_and_inputs_are_one_line_errors() {
 #[cfg(feature = "desk")]
 #[test]
 fn a_short_replay_writes_a_tum_trajectory_near_the_truth() {
-    use omnitrack::desk::recording::{cached_scenario, RecordingOptions};
-    use omnitrack::desk::scenario::{Scenario, ScenarioName};
     use omnitrack::trajectory::load_tum;
-    let dir = tempfile::tempdir().unwrap();
-    let rig = omnitrack::Rig::load(std::path::Path::new(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/firmware_config/ladybug2.toml"
-    )))
-    .unwrap();
-    let (rec, _) = cached_scenario(
-        dir.path(),
-        &Scenario::get(ScenarioName::Lab),
-        6,
-        11,
-        "default",
-        &rig,
-        &RecordingOptions::default(),
-        |_, _| {},
-    )
-    .unwrap();
-    let truth = load_tum(&rec.join("groundtruth.tum")).unwrap();
+    let lab = common::lab_recording(6);
+    let (dir, rec, truth) = (&lab.dir, &lab.rec, &lab.truth);
     let t0 = truth[0].pose.translation.vector;
     // A 1.5 m radius around a point 0.8 m from the true start.
     let init = format!("{},{},{},1.5", t0.x + 0.8, t0.y, t0.z);

@@ -232,23 +232,13 @@ impl FrameSink for TumSink {
         let Some(pose) = &r.result.pose else {
             return Ok(());
         };
-        let t = pose.translation.vector;
-        let q = pose.rotation.quaternion();
-        // The line of `trajectory::tum_line`, written straight into the buffer.
-        writeln!(
-            self.out,
-            "{}.{:09} {:.9} {:.9} {:.9} {:.12} {:.12} {:.12} {:.12}",
-            r.timestamp_ns / 1_000_000_000,
-            r.timestamp_ns % 1_000_000_000,
-            t.x,
-            t.y,
-            t.z,
-            q.i,
-            q.j,
-            q.k,
-            q.w
-        )
-        .map_err(|e| format!("{}: cannot write: {e}", self.path.display()))?;
+        let stamped = crate::trajectory::Stamped {
+            timestamp_ns: r.timestamp_ns,
+            pose: *pose,
+        };
+        crate::trajectory::write_tum_line(&mut self.out, &stamped)
+            .and_then(|()| writeln!(self.out))
+            .map_err(|e| format!("{}: cannot write: {e}", self.path.display()))?;
         self.poses += 1;
         Ok(())
     }

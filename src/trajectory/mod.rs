@@ -105,9 +105,18 @@ fn parse_seconds(s: &str) -> Option<u64> {
 
 /// One TUM line (no newline) for a pose.
 pub fn tum_line(s: &Stamped) -> String {
+    let mut line = Vec::with_capacity(96);
+    write_tum_line(&mut line, s).expect("writing to a Vec cannot fail");
+    String::from_utf8(line).expect("the line is ASCII")
+}
+
+/// [`tum_line`], written straight into `out` (the device path's trajectory
+/// file, where a String per frame would allocate).
+pub fn write_tum_line<W: std::io::Write>(out: &mut W, s: &Stamped) -> std::io::Result<()> {
     let t = s.pose.translation.vector;
     let q = s.pose.rotation.quaternion();
-    format!(
+    write!(
+        out,
         "{}.{:09} {:.9} {:.9} {:.9} {:.12} {:.12} {:.12} {:.12}",
         s.timestamp_ns / 1_000_000_000,
         s.timestamp_ns % 1_000_000_000,

@@ -7,6 +7,20 @@
 #![allow(dead_code)] // each test binary uses a different part
 
 use std::alloc::{GlobalAlloc, Layout, System};
+use std::process::Command;
+
+/// Runs the `omnitrack` binary: (exit code, stdout, stderr).
+pub fn omnitrack(args: &[&str]) -> (i32, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_omnitrack"))
+        .args(args)
+        .output()
+        .unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8(out.stdout).unwrap(),
+        String::from_utf8(out.stderr).unwrap(),
+    )
+}
 use std::cell::Cell;
 
 pub struct Counting;
