@@ -463,6 +463,7 @@ mod bench {
         println!("| detector | threads | p50 ms | p99 ms | max ms | edges/frame |");
         println!("| --- | ---: | ---: | ---: | ---: | ---: |");
         let mut ours_p50 = f64::NAN;
+        let mut phases = Vec::new();
         for threads in [2usize, 1] {
             let params = EdgeParams { threads, ..params() };
             let mut det = EdgeDetector::with_params(&rig, &config, params);
@@ -471,13 +472,28 @@ mod bench {
             }
             let mut ms = Vec::with_capacity(passes);
             let mut count = 0usize;
+            let mut phase_ns = [0u64; 3];
             for p in 0..passes {
                 let fs = &frames[p % frames.len()];
                 let t = Instant::now();
                 let n = det.detect(fs).len();
                 ms.push(t.elapsed().as_secs_f64() * 1e3);
                 count += n;
+                for k in 0..rig.sensors.len() {
+                    let st = det.sensor_stats(k);
+                    phase_ns[0] += st.pixel_ns as u64;
+                    phase_ns[1] += st.chain_ns as u64;
+                    phase_ns[2] += st.merge_ns as u64;
+                }
             }
+            let per_image = |ns: u64| ns as f64 / (passes * rig.sensors.len()) as f64 / 1e3;
+            phases.push(format!(
+                "{} thread(s), mean µs per sensor image: pixel pass {:.0}, chains (link, fit, hue) {:.0}, merge and select {:.0}",
+                det.threads(),
+                per_image(phase_ns[0]),
+                per_image(phase_ns[1]),
+                per_image(phase_ns[2])
+            ));
             ms.sort_by(f64::total_cmp);
             if threads == 2 {
                 ours_p50 = percentile(&ms, 0.5);
@@ -493,6 +509,10 @@ mod bench {
         }
         if opencv {
             run_opencv(&dir, ours_p50);
+        }
+        println!();
+        for line in &phases {
+            println!("{line}");
         }
         println!();
         println!("PNG frames: {}", dir.display());

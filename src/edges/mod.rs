@@ -21,6 +21,7 @@
 //! spread over a persistent pool of worker threads (the calling thread works too) fed through
 //! bounded crossbeam channels.
 
+mod gradient;
 mod hue;
 mod sensor;
 

@@ -3,13 +3,15 @@
 //! table, bilinear) → planes through the optical centre (split where a chain bends, merge
 //! collinear pieces, also across chains) → hue strips → the strongest `max_edges` edges.
 
+use super::gradient::{bin, bin_step, gradients_and_edgels, Rows};
 use super::hue::{HueAcc, HueTable};
-use super::{Edge, EdgeParams, HueSignature, Smoothing};
+use super::{Edge, EdgeParams, HueSignature};
 use crate::capture::SensorImage;
 use crate::geometry::{EdgePlane, Lens};
 use crate::rig::Sensor;
 use nalgebra::{Matrix3, Point2, Point3, Unit, UnitQuaternion, Vector3};
 use std::sync::Arc;
+use std::time::Instant;
 
 /// Longest chain traced in one go (a longer one is cut; the rest is traced as another chain).
 const MAX_CHAIN: usize = 4096;
@@ -34,6 +36,9 @@ struct Candidate {
     left: HueAcc,
     right: HueAcc,
     alive: bool,
+    /// Merged in the last pass of `merge_across_chains`, and in the current one.
+    changed: bool,
+    merged_now: bool,
 }
 
 /// Every buffer one sensor needs, sized at start-up.
@@ -52,13 +57,8 @@ pub(crate) struct Workspace {
     strip_px: usize,
     max_edges: usize,
     min_len_rad: f64,
-    /// The image as three colour planes (R, G, B), u8.
-    planes: Vec<u8>,
-    /// A colour channel smoothed by the binomial [1 2 1]² (×16), u16; the horizontal pass goes to `hblur`.
-    smooth: Vec<u16>,
-    hblur: Vec<u16>,
-    col_sum: Vec<i16>,
-    col_diff: Vec<i16>,
+    /// Ring buffers of the pixel pass.
+    rows: Rows,
     gx: Vec<i16>,
     gy: Vec<i16>,
     /// |gx| + |gy| ≤ 2 · 4 · 4 · 4 · 255 = 32640: fits i16 (signed, so that SSE2 compares it).
@@ -92,6 +92,11 @@ pub struct SensorStats {
     pub merged: u32,
     /// Edges dropped by the cap on edges per sensor.
     pub capped: u32,
+    /// Time (ns) in the pixel pass (gradients and non-maximum suppression), in linking and
+    /// fitting chains (hue included), and in merging and selecting candidates.
+    pub pixel_ns: u32,
+    pub chain_ns: u32,
+    pub merge_ns: u32,
 }
 
 impl Workspace {
@@ -120,11 +125,7 @@ impl Workspace {
             strip_px,
             max_edges,
             min_len_rad: min_len_deg.to_radians(),
-            planes: vec![0; 3 * n],
-            smooth: vec![0; n],
-            hblur: vec![0; n],
-            col_sum: vec![0; w],
-            col_diff: vec![0; w],
+            rows: Rows::new(w),
             gx: vec![0; n],
             gy: vec![0; n],
             mag: vec![0; n],
@@ -155,174 +156,28 @@ impl Workspace {
         }
         // Colour gradient: per pixel, the gradient of the channel (R, G or B) where it is largest,
         // so that edges between colours of equal brightness are found too.
-        self.planes(img.pixels());
-        for c in 0..3 {
-            self.smooth(c);
-            self.sobel(c > 0);
-        }
-        self.nms();
+        let t0 = Instant::now();
+        self.stats.edgels = gradients_and_edgels(
+            img.pixels(),
+            self.w,
+            self.h,
+            self.params.smoothing,
+            self.params.gradient_threshold.min(i16::MAX as u16) as i16,
+            &mut self.rows,
+            &mut self.gx,
+            &mut self.gy,
+            &mut self.mag,
+            &mut self.map,
+        );
+        let t1 = Instant::now();
         self.link(img.pixels());
+        let t2 = Instant::now();
         self.merge_across_chains();
         self.select();
-    }
-
-    /// Splits the RGB image into three planes.
-    #[inline(never)]
-    fn planes(&mut self, rgb: &[u8]) {
-        let n = self.w * self.h;
-        let (r, rest) = self.planes.split_at_mut(n);
-        let (g, b) = rest.split_at_mut(n);
-        for (((p, r), g), b) in rgb
-            .chunks_exact(3)
-            .zip(r.iter_mut())
-            .zip(g.iter_mut())
-            .zip(b.iter_mut())
-        {
-            *r = p[0];
-            *g = p[1];
-            *b = p[2];
-        }
-    }
-
-    /// Plane `c` smoothed for the Sobel (×16, u16): `hblur` by the binomial [1 2 1] across
-    /// columns (×4), `smooth` down rows. With [`Smoothing::Along`] `smooth` is the vertical pass
-    /// of the plane itself, so that the Sobel's x derivative is taken of `smooth` (smoothing along
-    /// a vertical edge only) and its y derivative of `hblur`; with [`Smoothing::Full`] `smooth`
-    /// is the vertical pass of `hblur` (the binomial [1 2 1]², both derivatives of it). Borders
-    /// replicate.
-    #[inline(never)]
-    fn smooth(&mut self, c: usize) {
-        let (w, h) = (self.w, self.h);
-        let n = w - 2;
-        let plane = &self.planes[c * w * h..(c + 1) * w * h];
-        let mode = self.params.smoothing;
-        if mode == Smoothing::None {
-            for (d, &p) in self.smooth.iter_mut().zip(plane) {
-                *d = 16 * p as u16;
-            }
-            return;
-        }
-        let hscale: u16 = if mode == Smoothing::Along { 4 } else { 1 };
-        for (src, dst) in plane.chunks_exact(w).zip(self.hblur.chunks_exact_mut(w)) {
-            let (a, b, cc) = (&src[..n], &src[1..n + 1], &src[2..n + 2]);
-            let out = &mut dst[1..n + 1];
-            for u in 0..n {
-                out[u] = hscale * (a[u] as u16 + 2 * b[u] as u16 + cc[u] as u16);
-            }
-            dst[0] = 4 * hscale * src[0] as u16;
-            dst[w - 1] = 4 * hscale * src[w - 1] as u16;
-        }
-        if mode == Smoothing::Along {
-            for v in 0..h {
-                let (r0, r2) = (v.saturating_sub(1), (v + 1).min(h - 1));
-                let a = &plane[r0 * w..r0 * w + w];
-                let b = &plane[v * w..v * w + w];
-                let c = &plane[r2 * w..r2 * w + w];
-                let out = &mut self.smooth[v * w..v * w + w];
-                for u in 0..w {
-                    out[u] = 4 * (a[u] as u16 + 2 * b[u] as u16 + c[u] as u16);
-                }
-            }
-            return;
-        }
-        for v in 0..h {
-            let (r0, r2) = (v.saturating_sub(1), (v + 1).min(h - 1));
-            let a = &self.hblur[r0 * w..r0 * w + w];
-            let b = &self.hblur[v * w..v * w + w];
-            let c = &self.hblur[r2 * w..r2 * w + w];
-            let out = &mut self.smooth[v * w..v * w + w];
-            for u in 0..w {
-                out[u] = a[u] + 2 * b[u] + c[u];
-            }
-        }
-    }
-
-    /// Integer 3×3 Sobel on the smoothed channel (so a 5×5 derivative), separable: the x
-    /// derivative of `smooth`, the y derivative of `hblur` under [`Smoothing::Along`], else of
-    /// `smooth` too; with `fold` a pixel keeps the earlier channels' gradient unless this one's
-    /// is larger. Border rows and columns stay 0.
-    #[inline(never)]
-    fn sobel(&mut self, fold: bool) {
-        let w = self.w;
-        let n = w - 2;
-        let ysrc = if self.params.smoothing == Smoothing::Along {
-            &self.hblur
-        } else {
-            &self.smooth
-        };
-        for v in 1..self.h - 1 {
-            let r0 = &self.smooth[(v - 1) * w..(v - 1) * w + w];
-            let r1 = &self.smooth[v * w..v * w + w];
-            let r2 = &self.smooth[(v + 1) * w..(v + 1) * w + w];
-            let y0 = &ysrc[(v - 1) * w..(v - 1) * w + w];
-            let y2 = &ysrc[(v + 1) * w..(v + 1) * w + w];
-            let cs = &mut self.col_sum[..w];
-            let cd = &mut self.col_diff[..w];
-            for u in 0..w {
-                cs[u] = r0[u] as i16 + 2 * r1[u] as i16 + r2[u] as i16;
-                cd[u] = y2[u] as i16 - y0[u] as i16;
-            }
-            let (s0, s2) = (&self.col_sum[..n], &self.col_sum[2..n + 2]);
-            let (d0, d1, d2) = (&self.col_diff[..n], &self.col_diff[1..n + 1], &self.col_diff[2..n + 2]);
-            let gx = &mut self.gx[v * w + 1..v * w + 1 + n];
-            let gy = &mut self.gy[v * w + 1..v * w + 1 + n];
-            let mag = &mut self.mag[v * w + 1..v * w + 1 + n];
-            sobel_row(s0, s2, d0, d1, d2, gx, gy, mag, fold);
-        }
-    }
-
-    /// Gradient bin: 1 horizontal gradient, 2 vertical, 3 diagonal with gx·gy > 0, 4 the other.
-    #[inline]
-    fn bin(gx: i16, gy: i16) -> u8 {
-        let (ax, ay) = (gx.unsigned_abs() as u32, gy.unsigned_abs() as u32);
-        // tan 22.5° ≈ 0.4142 ≈ 53/128.
-        if ay * 128 <= ax * 53 {
-            1
-        } else if ax * 128 <= ay * 53 {
-            2
-        } else if (gx > 0) == (gy > 0) {
-            3
-        } else {
-            4
-        }
-    }
-
-    /// Index offset of the gradient direction of a bin.
-    #[inline]
-    fn bin_step(&self, bin: u8) -> (isize, isize) {
-        match bin {
-            1 => (1, 0),
-            2 => (0, 1),
-            3 => (1, 1),
-            _ => (1, -1),
-        }
-    }
-
-    #[inline(never)]
-    fn nms(&mut self) {
-        let w = self.w;
-        let thr = self.params.gradient_threshold.min(i16::MAX as u16) as i16;
-        let mut count = 0u32;
-        for v in 1..self.h - 1 {
-            let row = v * w;
-            for u in 1..w - 1 {
-                let i = row + u;
-                let m = self.mag[i];
-                if m < thr {
-                    self.map[i] = 0;
-                    continue;
-                }
-                let bin = Self::bin(self.gx[i], self.gy[i]);
-                let (du, dv) = self.bin_step(bin);
-                let off = dv * w as isize + du;
-                let a = self.mag[(i as isize - off) as usize];
-                let b = self.mag[(i as isize + off) as usize];
-                let keep = m > a && m >= b;
-                self.map[i] = if keep { bin } else { 0 };
-                count += keep as u32;
-            }
-        }
-        self.stats.edgels = count;
+        let t3 = Instant::now();
+        self.stats.pixel_ns = (t1 - t0).as_nanos() as u32;
+        self.stats.chain_ns = (t2 - t1).as_nanos() as u32;
+        self.stats.merge_ns = (t3 - t2).as_nanos() as u32;
     }
 
     /// Whether the gradient axes at i and j agree within ~50° (polarity is not compared: the
@@ -365,17 +220,27 @@ impl Workspace {
         let mut map = std::mem::take(&mut self.map);
         let mut fwd = std::mem::take(&mut self.fwd);
         let mut bwd = std::mem::take(&mut self.bwd);
-        for v in 1..h - 1 {
-            for u in 1..w - 1 {
-                let i = v * w + u;
+        // Row-major over the interior (the map's border is always 0), eight empty cells at a
+        // time: most of the map is empty.
+        let end = (h - 1) * w;
+        let mut next = w;
+        while next < end {
+            let i = next;
+            if i + 8 <= end {
+                let mut word = [0u8; 8];
+                word.copy_from_slice(&map[i..i + 8]);
+                if u64::from_ne_bytes(word) == 0 {
+                    next += 8;
+                    continue;
+                }
+            }
+            next += 1;
+            {
                 if map[i] == 0 {
                     continue;
                 }
                 map[i] = 0;
-                // Tangent = gradient turned by +90°: (−gy, gx).
-                let (gx, gy) = (self.gx[i] as f64, self.gy[i] as f64);
-                let a = gx.atan2(-gy);
-                let dir = ((a / std::f64::consts::FRAC_PI_4).round() as i64).rem_euclid(8) as usize;
+                let dir = tangent_octant(self.gx[i], self.gy[i]);
                 fwd.clear();
                 bwd.clear();
                 Self::trace(&mut map, self, i, dir, &mut fwd, MAX_CHAIN - 1);
@@ -413,8 +278,8 @@ impl Workspace {
         for i in idx {
             let i = i as usize;
             let (gx, gy) = (self.gx[i], self.gy[i]);
-            let bin = Self::bin(gx, gy);
-            let (du, dv) = self.bin_step(bin);
+            let bin = bin(gx, gy);
+            let (du, dv) = bin_step(bin);
             let off = dv * w as isize + du;
             let m0 = self.mag[i] as f32;
             let ma = self.mag[(i as isize - off) as usize] as f32;
@@ -637,6 +502,8 @@ impl Workspace {
             left: lacc,
             right: racc,
             alive: true,
+            changed: false,
+            merged_now: false,
         };
         self.stats.candidates += 1;
         if self.cands.len() < self.cands.capacity() {
@@ -664,14 +531,15 @@ impl Workspace {
         let cos_max = self.params.merge_angle_rad.cos();
         let gap_max = self.params.merge_gap_rad;
         let tol = self.params.split_tolerance_rad.sin();
-        for _pass in 0..3 {
+        for pass in 0..3 {
             let mut merged_any = false;
             for i in 0..self.cands.len() {
                 if !self.cands[i].alive {
                     continue;
                 }
                 for j in i + 1..self.cands.len() {
-                    if !self.cands[j].alive {
+                    // A pair whose members are unchanged since the last pass was tried then.
+                    if !self.cands[j].alive || (pass > 0 && !self.cands[i].changed && !self.cands[j].changed) {
                         continue;
                     }
                     let (ci, cj) = (&self.cands[i], &self.cands[j]);
@@ -684,11 +552,15 @@ impl Workspace {
                         self.cands[j].alive = false;
                         self.stats.merged += 1;
                         merged_any = true;
+                        self.cands[i].merged_now = true;
                     }
                 }
             }
             if !merged_any {
                 break;
+            }
+            for c in self.cands.iter_mut() {
+                c.changed = std::mem::take(&mut c.merged_now);
             }
         }
         self.cands.retain(|c| c.alive);
@@ -746,54 +618,6 @@ impl Workspace {
     }
 }
 
-/// One row of the Sobel on the vertical sums `s` and differences `d` (u ± 1 as slices of equal
-/// length); with `fold` a pixel keeps its earlier gradient unless the new one is larger. A free
-/// function over slices, so that the compiler knows they do not alias and vectorises it.
-#[allow(clippy::too_many_arguments)]
-#[inline(always)]
-fn sobel_row(
-    s0: &[i16],
-    s2: &[i16],
-    d0: &[i16],
-    d1: &[i16],
-    d2: &[i16],
-    gx: &mut [i16],
-    gy: &mut [i16],
-    mag: &mut [i16],
-    fold: bool,
-) {
-    let n = gx
-        .len()
-        .min(gy.len())
-        .min(mag.len())
-        .min(s0.len())
-        .min(s2.len())
-        .min(d0.len())
-        .min(d1.len())
-        .min(d2.len());
-    let (s0, s2, d0, d1, d2) = (&s0[..n], &s2[..n], &d0[..n], &d1[..n], &d2[..n]);
-    let (gx, gy, mag) = (&mut gx[..n], &mut gy[..n], &mut mag[..n]);
-    if fold {
-        for u in 0..n {
-            let x = s2[u].wrapping_sub(s0[u]);
-            let y = d0[u].wrapping_add(d1[u].wrapping_mul(2)).wrapping_add(d2[u]);
-            let m = x.wrapping_abs().wrapping_add(y.wrapping_abs());
-            let keep = ((m > mag[u]) as i16).wrapping_neg();
-            gx[u] = (x & keep) | (gx[u] & !keep);
-            gy[u] = (y & keep) | (gy[u] & !keep);
-            mag[u] = (m & keep) | (mag[u] & !keep);
-        }
-    } else {
-        for u in 0..n {
-            let x = s2[u].wrapping_sub(s0[u]);
-            let y = d0[u].wrapping_add(d1[u].wrapping_mul(2)).wrapping_add(d2[u]);
-            gx[u] = x;
-            gy[u] = y;
-            mag[u] = x.wrapping_abs().wrapping_add(y.wrapping_abs());
-        }
-    }
-}
-
 /// Rays further off their piece's plane than this many RMS are left out of its fit…
 const OUTLIER_SIGMAS: f64 = 2.5;
 /// …but never rays within this (rad) of it.
@@ -817,14 +641,80 @@ fn edgel_weight(mag: f32) -> f64 {
 }
 
 /// Unit normal of the plane through the origin best fitting rays with moments `m`: the
-/// eigenvector of the smallest eigenvalue of Σ r rᵀ.
+/// eigenvector of the smallest eigenvalue λ₁ of M = Σ w r rᵀ.
+///
+/// Rays of an edge lie close to a plane, so λ₁ is tiny beside λ₂ ≤ λ₃, and the adjugate
+/// adj M = λ₂λ₃ v₁v₁ᵀ + λ₁λ₃ v₂v₂ᵀ + λ₁λ₂ v₃v₃ᵀ is v₁v₁ᵀ up to a part λ₁/λ₂ as large: its longest
+/// column is v₁ to that relative error, and each further product with adj M squares it (inverse
+/// iteration without a solve). A fraction of a general symmetric eigen-decomposition's cost,
+/// which matters because every piece and every merge of every frame fits a plane. Degenerate
+/// moments (rank ≤ 1: one ray direction) fall back to the full decomposition.
 fn plane_normal(m: &Moments) -> Option<Vector3<f64>> {
+    let r0 = Vector3::new(m[0], m[1], m[2]);
+    let r1 = Vector3::new(m[1], m[3], m[4]);
+    let r2 = Vector3::new(m[2], m[4], m[5]);
+    let cols = [r1.cross(&r2), r2.cross(&r0), r0.cross(&r1)];
+    let norms = cols.map(|c| c.norm_squared());
+    let k = if norms[0] >= norms[1] && norms[0] >= norms[2] {
+        0
+    } else if norms[1] >= norms[2] {
+        1
+    } else {
+        2
+    };
+    let scale = m[0] + m[3] + m[5];
+    if !(norms[k].is_finite() && norms[k] > 1e-28 * scale.powi(4)) {
+        return plane_normal_eigen(m);
+    }
+    let mut v = cols[k] / norms[k].sqrt();
+    for _ in 0..2 {
+        let next = cols[0] * v.x + cols[1] * v.y + cols[2] * v.z;
+        let n = next.norm();
+        if !(n.is_finite() && n > 0.0) {
+            break;
+        }
+        v = next / n;
+    }
+    Some(v)
+}
+
+/// [`plane_normal`] by a full symmetric eigen-decomposition.
+fn plane_normal_eigen(m: &Moments) -> Option<Vector3<f64>> {
     let mat = Matrix3::new(m[0], m[1], m[2], m[1], m[3], m[4], m[2], m[4], m[5]);
     let e = mat.symmetric_eigen();
     let k = e.eigenvalues.imin();
     let v: Vector3<f64> = e.eigenvectors.column(k).into_owned();
     let n = v.norm();
     (n.is_finite() && n > 0.5).then(|| v / n)
+}
+
+/// Direction index into [`DIRS`] of the edge tangent (the gradient turned by +90°: (−gy, gx)),
+/// the nearest of the eight 45° steps.
+#[inline]
+fn tangent_octant(gx: i16, gy: i16) -> usize {
+    let (x, y) = (-(gy as i32), gx as i32);
+    let (ax, ay) = (x.unsigned_abs(), y.unsigned_abs());
+    // tan 22.5° ≈ 53/128, as in the gradient bins.
+    if ay * 128 <= ax * 53 {
+        if x > 0 {
+            0
+        } else {
+            4
+        }
+    } else if ax * 128 <= ay * 53 {
+        if y > 0 {
+            2
+        } else {
+            6
+        }
+    } else {
+        match (x > 0, y > 0) {
+            (true, true) => 1,
+            (false, true) => 3,
+            (false, false) => 5,
+            (true, false) => 7,
+        }
+    }
 }
 
 /// nᵀ M n: the sum of squared sines of the rays' angles off the plane.
@@ -915,6 +805,8 @@ fn try_merge(ci: &Candidate, cj: &Candidate, gap_max: f64, tol: f64) -> Option<C
         left,
         right,
         alive: true,
+        changed: false,
+        merged_now: false,
     })
 }
 
@@ -930,4 +822,89 @@ pub(crate) fn ray_table(sensor: &Sensor) -> Arc<[[f32; 3]]> {
         }
     }
     t.into()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::rngs::SmallRng;
+    use rand::{Rng, SeedableRng};
+
+    /// The adjugate's normal is the smallest eigenvector, on rays from short and long arcs of
+    /// random great circles with noise off the plane, down to pieces of a few edgels.
+    #[test]
+    fn plane_normal_matches_the_eigen_decomposition() {
+        let mut rng = SmallRng::seed_from_u64(5);
+        let mut worst = 0.0f64;
+        for trial in 0..2000 {
+            let n = Unit::new_normalize(Vector3::new(
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+            ));
+            let e1 = n.cross(&Vector3::new(0.3, -0.5, 0.8)).normalize();
+            let e2 = n.cross(&e1);
+            let length = [0.02f64, 0.1, 0.5, 2.0][trial % 4];
+            let noise = [0.0f64, 1e-5, 1e-4, 1e-3][(trial / 4) % 4];
+            let count = [5usize, 12, 80][(trial / 16) % 3];
+            let start = rng.random_range(0.0..6.0);
+            let mut m: Moments = [0.0; 7];
+            for k in 0..count {
+                let a = start + length * k as f64 / (count - 1) as f64;
+                let off = noise * rng.random_range(-1.0..1.0);
+                let r = (e1 * a.cos() + e2 * a.sin() + n.into_inner() * off).normalize();
+                let o = weighted_outer(&r, rng.random_range(0.5..2.0));
+                for (x, y) in m.iter_mut().zip(o) {
+                    *x += y;
+                }
+            }
+            let fast = plane_normal(&m).expect("a normal");
+            let slow = plane_normal_eigen(&m).expect("a normal");
+            let angle = fast.cross(&slow).norm().min(1.0).asin();
+            // The normal is only defined to about noise / length: compare there.
+            worst = worst.max(angle * length / (noise + 1e-9 * length));
+            // Both minimise nᵀMn: the fast one is never worse than the decomposition.
+            assert!(
+                plane_residual(&m, &fast) <= plane_residual(&m, &slow) * (1.0 + 1e-9) + 1e-14 * m[6],
+                "trial {trial} len {length} noise {noise} count {count}: {:e} vs {:e}, angle {angle:e}",
+                plane_residual(&m, &fast),
+                plane_residual(&m, &slow)
+            );
+        }
+        assert!(worst < 1e-2, "worst angle {worst:e}, relative to noise / length");
+    }
+
+    /// One ray direction only: no plane, and no panic.
+    #[test]
+    fn plane_normal_of_degenerate_moments_falls_back() {
+        let r = Vector3::new(0.0, 0.6, 0.8);
+        let m = weighted_outer(&r, 3.0);
+        let n = plane_normal(&m).expect("some plane through the ray");
+        assert!(n.dot(&r).abs() < 1e-9);
+        // No rays at all: whatever comes back is a unit vector, never NaN.
+        if let Some(v) = plane_normal(&[0.0; 7]) {
+            assert!((v.norm() - 1.0).abs() < 1e-9);
+        }
+    }
+
+    /// The integer octant of the tangent is the rounded angle of (−gy, gx).
+    #[test]
+    fn tangent_octant_rounds_the_tangent_angle() {
+        let mut rng = SmallRng::seed_from_u64(9);
+        for _ in 0..20000 {
+            let gx: i16 = rng.random_range(-4000..4000);
+            let gy: i16 = rng.random_range(-4000..4000);
+            if gx == 0 && gy == 0 {
+                continue;
+            }
+            let a = (gx as f64).atan2(-(gy as f64));
+            let exact = a / std::f64::consts::FRAC_PI_4;
+            // 53/128 stands for tan 22.5°: at most 2e-4 rad off the true boundaries.
+            if (exact - exact.round()).abs() > 0.5 - 1e-3 {
+                continue;
+            }
+            let want = (exact.round() as i64).rem_euclid(8) as usize;
+            assert_eq!(tangent_octant(gx, gy), want, "gx {gx} gy {gy}");
+        }
+    }
 }

@@ -1,0 +1,327 @@
+//! The pixel stage of edge extraction, in one pass down the image: RGB8 rows → per colour
+//! channel, integer smoothing and Sobel derivatives → per pixel, the gradient of the channel where
+//! it is largest (`gx`, `gy`, `mag`) → non-maximum suppression into the edgel map (`map`).
+//!
+//! Rows stream through small ring buffers (three rows of each intermediate per channel), so the
+//! working set stays in the first-level cache and each full-size output is written once. The
+//! kernels are plain loops over equal-length slices, which the compiler vectorises; the whole
+//! pass is compiled for AVX2 and AVX-512BW as well as the baseline and picks the best the CPU has
+//! at run time (`multiversion`), since a rig's computer may have either.
+
+use super::Smoothing;
+use multiversion::multiversion;
+
+/// Ring buffers of one image width, sized at start-up.
+pub(crate) struct Rows {
+    w: usize,
+    /// Planar colour rows: [slot][channel][u], three slots (rows v−1, v, v+1).
+    p: Vec<u8>,
+    /// The rows whose x derivative is taken (smoothed down rows under [`Smoothing::Along`]),
+    /// ×16: [slot][channel][u].
+    x: Vec<u16>,
+    /// The rows whose y derivative is taken (smoothed across columns), ×16: [slot][channel][u].
+    y: Vec<u16>,
+    /// Scratch rows: horizontal passes (Full smoothing), column sums and differences.
+    t: Vec<u16>,
+    cs: Vec<i16>,
+    cd: Vec<i16>,
+}
+
+impl Rows {
+    pub fn new(w: usize) -> Rows {
+        Rows {
+            w,
+            p: vec![0; 9 * w],
+            x: vec![0; 9 * w],
+            y: vec![0; 9 * w],
+            t: vec![0; 3 * w],
+            cs: vec![0; w],
+            cd: vec![0; w],
+        }
+    }
+}
+
+/// Gradients and edgel map of an RGB8 image (`rgb`: rows of 3·w bytes). Writes rows 1..h−1,
+/// columns 1..w−1 of `gx`, `gy`, `mag` and `map` (the border stays as it is: zero); returns the
+/// number of edgels. `map` gets 0 (no edgel) or the gradient bin 1..=4 (see [`bin`]).
+#[allow(clippy::too_many_arguments)]
+#[multiversion(targets(
+    "x86_64+sse3+ssse3+sse4.1+sse4.2+popcnt+avx+avx2+bmi1+bmi2+fma+lzcnt+avx512f+avx512bw+avx512cd+avx512dq+avx512vl",
+    "x86_64+sse3+ssse3+sse4.1+sse4.2+popcnt+avx+avx2+bmi1+bmi2+fma+lzcnt",
+    "x86_64+sse3+ssse3+sse4.1+sse4.2+popcnt",
+))]
+pub(crate) fn gradients_and_edgels(
+    rgb: &[u8],
+    w: usize,
+    h: usize,
+    smoothing: Smoothing,
+    threshold: i16,
+    rows: &mut Rows,
+    gx: &mut [i16],
+    gy: &mut [i16],
+    mag: &mut [i16],
+    map: &mut [u8],
+) -> u32 {
+    let n = w * h;
+    if w < 3 || h < 3 || rgb.len() < 3 * n || gx.len() < n || gy.len() < n || mag.len() < n || map.len() < n {
+        return 0;
+    }
+    debug_assert_eq!(rows.w, w);
+    let slot = |v: usize| v % 3;
+    let row = |v: usize| &rgb[3 * w * v..3 * w * (v + 1)];
+    deinterleave(row(0), &mut rows.p[0..3 * w], w);
+    deinterleave(row(1), &mut rows.p[3 * w..6 * w], w);
+    let mut edgels = 0;
+    for v in 0..h {
+        // Planar rows v−1, v, v+1 (replicated at the borders) are in the ring: the smoothed rows
+        // of v need them.
+        if v + 1 < h && v >= 1 {
+            let s = slot(v + 1);
+            deinterleave(row(v + 1), &mut rows.p[3 * w * s..3 * w * (s + 1)], w);
+        }
+        let (up, mid, down) = (slot(v.saturating_sub(1)), slot(v), slot((v + 1).min(h - 1)));
+        for c in 0..3 {
+            let pr = |s: usize| (3 * s + c) * w..(3 * s + c + 1) * w;
+            let out = slot(v) * 3 + c;
+            let (pa, pb, pc) = (&rows.p[pr(up)], &rows.p[pr(mid)], &rows.p[pr(down)]);
+            let xo = &mut rows.x[out * w..(out + 1) * w];
+            let yo = &mut rows.y[out * w..(out + 1) * w];
+            match smoothing {
+                Smoothing::Along => {
+                    vertical_u8(pa, pb, pc, 4, xo);
+                    horizontal_u8(pb, 4, yo);
+                }
+                Smoothing::None => {
+                    for (d, &p) in xo.iter_mut().zip(pb) {
+                        *d = 16 * p as u16;
+                    }
+                    yo.copy_from_slice(xo);
+                }
+                Smoothing::Full => {
+                    let (ta, rest) = rows.t.split_at_mut(w);
+                    let (tb, tc) = rest.split_at_mut(w);
+                    horizontal_u8(pa, 1, ta);
+                    horizontal_u8(pb, 1, tb);
+                    horizontal_u8(pc, 1, tc);
+                    vertical_u16(ta, tb, tc, xo);
+                    yo.copy_from_slice(xo);
+                }
+            }
+        }
+        // The Sobel of row s = v − 1 needs the smoothed rows s − 1, s, s + 1.
+        if v >= 2 {
+            let s = v - 1;
+            let (a, b, c) = (slot(s - 1), slot(s), slot(s + 1));
+            let span = s * w + 1..s * w + w - 1;
+            for ch in 0..3 {
+                let xr = |k: usize| &rows.x[(3 * k + ch) * w..(3 * k + ch + 1) * w];
+                let yr = |k: usize| &rows.y[(3 * k + ch) * w..(3 * k + ch + 1) * w];
+                let (x0, x1, x2, y0, y2) = (xr(a), xr(b), xr(c), yr(a), yr(c));
+                column_sums(x0, x1, x2, y0, y2, &mut rows.cs, &mut rows.cd);
+                sobel_row(
+                    &rows.cs[..w - 2],
+                    &rows.cs[2..],
+                    &rows.cd[..w - 2],
+                    &rows.cd[1..w - 1],
+                    &rows.cd[2..],
+                    &mut gx[span.clone()],
+                    &mut gy[span.clone()],
+                    &mut mag[span.clone()],
+                    ch > 0,
+                );
+            }
+            // Rows s − 2..=s of `mag` are final: suppress non-maxima on row s − 1.
+            if s >= 2 {
+                edgels += nms_row(gx, gy, mag, map, w, s - 1, threshold);
+            }
+        }
+    }
+    // The last interior row: row h − 1 of `mag` is the zero border.
+    edgels + nms_row(gx, gy, mag, map, w, h - 2, threshold)
+}
+
+/// RGB8 row → three planar rows (R, G, B) of length w.
+#[inline(always)]
+fn deinterleave(rgb: &[u8], out: &mut [u8], w: usize) {
+    let (r, rest) = out.split_at_mut(w);
+    let (g, b) = rest.split_at_mut(w);
+    for (((p, r), g), b) in rgb[..3 * w]
+        .chunks_exact(3)
+        .zip(r.iter_mut())
+        .zip(g.iter_mut())
+        .zip(b.iter_mut())
+    {
+        *r = p[0];
+        *g = p[1];
+        *b = p[2];
+    }
+}
+
+/// `scale` · [1 2 1] down three rows.
+#[inline(always)]
+fn vertical_u8(a: &[u8], b: &[u8], c: &[u8], scale: u16, out: &mut [u16]) {
+    let n = out.len().min(a.len()).min(b.len()).min(c.len());
+    let (a, b, c, out) = (&a[..n], &b[..n], &c[..n], &mut out[..n]);
+    for u in 0..n {
+        out[u] = scale * (a[u] as u16 + 2 * b[u] as u16 + c[u] as u16);
+    }
+}
+
+/// [1 2 1] down three rows.
+#[inline(always)]
+fn vertical_u16(a: &[u16], b: &[u16], c: &[u16], out: &mut [u16]) {
+    let n = out.len().min(a.len()).min(b.len()).min(c.len());
+    let (a, b, c, out) = (&a[..n], &b[..n], &c[..n], &mut out[..n]);
+    for u in 0..n {
+        out[u] = a[u] + 2 * b[u] + c[u];
+    }
+}
+
+/// The Sobel's vertical halves: [1 2 1] down the x rows, [−1 0 1] down the y rows. Each value is
+/// at most 4 · 16 · 255 = 16320, so it fits i16.
+#[inline(always)]
+fn column_sums(x0: &[u16], x1: &[u16], x2: &[u16], y0: &[u16], y2: &[u16], cs: &mut [i16], cd: &mut [i16]) {
+    let n = cs
+        .len()
+        .min(cd.len())
+        .min(x0.len())
+        .min(x1.len())
+        .min(x2.len())
+        .min(y0.len())
+        .min(y2.len());
+    let (x0, x1, x2, y0, y2) = (&x0[..n], &x1[..n], &x2[..n], &y0[..n], &y2[..n]);
+    let (cs, cd) = (&mut cs[..n], &mut cd[..n]);
+    for u in 0..n {
+        cs[u] = (x0[u] + 2 * x1[u] + x2[u]) as i16;
+        cd[u] = y2[u] as i16 - y0[u] as i16;
+    }
+}
+
+/// `scale` · [1 2 1] across columns, the border replicated.
+#[inline(always)]
+fn horizontal_u8(src: &[u8], scale: u16, out: &mut [u16]) {
+    let w = src.len().min(out.len());
+    if w < 3 {
+        return;
+    }
+    let n = w - 2;
+    let (a, b, c) = (&src[..n], &src[1..n + 1], &src[2..n + 2]);
+    let o = &mut out[1..n + 1];
+    for u in 0..n {
+        o[u] = scale * (a[u] as u16 + 2 * b[u] as u16 + c[u] as u16);
+    }
+    out[0] = 4 * scale * src[0] as u16;
+    out[w - 1] = 4 * scale * src[w - 1] as u16;
+}
+
+/// One row of the Sobel on the column sums `s` and differences `d` (u ± 1 as slices of equal
+/// length); with `fold` a pixel keeps its earlier gradient unless the new one is larger.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn sobel_row(
+    s0: &[i16],
+    s2: &[i16],
+    d0: &[i16],
+    d1: &[i16],
+    d2: &[i16],
+    gx: &mut [i16],
+    gy: &mut [i16],
+    mag: &mut [i16],
+    fold: bool,
+) {
+    let n = gx
+        .len()
+        .min(gy.len())
+        .min(mag.len())
+        .min(s0.len())
+        .min(s2.len())
+        .min(d0.len())
+        .min(d1.len())
+        .min(d2.len());
+    let (s0, s2, d0, d1, d2) = (&s0[..n], &s2[..n], &d0[..n], &d1[..n], &d2[..n]);
+    let (gx, gy, mag) = (&mut gx[..n], &mut gy[..n], &mut mag[..n]);
+    if fold {
+        for u in 0..n {
+            let x = s2[u].wrapping_sub(s0[u]);
+            let y = d0[u].wrapping_add(d1[u].wrapping_mul(2)).wrapping_add(d2[u]);
+            let m = x.wrapping_abs().wrapping_add(y.wrapping_abs());
+            let keep = ((m > mag[u]) as i16).wrapping_neg();
+            gx[u] = (x & keep) | (gx[u] & !keep);
+            gy[u] = (y & keep) | (gy[u] & !keep);
+            mag[u] = (m & keep) | (mag[u] & !keep);
+        }
+    } else {
+        for u in 0..n {
+            let x = s2[u].wrapping_sub(s0[u]);
+            let y = d0[u].wrapping_add(d1[u].wrapping_mul(2)).wrapping_add(d2[u]);
+            gx[u] = x;
+            gy[u] = y;
+            mag[u] = x.wrapping_abs().wrapping_add(y.wrapping_abs());
+        }
+    }
+}
+
+/// Gradient bin: 1 horizontal gradient, 2 vertical, 3 diagonal with gx·gy > 0, 4 the other.
+#[inline(always)]
+pub(crate) fn bin(gx: i16, gy: i16) -> u8 {
+    let (ax, ay) = (gx.unsigned_abs() as u32, gy.unsigned_abs() as u32);
+    // tan 22.5° ≈ 0.4142 ≈ 53/128.
+    if ay * 128 <= ax * 53 {
+        1
+    } else if ax * 128 <= ay * 53 {
+        2
+    } else if (gx > 0) == (gy > 0) {
+        3
+    } else {
+        4
+    }
+}
+
+/// Pixel offset (du, dv) of the gradient direction of a bin.
+#[inline(always)]
+pub(crate) fn bin_step(bin: u8) -> (isize, isize) {
+    match bin {
+        1 => (1, 0),
+        2 => (0, 1),
+        3 => (1, 1),
+        _ => (1, -1),
+    }
+}
+
+/// Non-maximum suppression of row v (columns 1..w−1) across the gradient's bin: an edgel is at
+/// least `threshold`, larger than its neighbour on one side and no smaller than the other.
+/// Branch-free over the row (all four neighbour pairs are read, the bin's is kept), so that it
+/// vectorises.
+#[inline(always)]
+fn nms_row(gx: &[i16], gy: &[i16], mag: &[i16], map: &mut [u8], w: usize, v: usize, threshold: i16) -> u32 {
+    let n = w - 2;
+    let i0 = v * w + 1;
+    let (m, gx, gy) = (&mag[i0..i0 + n], &gx[i0..i0 + n], &gy[i0..i0 + n]);
+    let (left, right) = (&mag[i0 - 1..i0 - 1 + n], &mag[i0 + 1..i0 + 1 + n]);
+    let (up, down) = (&mag[i0 - w..i0 - w + n], &mag[i0 + w..i0 + w + n]);
+    let (up_left, down_right) = (&mag[i0 - w - 1..i0 - w - 1 + n], &mag[i0 + w + 1..i0 + w + 1 + n]);
+    let (down_left, up_right) = (&mag[i0 + w - 1..i0 + w - 1 + n], &mag[i0 - w + 1..i0 - w + 1 + n]);
+    let out = &mut map[i0..i0 + n];
+    let mut count = 0u32;
+    for u in 0..n {
+        let (x, y) = (gx[u] as i32, gy[u] as i32);
+        let (ax, ay) = (x.abs(), y.abs());
+        // Non-short-circuit `&` / `|` on bools and arithmetic bins keep the loop free of
+        // branches and gathers.
+        let horizontal = ay * 128 <= ax * 53;
+        let vertical = !horizontal & (ax * 128 <= ay * 53);
+        let diagonal = !horizontal & !vertical;
+        let rising = diagonal & ((x > 0) == (y > 0));
+        let falling = diagonal & !rising;
+        let mu = m[u];
+        let peak = (horizontal & (mu > left[u]) & (mu >= right[u]))
+            | (vertical & (mu > up[u]) & (mu >= down[u]))
+            | (rising & (mu > up_left[u]) & (mu >= down_right[u]))
+            | (falling & (mu > down_left[u]) & (mu >= up_right[u]));
+        let keep = peak & (mu >= threshold);
+        let bin = 1 + (!horizontal) as u8 + diagonal as u8 + falling as u8;
+        out[u] = keep as u8 * bin;
+        count += keep as u32;
+    }
+    count
+}
