@@ -272,7 +272,7 @@ mod bench {
                 if verbose {
                     let r2 = &r.result;
                     eprintln!(
-                        "{:4} {:?} {} σ {:5.1} cm inl {:3} u/p/a {:?} samples {:4} edges {:4} match {:.2} solve {:.2} ms{}",
+                        "{:4} {:?} {} σ {:5.1} cm expl {:.2} inl {:3} u/p/a {:?} samples {:4} edges {:4} match {:.2} solve {:.2} ms{}",
                         r.sequence,
                         r2.state,
                         match err {
@@ -281,6 +281,7 @@ mod bench {
                         },
                         // The covariance's largest position standard deviation.
                         r2.covariance.fixed_view::<3, 3>(0, 0).symmetric_eigenvalues().max().max(0.0).sqrt() * 100.0,
+                        r2.explained,
                         r2.inliers,
                         r2.states,
                         r2.samples,

@@ -70,6 +70,10 @@ fn bad_values_name_the_key() {
             "[budgets]\nframe_ms = nan\n",
             "key 'budgets.frame_ms': must be a positive number",
         ),
+        (
+            "[maintenance]\nmin_explained_ratio = 1.5\n",
+            "key 'maintenance.min_explained_ratio': must lie in [0, 1)",
+        ),
         ("[typo]\n", "unknown field `typo`"),
     ];
     for (text, expected) in cases {

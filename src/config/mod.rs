@@ -60,6 +60,9 @@ pub struct MaintenanceConfig {
     pub max_jump_m: f64,
     pub max_jump_deg: f64,
     pub relocalise_diameter_m: f64,
+    /// A solved pose must explain (an edge within the inlier angle) at least this fraction of
+    /// what recent good frames explained of VIS(T) (their running mean); 0 turns the check off.
+    pub min_explained_ratio: f64,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -190,6 +193,7 @@ impl Default for MaintenanceConfig {
             max_jump_m: 0.5,
             max_jump_deg: 15.0,
             relocalise_diameter_m: 1.0,
+            min_explained_ratio: 0.6,
         }
     }
 }
@@ -418,6 +422,12 @@ impl TrackerConfig {
             return Err(format!(
                 "key 'maintenance.relocalise_diameter_m': must be 0 (off) or a positive number of metres, found {}",
                 m.relocalise_diameter_m
+            ));
+        }
+        if !(0.0..1.0).contains(&m.min_explained_ratio) {
+            return Err(format!(
+                "key 'maintenance.min_explained_ratio': must lie in [0, 1) (0 = off), found {}",
+                m.min_explained_ratio
             ));
         }
         positive("visibility.node_spacing_m", v.node_spacing_m)?;

@@ -129,6 +129,9 @@ pub struct Candidate {
     pub inliers: usize,
     /// Plain ξ over those inliers (rad²).
     pub xi_rad2: f64,
+    /// Fraction of the segments of VIS(pose) long enough to be seen with an edge within the
+    /// inlier angle.
+    pub explained: f64,
 }
 
 /// What one [`Initialiser::run`] did.
@@ -804,13 +807,14 @@ impl<'m> Initialiser<'m> {
                 pose = p;
             }
         }
-        let (score, inliers) = self.final_score(&pose, edges);
+        let (score, inliers, counted) = self.final_score(&pose, edges);
         let count = self.gather(&pose, edges, inlier);
         Some(Candidate {
             pose,
             score,
             inliers,
             xi_rad2: xi(&self.corr[..count], &pose),
+            explained: inliers as f64 / counted.max(1) as f64,
         })
     }
 
@@ -841,8 +845,15 @@ impl<'m> Initialiser<'m> {
         self.corr.len()
     }
 
-    /// (truncated ξ with the inlier cap over the segments of VIS(pose) long enough, inliers).
-    fn final_score(&self, pose: &Pose, edges: &[Edge]) -> (f64, usize) {
+    /// [`Candidate::explained`] of any pose.
+    pub fn explained(&self, pose: &Pose, edges: &[Edge]) -> f64 {
+        let (_, inliers, counted) = self.final_score(pose, edges);
+        inliers as f64 / counted.max(1) as f64
+    }
+
+    /// (truncated ξ with the inlier cap over the segments of VIS(pose) long enough, inliers,
+    /// segments counted).
+    fn final_score(&self, pose: &Pose, edges: &[Edge]) -> (f64, usize, usize) {
         let cap = self.opts.inlier_alpha_rad;
         let gate = Gate {
             cos_alpha: cap.cos(),
@@ -850,7 +861,7 @@ impl<'m> Initialiser<'m> {
             hue: None,
         };
         let Some(set) = self.table.query(&Point3::from(pose.translation.vector)) else {
-            return (f64::INFINITY, 0);
+            return (f64::INFINITY, 0, 0);
         };
         let (mut sum, mut counted, mut inliers) = (0.0, 0usize, 0usize);
         for &s in set.segments {
@@ -869,9 +880,9 @@ impl<'m> Initialiser<'m> {
             }
         }
         if counted == 0 {
-            (f64::INFINITY, 0)
+            (f64::INFINITY, 0, 0)
         } else {
-            (sum / counted as f64, inliers)
+            (sum / counted as f64, inliers, counted)
         }
     }
 

@@ -33,6 +33,10 @@ use crate::solver::{
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion};
 use std::time::{Duration, Instant};
 
+/// A relocalised pose replaces a suspect maintenance pose only when it explains this many times
+/// as much of VIS(T).
+const SUSPECT_MARGIN: f64 = 1.2;
+
 /// The pose and S_t the next frame will be predicted from.
 fn constant_velocity(previous: &Pose, previous_t: u64, current: &Pose, current_t: u64, next_t: u64) -> Pose {
     let dt_prev = current_t.saturating_sub(previous_t) as f64;
@@ -82,9 +86,18 @@ fn fit(
 }
 
 impl Tracker<'_> {
-    /// A local search around `predicted` (diameter `relocalise_diameter_m`); on success the
-    /// tracker continues from the found pose with a fresh S_t, as after initialisation.
-    fn relocalise(&mut self, edges: &[Edge], predicted: &Pose, timestamp_ns: u64) -> Option<FrameResult> {
+    /// A local search around `predicted` (diameter `relocalise_diameter_m`); on success (a
+    /// candidate explaining at least `min_explained` of VIS(T)) the tracker continues from the
+    /// found pose with a fresh S_t, as after initialisation. A bad frame takes any plausible
+    /// candidate (`min_explained` 0): a view poorer than before, such as sensors covered, must
+    /// not stop the tracker from finding its place again.
+    fn relocalise(
+        &mut self,
+        edges: &[Edge],
+        predicted: &Pose,
+        timestamp_ns: u64,
+        min_explained: f64,
+    ) -> Option<FrameResult> {
         let d = self.cfg.maintenance.relocalise_diameter_m;
         if d <= 0.0 {
             return None;
@@ -97,10 +110,12 @@ impl Tracker<'_> {
         self.init.set_time_budget(budget);
         let turn_limit = self.max_turn_rad(timestamp_ns);
         let turned_from = self.last_good.map_or(predicted.rotation, |p| p.rotation);
+        let floor = min_explained;
         let (candidates, _) = self.init.run(edges, &volume, &mut self.rng);
         let m = &self.cfg.maintenance;
         let best = candidates.first().copied().filter(|c| {
             c.inliers >= m.min_inliers as usize
+                && c.explained >= floor
                 && (c.pose.translation.vector - predicted.translation.vector).norm() <= 0.5 * d + m.max_jump_m
                 && c.pose.rotation.angle_to(&turned_from) <= turn_limit
         })?;
@@ -292,12 +307,14 @@ impl Tracker<'_> {
         let tight = inlier_rad.cos();
         self.set.clear();
         self.set_track.clear();
+        let (mut eligible, mut seen) = (0u32, 0u32);
         for i in 0..n_tracks {
             let t = self.tracks.tracks()[i];
             let seg = &self.model.segments[t.segment as usize];
             let ends = [seg.a, seg.b];
             let pred = Predicted::new(&ends, &check_pose, &self.centres);
             let observed = if solved.is_some() && pred.length_rad >= min_len {
+                eligible += 1;
                 let gate = Gate {
                     cos_alpha: tight,
                     min_overlap: 0.5,
@@ -310,6 +327,7 @@ impl Tracker<'_> {
             let track = &mut self.tracks.tracks_mut()[i];
             match observed {
                 Some((e, _)) => {
+                    seen += 1;
                     let was_accepted = track.state == CorrespondenceState::Accepted;
                     track.observe(HeldEdge::from(&edges[e]), k);
                     if was_accepted || track.state == CorrespondenceState::Accepted {
@@ -324,6 +342,12 @@ impl Tracker<'_> {
             }
         }
 
+        result.explained = if eligible > 0 {
+            seen as f32 / eligible as f32
+        } else {
+            0.0
+        };
+
         // 5. Final fit and the health of the frame.
         let mut pose = solved;
         if let Some(p) = pose {
@@ -332,7 +356,7 @@ impl Tracker<'_> {
             }
         }
         let max_jump_rad = mcfg.max_jump_deg.to_radians();
-        let good = match &pose {
+        let mut good = match &pose {
             Some(p) => {
                 self.set.len() >= mcfg.min_inliers as usize
                     && (p.translation.vector - prior.translation.vector).norm() <= mcfg.max_jump_m
@@ -340,17 +364,29 @@ impl Tracker<'_> {
             }
             None => false,
         };
-        if !good {
-            // The prior failed (typically a turn faster than the motion model expects, which
-            // moves every plane out of the angular gate): search a small volume around the
-            // prediction with the initialisation's triplet matching, which needs no rotation.
-            if let Some(r) = self.relocalise(edges, &predicted, timestamp_ns) {
+        // A pose that explains far less of VIS(T) than the frames before it may have slid off
+        // the building (a doorway turn that took most correspondences out of view) while moving
+        // less than the jump limits, or the view may just be poorer (people, clutter): a local
+        // search decides, and replaces the pose only with one that explains clearly more (by
+        // the search's own measure, without the hue gate).
+        let suspect = good && (result.explained as f64) < self.explained_floor(0);
+        if !good || suspect {
+            // When the prior failed (typically a turn faster than the motion model expects,
+            // which moves every plane out of the angular gate), the initialisation's triplet
+            // matching searches a small volume around the prediction: it needs no rotation.
+            let own = match (&pose, suspect) {
+                (Some(p), true) => SUSPECT_MARGIN * self.init.explained(p, edges),
+                _ => 0.0,
+            };
+            if let Some(r) = self.relocalise(edges, &predicted, timestamp_ns, own) {
                 let mut r = r;
                 r.match_time += match_time;
                 r.solve_time = solve_started.elapsed().saturating_sub(match_time);
                 r.samples += samples;
                 return r;
             }
+            // No better pose nearby: a suspect frame stands.
+            good = suspect;
         }
         result.solve_time = solve_started.elapsed().saturating_sub(match_time);
         result.match_time = match_time;
@@ -358,6 +394,7 @@ impl Tracker<'_> {
         if good {
             let p = pose.expect("a good frame has a pose");
             self.bad_frames = 0;
+            self.note_explained(result.explained as f64);
             result.pose = Some(p);
             result.inliers = self.set.len() as u32;
             self.last_inliers = result.inliers;

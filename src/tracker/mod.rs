@@ -76,6 +76,9 @@ pub struct FrameResult {
     /// Correspondences per state after the frame: unknown, pending, accepted.
     pub states: [u32; 3],
     pub xi_rad2: f64,
+    /// Of the segments of VIS(T) long enough to be seen, the fraction with an edge within the
+    /// inlier angle at the solved pose (maintenance frames; NaN otherwise).
+    pub explained: f32,
     /// Consensus samples drawn.
     pub samples: u64,
     pub match_time: Duration,
@@ -92,6 +95,7 @@ impl FrameResult {
             inliers: 0,
             states: [0; 3],
             xi_rad2: f64::NAN,
+            explained: f32::NAN,
             samples: 0,
             match_time: Duration::ZERO,
             solve_time: Duration::ZERO,
@@ -161,6 +165,9 @@ pub struct Tracker<'m> {
     last_inliers: u32,
     /// The last search found no acceptable candidate: search more broadly.
     widen: bool,
+    /// Running mean of the fraction of VIS(T) that good frames explain (NaN before the first
+    /// commit): a pose explaining much less is suspect (`maintenance.min_explained_ratio`).
+    explained_ref: f64,
     stats: TrackerStats,
 }
 
@@ -236,6 +243,7 @@ impl<'m> Tracker<'m> {
             bad_frames: 0,
             last_inliers: 0,
             widen: false,
+            explained_ref: f64::NAN,
             stats: TrackerStats::default(),
         }
     }
@@ -312,6 +320,13 @@ impl<'m> Tracker<'m> {
                 (TrackerState::Lost, Some(p)) => Some((p.rotation, self.max_turn_rad(timestamp_ns))),
                 _ => None,
             };
+            // After a loss, a candidate must also explain about as much as the frames before
+            // it did; the requirement relaxes with every failed attempt, since the rig may
+            // have walked somewhere that is seen less well.
+            let floor = match self.state {
+                TrackerState::Lost => self.explained_floor(self.search_attempts),
+                _ => 0.0,
+            };
             let (candidates, report) = self.init.run(edges, &volume, &mut self.rng);
             let min = self.cfg.maintenance.min_inliers as usize;
             // A candidate must explain at least `accept_explained_fraction` of the segments it
@@ -320,7 +335,8 @@ impl<'m> Tracker<'m> {
             let cap2 = self.cfg.maintenance.inlier_angle_deg.to_radians().powi(2);
             let max_score = (1.0 - i.accept_explained_fraction) * cap2;
             let plausible = |c: &Candidate| turn_limit.is_none_or(|(r, limit)| c.pose.rotation.angle_to(&r) <= limit);
-            let accepted = |c: &&Candidate| c.inliers >= min && c.score <= max_score && plausible(c);
+            let accepted =
+                |c: &&Candidate| c.inliers >= min && c.score <= max_score && plausible(c) && c.explained >= floor;
             // A failed search is repeated once more broadly on the same volume; if that fails
             // too, the volume doubles and the breadth is normal again (widening a large volume
             // only lets the time budget cover fewer cells).
@@ -410,6 +426,25 @@ impl<'m> Tracker<'m> {
         live().filter(|c| mean(c) > best).all(|c| best < ratio * mean(c))
     }
 
+    /// The least fraction of VIS(T) a pose must explain: `min_explained_ratio` of the running
+    /// mean, relaxed by a fifth for each of `relax` failed attempts (0 before the first commit).
+    fn explained_floor(&self, relax: u32) -> f64 {
+        let ratio = self.cfg.maintenance.min_explained_ratio;
+        if ratio <= 0.0 || !self.explained_ref.is_finite() {
+            return 0.0;
+        }
+        ratio * self.explained_ref * 0.8f64.powi(relax.min(32) as i32)
+    }
+
+    /// Folds a good frame's explained fraction into the running mean (about ten frames).
+    fn note_explained(&mut self, explained: f64) {
+        self.explained_ref = if self.explained_ref.is_finite() {
+            0.9 * self.explained_ref + 0.1 * explained
+        } else {
+            explained
+        };
+    }
+
     /// The largest turn since the last good frame that is still plausible at `timestamp_ns`.
     fn max_turn_rad(&self, timestamp_ns: u64) -> f64 {
         let elapsed_s = timestamp_ns.saturating_sub(self.last_good_time) as f64 * 1e-9;
@@ -452,26 +487,37 @@ impl<'m> Tracker<'m> {
         };
         let min_len = self.cfg.edges.min_edge_length_deg.to_radians();
         self.tracks.clear();
+        let (mut eligible, mut seen) = (0u32, 0u32);
         if let Some(set) = self.table.query(&Point3::from(pose.translation.vector)) {
             let (model, centres) = (self.model, &self.centres);
             self.tracks.reset_with(set.segments.iter().map(|&s| {
                 let seg = &model.segments[s as usize];
                 let pred = Predicted::new(&[seg.a, seg.b], pose, centres);
+                eligible += (pred.length_rad >= min_len) as u32;
                 match (pred.length_rad >= min_len)
                     .then(|| best_edge(&pred, centres, edges, &gate))
                     .flatten()
                 {
-                    Some((e, _)) => Track::accepted(s, HeldEdge::from(&edges[e])),
+                    Some((e, _)) => {
+                        seen += 1;
+                        Track::accepted(s, HeldEdge::from(&edges[e]))
+                    }
                     None => Track::unknown(s),
                 }
             }));
         }
+        // The committed pose passed the search's own tests: where it explains less than the
+        // running mean, the rig has come somewhere seen less well, and that is the new norm.
+        let explained = seen as f64 / eligible.max(1) as f64;
+        // (`f64::min` takes the number over NaN: the first commit sets the mean.)
+        self.explained_ref = self.explained_ref.min(explained);
         let mut result = FrameResult::empty(TrackerState::Tracking);
         self.collect_accepted_set(edges, pose, true);
         result.inliers = self.set.len() as u32;
         self.last_inliers = result.inliers;
         result.covariance = crate::solver::covariance(&self.set, pose, &self.solver);
         result.xi_rad2 = crate::geometry::xi(&self.set, pose);
+        result.explained = explained as f32;
         result.pose = Some(*pose);
         result.states = self.state_counts();
         self.previous = Some((*pose, timestamp_ns));
