@@ -12,6 +12,12 @@
 //!
 //! It first reproduces Koch–Teller Figure 15 as a table (`--no-figure15` skips it).
 //!
+//! `--init-trials N` measures initialisation alone instead (the paper's admitted weakness:
+//! repeated structure such as doorways along a corridor): from N start frames spread over the
+//! recording, a fresh tracker searches a 3 m volume whose centre is 1 m from the true position
+//! (in a different direction each trial) until it commits, and the commit is judged right
+//! (within 10 cm and 1°) or wrong, with the time and frames it took.
+//!
 //! Recordings are cached in `target/omnitrack-cache/` (or `$OMNITRACK_CACHE`).
 
 #[cfg(feature = "desk")]
@@ -45,6 +51,7 @@ mod bench {
         hint: bool,
         config: Option<PathBuf>,
         figure15: bool,
+        init_trials: usize,
     }
 
     fn args() -> Args {
@@ -58,6 +65,7 @@ mod bench {
             hint: true,
             config: None,
             figure15: true,
+            init_trials: 0,
         };
         let mut it = std::env::args().skip(1);
         while let Some(x) = it.next() {
@@ -73,6 +81,7 @@ mod bench {
                 "--no-hint" => a.hint = false,
                 "--config" => a.config = it.next().map(PathBuf::from),
                 "--no-figure15" => a.figure15 = false,
+                "--init-trials" => a.init_trials = it.next().and_then(|s| s.parse().ok()).expect("--init-trials N"),
                 _ => {}
             }
         }
@@ -163,6 +172,156 @@ mod bench {
         println!();
     }
 
+    /// The `--init-trials` mode (module doc).
+    #[allow(clippy::too_many_arguments)]
+    fn init_trials(
+        name: &ScenarioName,
+        rig: &Rig,
+        model: &Model,
+        table: &omnitrack::visibility::VisibilityTable,
+        cfg: &TrackerConfig,
+        source: &mut ReplaySource,
+        truth: &[Stamped],
+        trials: usize,
+        verbose: bool,
+    ) {
+        use omnitrack::capture::{FrameSet, FrameSource};
+        use omnitrack::edges::EdgeDetector;
+        use omnitrack::tracker::{Tracker, TrackerState};
+        use std::time::Instant;
+        // A trial gives up after this many frames without a commit…
+        const WINDOW: usize = 25;
+        // …and is judged this many frames after its commit.
+        const AFTER: usize = 10;
+        let frames = source.frame_count();
+        let spacing = (frames.saturating_sub(WINDOW + AFTER) / trials.max(1)).max(WINDOW + AFTER);
+        let starts: Vec<usize> = (0..trials)
+            .map(|k| k * spacing)
+            .filter(|&s| s + WINDOW + AFTER <= frames)
+            .collect();
+        let mut frame = FrameSet::for_rig(rig);
+        let mut detector = EdgeDetector::new(rig, &cfg.edges);
+        let (mut right, mut wrong, mut none) = (0usize, Vec::new(), 0usize);
+        let (mut times_ms, mut frames_to_commit) = (Vec::new(), Vec::new());
+        let mut index = 0usize;
+        for (trial, &start) in starts.iter().enumerate() {
+            while index < start {
+                source.next_frame(&mut frame).unwrap();
+                index += 1;
+            }
+            let t0 = truth[start].pose;
+            let angle = trial as f64 * 2.399; // golden angle: directions spread evenly
+            let centre = t0.translation.vector + nalgebra::Vector3::new(angle.cos(), angle.sin(), 0.0);
+            let hint = SearchVolume {
+                centre: Point3::from(centre),
+                diameter_m: Some(cfg.initialisation.search_diameter_m),
+            };
+            let mut tracker = Tracker::new(rig, model, table, cfg, Some(hint), 1 + trial as u64);
+            let started = Instant::now();
+            let mut outcome = None;
+            let mut committed = None;
+            let mut elapsed_ms = f64::NAN;
+            for k in 0..WINDOW + AFTER {
+                if committed.is_none() && k >= WINDOW {
+                    break;
+                }
+                if !source.next_frame(&mut frame).unwrap() {
+                    break;
+                }
+                index += 1;
+                let ts = frame.timestamp_ns().unwrap_or(0);
+                let edges = detector.detect(&frame);
+                let r = tracker.process(edges, ts);
+                let g = truth
+                    .iter()
+                    .find(|s| s.timestamp_ns.abs_diff(ts) < 1_000_000)
+                    .map(|s| s.pose);
+                if verbose {
+                    if let Some(g) = &g {
+                        for (p, score, n, alive) in tracker.candidates() {
+                            eprintln!(
+                                "    frame {}: candidate {:6.1} cm {:6.2}° score {:.2e} over {n} frames{}",
+                                start + k,
+                                (p.translation.vector - g.translation.vector).norm() * 100.0,
+                                p.rotation.angle_to(&g.rotation).to_degrees(),
+                                score,
+                                if alive { "" } else { " (dropped)" }
+                            );
+                        }
+                    }
+                }
+                if let Some(committed_at) = committed {
+                    // Judged AFTER frames of tracking: a commit a little off that converges is
+                    // right; one that settles somewhere else, or loses lock, is not.
+                    if k >= committed_at + AFTER || r.state != TrackerState::Tracking {
+                        let (dp, dr) = match (r.pose, g) {
+                            (Some(p), Some(g)) => (
+                                (p.translation.vector - g.translation.vector).norm(),
+                                p.rotation.angle_to(&g.rotation).to_degrees(),
+                            ),
+                            _ => (f64::INFINITY, f64::INFINITY),
+                        };
+                        outcome = Some((dp, dr, committed_at + 1));
+                        break;
+                    }
+                    continue;
+                }
+                if let (TrackerState::Tracking, Some(p)) = (r.state, r.pose) {
+                    let (dp, dr) = g.map_or((f64::NAN, f64::NAN), |g| {
+                        (
+                            (p.translation.vector - g.translation.vector).norm(),
+                            p.rotation.angle_to(&g.rotation).to_degrees(),
+                        )
+                    });
+                    if verbose {
+                        eprintln!("    committed at frame {}: {:.1} cm {:.2}°", start + k, dp * 100.0, dr);
+                    }
+                    committed = Some(k);
+                    elapsed_ms = started.elapsed().as_secs_f64() * 1e3;
+                }
+            }
+            match outcome {
+                Some((dp, dr, n)) => {
+                    times_ms.push(elapsed_ms);
+                    frames_to_commit.push(n as f64);
+                    if dp <= 0.10 && dr <= 1.0 {
+                        right += 1;
+                    } else {
+                        wrong.push((start, dp, dr));
+                    }
+                    if verbose {
+                        eprintln!(
+                            "  trial {trial} from frame {start}: committed after {n} frames, {elapsed_ms:.0} ms; {AFTER} frames later {:.1} cm {:.2}°",
+                            dp * 100.0,
+                            dr
+                        );
+                    }
+                }
+                None => {
+                    none += 1;
+                    if verbose {
+                        eprintln!("  trial {trial} from frame {start}: no commit in {WINDOW} frames");
+                    }
+                }
+            }
+        }
+        times_ms.sort_by(f64::total_cmp);
+        frames_to_commit.sort_by(f64::total_cmp);
+        println!();
+        println!(
+            "{name}: {} initialisation trials (3 m volume, centre 1 m off), judged {AFTER} frames after the commit: {right} right (10 cm, 1°), {} wrong, {none} without a commit in {WINDOW} frames; time to commit p50 {:.0} ms, max {:.0} ms; frames to commit p50 {:.0}, max {:.0}",
+            starts.len(),
+            wrong.len(),
+            percentile(&times_ms, 0.5),
+            times_ms.last().copied().unwrap_or(f64::NAN),
+            percentile(&frames_to_commit, 0.5),
+            frames_to_commit.last().copied().unwrap_or(f64::NAN),
+        );
+        for (start, dp, dr) in &wrong {
+            println!("  wrong: from frame {start}, {:.1} cm, {:.1}°", dp * 100.0, dr);
+        }
+    }
+
     pub fn main() {
         let a = args();
         let rig = Rig::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("firmware_config/ladybug2.toml")).unwrap();
@@ -206,6 +365,20 @@ mod bench {
             eprintln!("{name}: {origin}");
             let mut source = ReplaySource::open(&dir, Pacing::AsFastAsPossible).unwrap();
             let truth: Vec<Stamped> = source.ground_truth().unwrap().to_vec();
+            if a.init_trials > 0 {
+                init_trials(
+                    name,
+                    &rig,
+                    &model,
+                    &table,
+                    &cfg,
+                    &mut source,
+                    &truth,
+                    a.init_trials,
+                    a.verbose,
+                );
+                continue;
+            }
             let hint = a.hint.then(|| SearchVolume {
                 centre: Point3::from(truth[0].pose.translation.vector),
                 diameter_m: Some(cfg.initialisation.search_diameter_m),
