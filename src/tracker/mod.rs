@@ -26,7 +26,7 @@ mod maintenance;
 pub mod matching;
 
 pub use correspondence::{CorrespondenceState, CorrespondenceTable, HeldEdge, Track};
-pub use init::{same_pose, Candidate, InitOptions, InitReport, Initialiser, SearchVolume};
+pub use init::{Candidate, InitOptions, InitReport, Initialiser, SearchVolume};
 
 use crate::config::TrackerConfig;
 use crate::edges::Edge;
@@ -40,10 +40,6 @@ use nalgebra::{Matrix6, Point3};
 use rand::rngs::SmallRng;
 use rand::SeedableRng;
 use std::time::{Duration, Instant};
-
-/// A candidate this close to another is the same place (the broader search pass's duplicates).
-const DUPLICATE_POSITION_M: f64 = 0.3;
-const DUPLICATE_ROTATION_RAD: f64 = 5.0 * std::f64::consts::PI / 180.0;
 
 /// Where the tracker is (the `status` of the pose message).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -331,66 +327,26 @@ impl<'m> Tracker<'m> {
                 TrackerState::Lost => self.explained_floor(self.search_attempts),
                 _ => 0.0,
             };
+            let (candidates, report) = self.init.run(edges, &volume, &mut self.rng);
             let min = self.cfg.maintenance.min_inliers as usize;
             // A candidate must explain at least `accept_explained_fraction` of the segments it
             // predicts (its truncated ξ is ≈ (1 − explained) × cap²); when none does, the next
             // frame searches more broadly.
             let cap2 = self.cfg.maintenance.inlier_angle_deg.to_radians().powi(2);
             let max_score = (1.0 - i.accept_explained_fraction) * cap2;
-            let (wide_edges, wide_segments, wide_samples) = (
-                i.wide_edges_considered as usize,
-                i.wide_segments_considered as usize,
-                i.wide_samples_per_cell as usize,
-            );
             let plausible = |c: &Candidate| turn_limit.is_none_or(|(r, limit)| c.pose.rotation.angle_to(&r) <= limit);
             let accepted =
                 |c: &&Candidate| c.inliers >= min && c.score <= max_score && plausible(c) && c.explained >= floor;
-            let mut found = [None::<Candidate>; 8];
-            let (candidates, mut report) = self.init.run(edges, &volume, &mut self.rng);
-            let mut count = 0;
-            for c in candidates.iter().filter(accepted).take(found.len()) {
-                found[count] = Some(*c);
-                count += 1;
-            }
-            // A bounded search that covered its volume in under half its budget spends the rest
-            // on a broader pass: in repeated structure (a corridor's doorways, its 180° twin) the
-            // normal breadth can miss the true place altogether while finding several wrong ones.
-            let total = Duration::from_secs_f64(budget / 1e3);
-            if volume.diameter_m.is_some() && !self.widen && !report.timed_out && 2 * report.elapsed < total {
-                // Four fifths: the whole search stays inside the budget with room to commit.
-                self.init
-                    .set_time_budget(total.mul_f64(0.8).saturating_sub(report.elapsed));
-                self.init.set_breadth(wide_edges, wide_segments, wide_samples);
-                let (more, second) = self.init.run(edges, &volume, &mut self.rng);
-                for c in more.iter().filter(accepted) {
-                    let known = found[..count]
-                        .iter()
-                        .flatten()
-                        .any(|k| same_pose(&k.pose, &c.pose, DUPLICATE_POSITION_M, DUPLICATE_ROTATION_RAD));
-                    if !known && count < found.len() {
-                        found[count] = Some(*c);
-                        count += 1;
-                    }
-                }
-                report.samples += second.samples;
-                report.triplet_matches += second.triplet_matches;
-                report.elapsed += second.elapsed;
-                report.timed_out = second.timed_out;
-            }
-            found[..count].sort_by(|a, b| {
-                let score = |c: &Option<Candidate>| c.map_or(f64::INFINITY, |c| c.score);
-                score(a).total_cmp(&score(b))
-            });
             // A failed search is repeated once more broadly on the same volume; if that fails
             // too, the volume doubles and the breadth is normal again (widening a large volume
             // only lets the time budget cover fewer cells).
-            let failed = count == 0;
+            let failed = !candidates.iter().any(|c| accepted(&c));
             if failed && self.widen {
                 self.volume_level += 1;
             }
             self.widen = failed && !self.widen;
             let mut n = 0;
-            for c in found[..count].iter().flatten().take(self.confirming.len()) {
+            for c in candidates.iter().filter(accepted).take(self.confirming.len()) {
                 self.confirming[n] = Confirming {
                     pose: c.pose,
                     score_sum: c.score,
