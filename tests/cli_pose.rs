@@ -1,22 +1,12 @@
 //! `omnitrack pose` as a black box: rig TOML + lines CSV in, the JSON of INTERFACES.md out.
 
+mod common;
+
+use common::omnitrack;
 use nalgebra::{Isometry3, Point3, Vector3};
 use omnitrack::Rig;
 use std::fmt::Write;
 use std::path::Path;
-use std::process::Command;
-
-fn omnitrack(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_omnitrack"))
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8(out.stdout).unwrap(),
-        String::from_utf8(out.stderr).unwrap(),
-    )
-}
 
 /// Lines seen from `truth` by the six-sensor rig: each segment's end points projected into the
 /// sensor that sees both.

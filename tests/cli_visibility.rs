@@ -1,19 +1,9 @@
 //! `omnitrack visibility build / query` as a black box on the extruded example plan.
 #![cfg(feature = "desk")]
 
-use std::process::Command;
+mod common;
 
-fn omnitrack(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_omnitrack"))
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8(out.stdout).unwrap(),
-        String::from_utf8(out.stderr).unwrap(),
-    )
-}
+use common::omnitrack;
 
 #[test]
 fn build_then_query_prints_the_documented_json() {

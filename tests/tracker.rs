@@ -7,8 +7,8 @@ use nalgebra::{Point3, Vector3};
 use omnitrack::capture::{FrameSet, FrameSource, Pacing, ReplaySource, SourceError, SourceStats};
 use omnitrack::config::TrackerConfig;
 use omnitrack::edges::EdgeDetector;
-use omnitrack::runtime::{track, RunOptions};
-use omnitrack::tracker::{SearchVolume, Tracker, TrackerState};
+use omnitrack::runtime::{track, FrameRecord, RunOptions};
+use omnitrack::tracker::{SearchVolume, Tracker, TrackerState, TrackerStats};
 use omnitrack::Rig;
 use std::sync::OnceLock;
 
@@ -47,7 +47,21 @@ fn errors(f: &LabRecording, timestamp_ns: u64, pose: &omnitrack::Pose) -> (f64, 
     )
 }
 
-/// A recording whose images are all uniform grey for a range of frames: a hand over the rig.
+/// Tracks `source` with the default configuration from the 3 m hint, each frame to `sink`.
+fn run_hinted(
+    f: &LabRecording,
+    source: &mut dyn FrameSource,
+    sink: &mut dyn FnMut(&FrameRecord, &Tracker) -> Result<(), String>,
+) -> TrackerStats {
+    let opts = RunOptions {
+        hint: Some(hint(f)),
+        ..RunOptions::default()
+    };
+    track(source, &f.model, &f.table, &TrackerConfig::default(), &opts, sink).unwrap()
+}
+
+/// A recording whose images are uniform grey for a range of frames (in the first `sensors`
+/// sensors): a hand over the rig.
 struct Occluded {
     inner: ReplaySource,
     frame: usize,
@@ -80,32 +94,20 @@ impl FrameSource for Occluded {
 fn initialises_from_a_3m_volume_within_10cm_and_1deg_and_tracks_100_frames_without_loss() {
     let f = fixture();
     let mut source = ReplaySource::open(&f.rec, Pacing::AsFastAsPossible).unwrap();
-    let opts = RunOptions {
-        hint: Some(hint(f)),
-        ..RunOptions::default()
-    };
     let mut first: Option<(f64, f64)> = None;
     let mut worst = (0.0f64, 0.0f64);
     let mut sum2 = 0.0;
     let mut n = 0;
-    let stats = track(
-        &mut source,
-        &f.model,
-        &f.table,
-        &TrackerConfig::default(),
-        &opts,
-        &mut |r, _| {
-            if let Some(p) = &r.result.pose {
-                let (dp, dr) = errors(f, r.timestamp_ns, p);
-                first.get_or_insert((dp, dr));
-                worst = (worst.0.max(dp), worst.1.max(dr));
-                sum2 += dp * dp;
-                n += 1;
-            }
-            Ok(())
-        },
-    )
-    .unwrap();
+    let stats = run_hinted(f, &mut source, &mut |r, _| {
+        if let Some(p) = &r.result.pose {
+            let (dp, dr) = errors(f, r.timestamp_ns, p);
+            first.get_or_insert((dp, dr));
+            worst = (worst.0.max(dp), worst.1.max(dr));
+            sum2 += dp * dp;
+            n += 1;
+        }
+        Ok(())
+    });
     let (dp, dr) = first.expect("initialised");
     assert!(dp < 0.10 && dr < 1.0, "first pose {:.1} cm, {dr:.2}°", dp * 100.0);
     assert_eq!(stats.frames, FRAMES as u64);
@@ -136,36 +138,24 @@ fn a_poorer_view_is_suspected_but_not_lost() {
         to: 40,
         sensors: 3,
     };
-    let opts = RunOptions {
-        hint: Some(hint(f)),
-        ..RunOptions::default()
-    };
     let mut covered = Vec::new();
     let mut worst = 0.0f64;
     let mut untracked = 0;
-    let stats = track(
-        &mut source,
-        &f.model,
-        &f.table,
-        &TrackerConfig::default(),
-        &opts,
-        &mut |r, _| {
-            if (30..40).contains(&r.sequence) {
-                covered.push(r.result.explained);
+    let stats = run_hinted(f, &mut source, &mut |r, _| {
+        if (30..40).contains(&r.sequence) {
+            covered.push(r.result.explained);
+        }
+        if r.sequence >= 10 {
+            assert_eq!(r.result.state, TrackerState::Tracking, "frame {}", r.sequence);
+            match &r.result.pose {
+                // Three sensors see too little for the usual accuracy: judge after them.
+                Some(p) if r.sequence >= 45 => worst = worst.max(errors(f, r.timestamp_ns, p).0),
+                Some(_) => {}
+                None => untracked += 1,
             }
-            if r.sequence >= 10 {
-                assert_eq!(r.result.state, TrackerState::Tracking, "frame {}", r.sequence);
-                match &r.result.pose {
-                    // Three sensors see too little for the usual accuracy: judge after them.
-                    Some(p) if r.sequence >= 45 => worst = worst.max(errors(f, r.timestamp_ns, p).0),
-                    Some(_) => {}
-                    None => untracked += 1,
-                }
-            }
-            Ok(())
-        },
-    )
-    .unwrap();
+        }
+        Ok(())
+    });
     assert_eq!(stats.losses, 0, "{stats:?}");
     assert!(untracked <= 2, "{untracked} frames without a pose");
     // The covered frames did explain less: the check had something to judge.
@@ -185,29 +175,17 @@ fn recovers_after_the_rig_is_occluded_for_a_second() {
         to: 45,
         sensors: usize::MAX,
     };
-    let opts = RunOptions {
-        hint: Some(hint(f)),
-        ..RunOptions::default()
-    };
     let mut states = Vec::new();
     let mut late = Vec::new();
-    let stats = track(
-        &mut source,
-        &f.model,
-        &f.table,
-        &TrackerConfig::default(),
-        &opts,
-        &mut |r, _| {
-            states.push(r.result.state);
-            if r.sequence >= 60 {
-                if let Some(p) = &r.result.pose {
-                    late.push(errors(f, r.timestamp_ns, p));
-                }
+    let stats = run_hinted(f, &mut source, &mut |r, _| {
+        states.push(r.result.state);
+        if r.sequence >= 60 {
+            if let Some(p) = &r.result.pose {
+                late.push(errors(f, r.timestamp_ns, p));
             }
-            Ok(())
-        },
-    )
-    .unwrap();
+        }
+        Ok(())
+    });
     let lost_at = states
         .iter()
         .position(|s| *s == TrackerState::Lost)

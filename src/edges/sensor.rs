@@ -175,9 +175,10 @@ impl Workspace {
         self.merge_across_chains();
         self.select();
         let t3 = Instant::now();
-        self.stats.pixel_ns = (t1 - t0).as_nanos() as u32;
-        self.stats.chain_ns = (t2 - t1).as_nanos() as u32;
-        self.stats.merge_ns = (t3 - t2).as_nanos() as u32;
+        let ns = |d: std::time::Duration| d.as_nanos().min(u32::MAX as u128) as u32;
+        self.stats.pixel_ns = ns(t1 - t0);
+        self.stats.chain_ns = ns(t2 - t1);
+        self.stats.merge_ns = ns(t3 - t2);
     }
 
     /// Whether the gradient axes at i and j agree within ~50° (polarity is not compared: the

@@ -7,6 +7,7 @@
 #![allow(dead_code)] // each test binary uses a different part
 
 use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
 use std::process::Command;
 
 /// Runs the `omnitrack` binary: (exit code, stdout, stderr).
@@ -21,7 +22,6 @@ pub fn omnitrack(args: &[&str]) -> (i32, String, String) {
         String::from_utf8(out.stderr).unwrap(),
     )
 }
-use std::cell::Cell;
 
 pub struct Counting;
 
