@@ -236,6 +236,20 @@ mod bench {
                     .iter()
                     .find(|s| s.timestamp_ns.abs_diff(ts) < 1_000_000)
                     .map(|s| s.pose);
+                if verbose && k == 0 {
+                    if let Some(g) = &g {
+                        if let Some(c) = tracker.polish(g, edges) {
+                            eprintln!(
+                                "    frame {}: the truth polished lands {:.1} cm {:.2}° off, score {:.2e}, explains {:.2}",
+                                start,
+                                (c.pose.translation.vector - g.translation.vector).norm() * 100.0,
+                                c.pose.rotation.angle_to(&g.rotation).to_degrees(),
+                                c.score,
+                                c.explained
+                            );
+                        }
+                    }
+                }
                 if verbose {
                     if let Some(g) = &g {
                         for (p, score, n, alive) in tracker.candidates() {

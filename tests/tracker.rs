@@ -8,7 +8,7 @@ use omnitrack::capture::{FrameSet, FrameSource, Pacing, ReplaySource, SourceErro
 use omnitrack::config::TrackerConfig;
 use omnitrack::edges::EdgeDetector;
 use omnitrack::runtime::{track, FrameRecord, RunOptions};
-use omnitrack::tracker::{SearchVolume, Tracker, TrackerState, TrackerStats};
+use omnitrack::tracker::{SearchVolume, Tracker, TrackerEvent, TrackerState, TrackerStats};
 use omnitrack::Rig;
 use std::sync::OnceLock;
 
@@ -227,4 +227,27 @@ fn tracking_allocates_nothing_per_frame() {
     }
     assert!(counted >= 90 && tracking_frames >= 90, "{counted} frames counted");
     assert_eq!(allocated, 0, "allocations while tracking");
+}
+
+/// The module doc of `tracker::init`: a bounded search (a hint, a re-initialisation, a
+/// relocalisation) allocates nothing, the translation vote and its height sweep included.
+#[test]
+fn a_bounded_search_allocates_nothing() {
+    let f = fixture();
+    let mut source = ReplaySource::open(&f.rec, Pacing::AsFastAsPossible).unwrap();
+    let rig = source.rig().clone();
+    let cfg = TrackerConfig::default();
+    let mut frame = FrameSet::for_rig(&rig);
+    let mut detector = EdgeDetector::new(&rig, &cfg.edges);
+    let mut tracker = Tracker::new(&rig, &f.model, &f.table, &cfg, Some(hint(f)), 1);
+    common::assert_counter_works();
+    assert!(source.next_frame(&mut frame).unwrap());
+    let edges = detector.detect(&frame);
+    let (r, n) = common::allocations_in(|| tracker.process(edges, frame.timestamp_ns().unwrap()));
+    assert!(
+        matches!(r.event, Some(TrackerEvent::Searched(_)) | Some(TrackerEvent::Committed { .. })),
+        "the first frame searches: {:?}",
+        r.event
+    );
+    assert_eq!(n, 0, "allocations in the search");
 }

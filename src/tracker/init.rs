@@ -41,6 +41,14 @@
 //! matches gathered at the pose with shrinking gates (model segments of VIS(T), all edges), refit,
 //! and ranked by the truncated ξ with the inlier cap.
 //!
+//! **Translation by voting** (module `vote`; beyond the paper). The triplet sampling finds
+//! rotations far more reliably than translations: in a corridor of evenly spaced doors its best
+//! poses are the right heading (or the symmetric corridor's 180° twin) a door away. So under the
+//! rotations of the two best candidates, and their quarter turns about the vertical where any
+//! heading is plausible, the plan positions most vertical edge planes agree on are voted, the
+//! height swept at each (`HEIGHT_STEP_M`), and the result polished and ranked with the rest.
+//! Measured on 40 starts along the full-length `corridor`: right 33–34 times against 26.
+//!
 //! With `upright` set (KT §5.4), the cells are those of the layer nearest the known height, the
 //! rotation is the yaw alone (closed form) and every fit solves x, y and yaw only.
 //!
@@ -54,6 +62,7 @@
 //! only the whole-model search starts threads.
 
 use super::matching::{best_edge, correspondence, Gate, Predicted};
+use super::vote::{Grid, TranslationVote, PEAKS};
 use crate::edges::Edge;
 use crate::geometry::{xi, Correspondence, Pose};
 use crate::model::Model;
@@ -78,6 +87,12 @@ const POLISHED: usize = 16;
 /// Two candidates closer than this are the same (m, rad).
 const SAME_POSITION_M: f64 = 0.3;
 const SAME_ROTATION_RAD: f64 = 0.0873;
+/// The translation vote runs under the rotations of this many of the best candidates (with
+/// their quarter turns: at most this many rotations in all).
+const VOTED_CANDIDATES: usize = 2;
+const VOTED_ROTATIONS: usize = 8;
+/// Step of the height sweep at a voted plan position (m).
+const HEIGHT_STEP_M: f64 = 0.1;
 
 /// Tunables of [`Initialiser`] (from tracker.toml `[initialisation]` and the noise model).
 #[derive(Debug, Clone, PartialEq)]
@@ -211,6 +226,10 @@ pub struct Initialiser<'m> {
     corr: Vec<Correspondence>,
     alphas: Vec<f64>,
     candidates: Vec<Candidate>,
+    /// Translation by voting under the candidates' rotations (module `vote`), and whether
+    /// their quarter-turn twins about the vertical are voted too.
+    vote: TranslationVote,
+    yaw_twins: bool,
 }
 
 impl<'m> Initialiser<'m> {
@@ -256,7 +275,9 @@ impl<'m> Initialiser<'m> {
             pool: Vec::with_capacity(POOL),
             corr: Vec::with_capacity(max_set),
             alphas: Vec::with_capacity(max_set),
-            candidates: Vec::with_capacity(POLISHED),
+            candidates: Vec::with_capacity(POLISHED + VOTED_ROTATIONS * PEAKS),
+            vote: TranslationVote::new(model.segments.len()),
+            yaw_twins: true,
         }
     }
 
@@ -273,6 +294,13 @@ impl<'m> Initialiser<'m> {
     }
 
     /// Changes the search's time budget (a volume, or the whole model).
+    /// Whether the translation vote also tries each candidate rotation turned by quarter turns
+    /// about the vertical (on by default; off where the rotation is known to be near, as in a
+    /// relocalisation).
+    pub fn set_yaw_twins(&mut self, on: bool) {
+        self.yaw_twins = on;
+    }
+
     pub fn set_time_budget(&mut self, budget: Duration) {
         self.opts.time_budget = budget;
     }
@@ -372,9 +400,86 @@ impl<'m> Initialiser<'m> {
             }
         }
         self.candidates.sort_unstable_by(|a, b| a.score.total_cmp(&b.score));
+        if let Some(d) = volume.diameter_m {
+            self.vote_translations(edges, &volume.centre, d, started);
+        }
+        self.candidates.sort_unstable_by(|a, b| a.score.total_cmp(&b.score));
         self.candidates.truncate(self.opts.candidates);
         report.elapsed = started.elapsed();
         (&self.candidates, report)
+    }
+
+    /// Module `vote`: under the rotations of the best candidates so far (and their quarter
+    /// turns about the vertical when `yaw_twins`), the translations most edges agree on, each
+    /// polished into a candidate. Within the time budget.
+    fn vote_translations(&mut self, edges: &[Edge], centre: &Point3<f64>, diameter: f64, started: Instant) {
+        if self.candidates.is_empty() || self.cells.is_empty() {
+            return;
+        }
+        // The segments seen from the volume, and the span of heights of the node layers it
+        // meets (the known height when upright).
+        self.vote.clear_segments();
+        let half_z = layer_half_height(&self.table.header.heights_m);
+        let (mut z_lo, mut z_hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        for k in 0..self.cells.len() {
+            let node = self.cells[k].1;
+            self.vote.add_segments(self.table.node_set(node).segments);
+            let z = self.table.node_position(node).z;
+            z_lo = z_lo.min(z - half_z);
+            z_hi = z_hi.max(z + half_z);
+        }
+        if let Some(h) = self.opts.upright_height_m {
+            (z_lo, z_hi) = (h, h);
+        }
+        let mid_z = 0.5 * (z_lo + z_hi);
+        let grid = Grid::new(&Point3::new(centre.x, centre.y, mid_z), diameter);
+        let mut rotations = [UnitQuaternion::identity(); VOTED_ROTATIONS];
+        let mut n_rot = 0;
+        let turns: &[f64] = if self.yaw_twins { &[0.0, 0.5, 1.0, 1.5] } else { &[0.0] };
+        for c in self.candidates.iter().take(VOTED_CANDIDATES) {
+            for &t in turns {
+                let r = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), t * std::f64::consts::PI) * c.pose.rotation;
+                if n_rot < rotations.len() && rotations[..n_rot].iter().all(|o| o.angle_to(&r) > SAME_ROTATION_RAD) {
+                    rotations[n_rot] = r;
+                    n_rot += 1;
+                }
+            }
+        }
+        let mut peaks = [(0u16, Pose::identity()); PEAKS];
+        for r in &rotations[..n_rot] {
+            if started.elapsed() >= self.opts.time_budget {
+                return;
+            }
+            let found = self.vote.run(self.model, &self.top, r, &grid, &mut peaks);
+            for &(_, peak) in &peaks[..found] {
+                // The height: the best truncated ξ over a sweep of the layers' span (the polish
+                // alone settles on a wrong height from a start a few decimetres off), then the
+                // polish from there.
+                let mut start = peak;
+                let mut best_z = (f64::INFINITY, mid_z);
+                let steps = ((z_hi - z_lo) / HEIGHT_STEP_M).ceil().max(0.0) as usize;
+                for k in 0..=steps {
+                    let z = (z_lo + k as f64 * HEIGHT_STEP_M).min(z_hi);
+                    start.translation.vector.z = z;
+                    let (score, _, _) = self.final_score(&start, edges);
+                    if score < best_z.0 {
+                        best_z = (score, z);
+                    }
+                }
+                start.translation.vector.z = best_z.1;
+                let best = self.polish(&start, edges);
+                if let Some(c) = best {
+                    if self.candidates.len() < self.candidates.capacity()
+                        && self
+                            .candidates
+                            .iter()
+                            .all(|o| !same_pose(&o.pose, &c.pose, SAME_POSITION_M, SAME_ROTATION_RAD))
+                    {
+                        self.candidates.push(c);
+                    }
+                }
+            }
+        }
     }
 
     /// ℰ: the strongest edges of sufficient length, their dihedral angles, masks and sorted pairs.

@@ -24,6 +24,7 @@ pub mod correspondence;
 pub mod init;
 mod maintenance;
 pub mod matching;
+mod vote;
 
 pub use correspondence::{CorrespondenceState, CorrespondenceTable, HeldEdge, Track};
 pub use init::{Candidate, InitOptions, InitReport, Initialiser, SearchVolume};
@@ -269,6 +270,12 @@ impl<'m> Tracker<'m> {
             .map(|c| (c.pose, c.score_sum / c.frames.max(1) as f64, c.frames, c.alive))
     }
 
+    /// The search's own refinement and score of any pose (`Initialiser::polish`): for
+    /// diagnostics and benchmarks, e.g. how the true pose would have scored.
+    pub fn polish(&mut self, pose: &Pose, edges: &[Edge]) -> Option<Candidate> {
+        self.init.polish(pose, edges)
+    }
+
     /// The current pose estimate (meaningful when tracking).
     pub fn pose(&self) -> &Pose {
         &self.pose
@@ -327,6 +334,9 @@ impl<'m> Tracker<'m> {
                 TrackerState::Lost => self.explained_floor(self.search_attempts),
                 _ => 0.0,
             };
+            // Quarter-turn twins are worth searching only where any heading is plausible.
+            self.init
+                .set_yaw_twins(turn_limit.is_none_or(|(_, limit)| limit >= std::f64::consts::PI));
             let (candidates, report) = self.init.run(edges, &volume, &mut self.rng);
             let min = self.cfg.maintenance.min_inliers as usize;
             // A candidate must explain at least `accept_explained_fraction` of the segments it
