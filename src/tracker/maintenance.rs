@@ -23,7 +23,7 @@
 
 use super::matching::{best_edge, Gate, Predicted};
 use super::Tracker;
-use super::{CorrespondenceState, FrameResult, HeldEdge, SearchVolume, TrackerEvent, TrackerState};
+use super::{Candidate, CorrespondenceState, FrameResult, HeldEdge, SearchVolume, TrackerEvent, TrackerState};
 use crate::config::SolverMethod;
 use crate::edges::Edge;
 use crate::geometry::{xi, Correspondence, Pose};
@@ -90,7 +90,10 @@ impl Tracker<'_> {
     /// candidate explaining at least `min_explained` of VIS(T)) the tracker continues from the
     /// found pose with a fresh S_t, as after initialisation. A bad frame takes any plausible
     /// candidate (`min_explained` 0): a view poorer than before, such as sensors covered, must
-    /// not stop the tracker from finding its place again.
+    /// not stop the tracker from finding its place again. The polished prediction competes with
+    /// the search's candidates, and one that turns more than `max_jump_deg` from the prediction
+    /// wins only by `clear_winner_ratio` (a symmetric corridor's quarter-turn twin explains about
+    /// as much as the truth on one frame).
     fn relocalise(
         &mut self,
         edges: &[Edge],
@@ -111,14 +114,35 @@ impl Tracker<'_> {
         let turn_limit = self.max_turn_rad(timestamp_ns);
         let turned_from = self.last_good.map_or(predicted.rotation, |p| p.rotation);
         let floor = min_explained;
-        let (candidates, _) = self.init.run(edges, &volume, &mut self.rng);
+        // The heading is near the prediction's: its quarter-turn twins are not searched.
+        self.init.set_yaw_twins(false);
+        let (found, _) = self.init.run(edges, &volume, &mut self.rng);
+        let mut candidates = [None; 4];
+        for (slot, c) in candidates.iter_mut().zip(found) {
+            *slot = Some(*c);
+        }
+        // The prediction itself, polished, competes too: the search may also find a twin of
+        // the place (a symmetric corridor seen a quarter turn away), and a pose that jumps
+        // away from the motion must explain clearly more than one that continues it.
+        candidates[3] = self.init.polish(predicted, edges);
         let m = &self.cfg.maintenance;
-        let best = candidates.first().copied().filter(|c| {
+        let acceptable = |c: &Candidate| {
             c.inliers >= m.min_inliers as usize
                 && c.explained >= floor
                 && (c.pose.translation.vector - predicted.translation.vector).norm() <= 0.5 * d + m.max_jump_m
                 && c.pose.rotation.angle_to(&turned_from) <= turn_limit
-        })?;
+        };
+        let jump_rad = m.max_jump_deg.to_radians();
+        let jumps = |c: &Candidate| c.pose.rotation.angle_to(&predicted.rotation) > jump_rad;
+        let ok = || candidates.iter().flatten().filter(|c| acceptable(c));
+        let by_score = |a: &&Candidate, b: &&Candidate| a.score.total_cmp(&b.score);
+        let continuing = ok().filter(|c| !jumps(c)).min_by(by_score).copied();
+        let ratio = self.cfg.initialisation.clear_winner_ratio;
+        let best = match (continuing, ok().filter(|c| jumps(c)).min_by(by_score).copied()) {
+            (Some(k), Some(j)) if j.score < ratio * k.score => j,
+            (Some(k), _) => k,
+            (None, j) => j?,
+        };
         self.stats.relocalisations += 1;
         let mut r = self.commit(&best.pose, edges, timestamp_ns);
         r.event = Some(TrackerEvent::Relocalised);
