@@ -245,7 +245,10 @@ fn a_bounded_search_allocates_nothing() {
     let edges = detector.detect(&frame);
     let (r, n) = common::allocations_in(|| tracker.process(edges, frame.timestamp_ns().unwrap()));
     assert!(
-        matches!(r.event, Some(TrackerEvent::Searched(_)) | Some(TrackerEvent::Committed { .. })),
+        matches!(
+            r.event,
+            Some(TrackerEvent::Searched(_)) | Some(TrackerEvent::Committed { .. })
+        ),
         "the first frame searches: {:?}",
         r.event
     );
