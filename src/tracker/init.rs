@@ -293,7 +293,6 @@ impl<'m> Initialiser<'m> {
         self.opts.samples_per_cell = samples_per_cell.max(1);
     }
 
-    /// Changes the search's time budget (a volume, or the whole model).
     /// Whether the translation vote also tries each candidate rotation turned by quarter turns
     /// about the vertical (on by default; off where the rotation is known to be near, as in a
     /// relocalisation).
@@ -301,6 +300,7 @@ impl<'m> Initialiser<'m> {
         self.yaw_twins = on;
     }
 
+    /// Changes the search's time budget (a volume, or the whole model).
     pub fn set_time_budget(&mut self, budget: Duration) {
         self.opts.time_budget = budget;
     }
@@ -467,8 +467,7 @@ impl<'m> Initialiser<'m> {
                     }
                 }
                 start.translation.vector.z = best_z.1;
-                let best = self.polish(&start, edges);
-                if let Some(c) = best {
+                if let Some(c) = self.polish(&start, edges) {
                     if self.candidates.len() < self.candidates.capacity()
                         && self
                             .candidates

@@ -117,13 +117,14 @@ impl Tracker<'_> {
         // The heading is near the prediction's: its quarter-turn twins are not searched.
         self.init.set_yaw_twins(false);
         let (found, _) = self.init.run(edges, &volume, &mut self.rng);
+        // The search's best few (the tracker asks for three), then the prediction itself,
+        // polished: the search may also find a twin of the place (a symmetric corridor seen a
+        // quarter turn away), and a pose that jumps away from the motion must explain clearly
+        // more than one that continues it.
         let mut candidates = [None; 4];
-        for (slot, c) in candidates.iter_mut().zip(found) {
+        for (slot, c) in candidates[..3].iter_mut().zip(found) {
             *slot = Some(*c);
         }
-        // The prediction itself, polished, competes too: the search may also find a twin of
-        // the place (a symmetric corridor seen a quarter turn away), and a pose that jumps
-        // away from the motion must explain clearly more than one that continues it.
         candidates[3] = self.init.polish(predicted, edges);
         let m = &self.cfg.maintenance;
         let acceptable = |c: &Candidate| {
