@@ -185,7 +185,7 @@ impl Default for MaintenanceConfig {
             success_probability: 0.95, // Koch–Teller eq. 2
             outlier_percent: 30.0,     // Koch–Teller Table 1, b
             max_samples: 1000,
-            time_budget_ms: 15.0,
+            time_budget_ms: 30.0,
             constant_velocity_prior: true,
             inlier_angle_deg: 1.5,
             min_inliers: 8,

@@ -63,6 +63,7 @@
 
 use super::matching::{best_edge, correspondence, Gate, Predicted};
 use super::vote::{Grid, TranslationVote, PEAKS};
+use crate::config::TrackerConfig;
 use crate::edges::Edge;
 use crate::geometry::{xi, Correspondence, Pose};
 use crate::model::Model;
@@ -123,6 +124,29 @@ pub struct InitOptions {
     pub candidates: usize,
     /// The most segments [`Initialiser::set_breadth`] may ask for (buffers are sized for it).
     pub wide_segments_considered: usize,
+}
+
+impl InitOptions {
+    /// The options tracker.toml gives: `[initialisation]`, the inlier angle of `[maintenance]`,
+    /// the minimum edge length and the upright mode; three candidates.
+    pub fn from_config(cfg: &TrackerConfig) -> Self {
+        let i = &cfg.initialisation;
+        InitOptions {
+            edges_considered: i.edges_considered as usize,
+            segments_considered: i.segments_considered as usize,
+            best_edges_per_segment: i.best_edges_per_segment as usize,
+            samples_per_cell: i.samples_per_cell as usize,
+            time_budget: Duration::from_secs_f64(i.time_budget_ms / 1e3),
+            dihedral_tolerance_rad: i.dihedral_tolerance_deg.to_radians(),
+            max_range_rad: i.max_dihedral_range_deg.to_radians(),
+            inlier_alpha_rad: cfg.maintenance.inlier_angle_deg.to_radians(),
+            min_length_rad: cfg.edges.min_edge_length_deg.to_radians(),
+            upright_height_m: cfg.motion.upright.then_some(cfg.motion.upright_height_m),
+            simplex_refinement: i.simplex_refinement,
+            candidates: 3,
+            wide_segments_considered: i.wide_segments_considered as usize,
+        }
+    }
 }
 
 /// Where to search.
@@ -230,6 +254,9 @@ pub struct Initialiser<'m> {
     /// their quarter-turn twins about the vertical are voted too.
     vote: TranslationVote,
     yaw_twins: bool,
+    /// A rotation the rig cannot have turned further from than the angle (rad): samples beyond
+    /// it are dropped before they take a place in the pool.
+    rotation_prior: Option<(UnitQuaternion<f64>, f64)>,
 }
 
 impl<'m> Initialiser<'m> {
@@ -278,6 +305,7 @@ impl<'m> Initialiser<'m> {
             candidates: Vec::with_capacity(POLISHED + VOTED_ROTATIONS * PEAKS),
             vote: TranslationVote::new(model.segments.len()),
             yaw_twins: true,
+            rotation_prior: None,
         }
     }
 
@@ -298,6 +326,15 @@ impl<'m> Initialiser<'m> {
     /// relocalisation).
     pub fn set_yaw_twins(&mut self, on: bool) {
         self.yaw_twins = on;
+    }
+
+    /// Where the rig's rotation is known to within an angle (after a loss or a bad frame: the
+    /// last good rotation and the turn the rig's turn rate allows since), samples turned further
+    /// are dropped: they could not be accepted, and in a symmetric building their twins (the same
+    /// place seen turned half round, or upside down) would otherwise fill the pool and crowd out
+    /// the plausible samples. `None`: any rotation.
+    pub fn set_rotation_prior(&mut self, prior: Option<(UnitQuaternion<f64>, f64)>) {
+        self.rotation_prior = prior;
     }
 
     /// Changes the search's time budget (a volume, or the whole model).
@@ -760,6 +797,12 @@ impl<'m> Initialiser<'m> {
             if !(inside_cell && inside_volume && z_ok) {
                 continue;
             }
+            if self
+                .rotation_prior
+                .is_some_and(|(r, limit)| pose.rotation.angle_to(&r) > limit)
+            {
+                continue;
+            }
             let s = self.loose_score(w, &pose);
             if s < kept[KEEP_PER_CELL - 1].0 {
                 kept[KEEP_PER_CELL - 1] = (s, pose);
@@ -947,6 +990,11 @@ impl<'m> Initialiser<'m> {
             }
         }
         self.corr.len()
+    }
+
+    /// [`Candidate::score`] of any pose (truncated ξ over the segments of VIS(pose)).
+    pub fn score(&self, pose: &Pose, edges: &[Edge]) -> f64 {
+        self.final_score(pose, edges).0
     }
 
     /// [`Candidate::explained`] of any pose.

@@ -120,6 +120,8 @@ pub struct TrackerStats {
     pub search_time: Duration,
     /// Commits where the confirmation frames overruled the search frame's best candidate.
     pub changed_mind: u64,
+    /// Frames whose solve, far from the prediction, the polished prediction replaced.
+    pub second_opinions: u64,
 }
 
 /// A candidate under confirmation.
@@ -185,24 +187,8 @@ impl<'m> Tracker<'m> {
     ) -> Tracker<'m> {
         let solver = cfg.solver_options();
         let max_edges = rig.sensors.len() * cfg.edges.max_edges_per_sensor as usize;
-        let i = &cfg.initialisation;
         let m = &cfg.maintenance;
-        let upright = cfg.motion.upright.then_some(cfg.motion.upright_height_m);
-        let opts = InitOptions {
-            edges_considered: i.edges_considered as usize,
-            segments_considered: i.segments_considered as usize,
-            best_edges_per_segment: i.best_edges_per_segment as usize,
-            samples_per_cell: i.samples_per_cell as usize,
-            time_budget: Duration::from_secs_f64(i.time_budget_ms / 1e3),
-            dihedral_tolerance_rad: i.dihedral_tolerance_deg.to_radians(),
-            max_range_rad: i.max_dihedral_range_deg.to_radians(),
-            inlier_alpha_rad: m.inlier_angle_deg.to_radians(),
-            min_length_rad: cfg.edges.min_edge_length_deg.to_radians(),
-            upright_height_m: upright,
-            simplex_refinement: i.simplex_refinement,
-            candidates: 3,
-            wide_segments_considered: i.wide_segments_considered as usize,
-        };
+        let opts = InitOptions::from_config(cfg);
         let init = Initialiser::new(rig, model, table, opts, solver.clone(), max_edges);
         let max_set = (0..table.node_count() as u32)
             .map(|n| table.node_set(n).segments.len())
@@ -337,6 +323,7 @@ impl<'m> Tracker<'m> {
             // Quarter-turn twins are worth searching only where any heading is plausible.
             self.init
                 .set_yaw_twins(turn_limit.is_none_or(|(_, limit)| limit >= std::f64::consts::PI));
+            self.init.set_rotation_prior(turn_limit);
             let (candidates, report) = self.init.run(edges, &volume, &mut self.rng);
             let min = self.cfg.maintenance.min_inliers as usize;
             // A candidate must explain at least `accept_explained_fraction` of the segments it
