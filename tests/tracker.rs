@@ -253,23 +253,31 @@ fn tracking_and_bounded_searches_allocate_nothing() {
 /// A search told where the rotation is (after a bad frame: the last good one and the turn the
 /// rig can have made since) keeps to it: with the prior on the truth it still finds the truth,
 /// with the prior on the truth's half-turn twin nothing near the truth comes out, although the
-/// same search without the prior finds it.
+/// same search without the prior finds it. And a search drops samples tilted further from
+/// upright than `motion.max_tilt_deg`: with a tight limit it drops some, still finds the
+/// (upright) truth and returns nothing tilted beyond the limit; with 180° it drops none.
 #[test]
-fn a_rotation_prior_keeps_the_search_to_turns_the_rig_can_have_made() {
+fn a_rotation_prior_and_a_tilt_limit_keep_the_search_to_plausible_rotations() {
     use nalgebra::UnitQuaternion;
     use omnitrack::tracker::{InitOptions, Initialiser};
     use rand::SeedableRng;
     let f = fixture();
     let (mut source, rig, cfg, mut frame, mut detector) = replay(f);
     let max_edges = rig.sensors.len() * cfg.edges.max_edges_per_sensor as usize;
-    let mut init = Initialiser::new(
-        &rig,
-        &f.model,
-        &f.table,
-        InitOptions::from_config(&cfg),
-        cfg.solver_options(),
-        max_edges,
-    );
+    let initialiser = |max_tilt_deg: f64| {
+        let mut c = cfg.clone();
+        c.motion.max_tilt_deg = max_tilt_deg;
+        let mut init = Initialiser::new(
+            &rig,
+            &f.model,
+            &f.table,
+            InitOptions::from_config(&c),
+            c.solver_options(),
+            max_edges,
+        );
+        init.set_yaw_twins(false);
+        init
+    };
     assert!(source.next_frame(&mut frame).unwrap());
     let ts = frame.timestamp_ns().unwrap();
     let edges = detector.detect(&frame).to_vec();
@@ -280,13 +288,13 @@ fn a_rotation_prior_keeps_the_search_to_turns_the_rig_can_have_made() {
         .unwrap()
         .pose;
     let volume = hint(f);
-    init.set_yaw_twins(false);
     let near_truth = |found: &[omnitrack::tracker::Candidate], deg: f64| {
         found.iter().any(|c| {
             (c.pose.translation.vector - truth.translation.vector).norm() < 0.1
                 && c.pose.rotation.angle_to(&truth.rotation) < deg.to_radians()
         })
     };
+    let mut init = initialiser(180.0);
     let limit = 30f64.to_radians();
     let twin = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), std::f64::consts::PI) * truth.rotation;
     for (prior, expect_truth) in [
@@ -296,8 +304,9 @@ fn a_rotation_prior_keeps_the_search_to_turns_the_rig_can_have_made() {
     ] {
         init.set_rotation_prior(prior);
         let mut rng = rand::rngs::SmallRng::seed_from_u64(5);
-        let (found, _) = init.run(&edges, &volume, &mut rng);
+        let (found, report) = init.run(&edges, &volume, &mut rng);
         assert_eq!(near_truth(found, 1.0), expect_truth, "prior {prior:?}: {found:?}");
+        assert_eq!(report.tilted, 0, "no tilt limit at 180°");
         if let Some((r, _)) = prior {
             // The polish may settle a little beyond the limit, never on the far side.
             assert!(
@@ -306,4 +315,13 @@ fn a_rotation_prior_keeps_the_search_to_turns_the_rig_can_have_made() {
             );
         }
     }
+    // The lab rig rolls upright: 10° keeps the truth and drops the samples of wrong triplets,
+    // whose rotations fall anywhere.
+    let mut init = initialiser(10.0);
+    let mut rng = rand::rngs::SmallRng::seed_from_u64(5);
+    let (found, report) = init.run(&edges, &volume, &mut rng);
+    assert!(near_truth(found, 1.0), "{found:?}");
+    assert!(report.tilted > 0, "{report:?}");
+    let tilt = |c: &omnitrack::tracker::Candidate| (c.pose.rotation * Vector3::z()).z.acos().to_degrees();
+    assert!(found.iter().all(|c| tilt(c) < 12.0), "{found:?}");
 }

@@ -105,6 +105,9 @@ pub struct MotionConfig {
     /// Fastest plausible turn of the rig (deg/s): a relocalised or re-initialised pose that
     /// turned further since the last good frame (beyond `maintenance.max_jump_deg`) is refused.
     pub max_turn_rate_deg_s: f64,
+    /// Largest tilt of the rig's z axis from the world's up (deg) a search considers; 180 keeps
+    /// every orientation.
+    pub max_tilt_deg: f64,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -240,6 +243,7 @@ impl Default for MotionConfig {
             upright: false,
             upright_height_m: 1.2,
             max_turn_rate_deg_s: 360.0, // ours: heads turn at up to ~300–400°/s
+            max_tilt_deg: 90.0,         // ours: a worn rig's up axis stays above the horizon
         } // Koch–Teller §5.4
     }
 }
@@ -452,6 +456,10 @@ impl TrackerConfig {
         positive("noise.edge_normal_sigma_deg", self.noise.edge_normal_sigma_deg)?;
         positive("motion.upright_height_m", self.motion.upright_height_m)?;
         positive("motion.max_turn_rate_deg_s", self.motion.max_turn_rate_deg_s)?;
+        let tilt = self.motion.max_tilt_deg;
+        if !(tilt > 0.0 && tilt <= 180.0) {
+            return Err(format!("key 'motion.max_tilt_deg': must be in (0, 180], found {tilt}"));
+        }
         positive("budgets.frame_ms", self.budgets.frame_ms)?;
         positive("budgets.edges_ms", self.budgets.edges_ms)?;
         positive("budgets.frame_sync_tolerance_ms", self.budgets.frame_sync_tolerance_ms)?;

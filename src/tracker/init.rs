@@ -124,6 +124,9 @@ pub struct InitOptions {
     pub candidates: usize,
     /// The most segments [`Initialiser::set_breadth`] may ask for (buffers are sized for it).
     pub wide_segments_considered: usize,
+    /// Samples whose rig z axis is further than this from the world's up are dropped (rad;
+    /// π keeps every sample).
+    pub max_tilt_rad: f64,
 }
 
 impl InitOptions {
@@ -145,6 +148,7 @@ impl InitOptions {
             simplex_refinement: i.simplex_refinement,
             candidates: 3,
             wide_segments_considered: i.wide_segments_considered as usize,
+            max_tilt_rad: cfg.motion.max_tilt_deg.to_radians(),
         }
     }
 }
@@ -182,6 +186,8 @@ pub struct InitReport {
     pub samples: u64,
     pub elapsed: Duration,
     pub timed_out: bool,
+    /// Samples dropped because the rig would be tilted further than `max_tilt_rad` allows.
+    pub tilted: u64,
 }
 
 /// Most threads the whole-model search uses.
@@ -376,7 +382,9 @@ impl<'m> Initialiser<'m> {
                     }
                     done.cells_searched += 1;
                     done.triplet_matches += me.score_cell(w, node);
-                    done.samples += me.sample_cell(w, node, volume, rng);
+                    let (drawn, tilted) = me.sample_cell(w, node, volume, rng);
+                    done.samples += drawn;
+                    done.tilted += tilted;
                 }
                 done
             };
@@ -384,6 +392,7 @@ impl<'m> Initialiser<'m> {
                 report.cells_searched += part.cells_searched;
                 report.triplet_matches += part.triplet_matches;
                 report.samples += part.samples;
+                report.tilted += part.tilted;
                 report.timed_out |= part.timed_out;
             };
             if workers > 1 {
@@ -727,13 +736,16 @@ impl<'m> Initialiser<'m> {
     }
 
     /// Figure 4 lines 11–15 for one cell: random correspondence samples, a pose for each, the best
-    /// kept in the pool. Returns the number of samples drawn.
-    fn sample_cell(&self, w: &mut CellScratch, node: u32, volume: &SearchVolume, rng: &mut SmallRng) -> u64 {
+    /// kept in the pool. Returns the number of samples drawn and how many of them were dropped as
+    /// tilted.
+    fn sample_cell(&self, w: &mut CellScratch, node: u32, volume: &SearchVolume, rng: &mut SmallRng) -> (u64, u64) {
         let n = w.segs.len();
         let total: f64 = w.weights[..n].iter().sum();
         if n < 3 || total <= 0.0 || w.weights[..n].iter().filter(|w| **w > 0.0).count() < 3 {
-            return 0;
+            return (0, 0);
         }
+        let min_up = self.opts.max_tilt_rad.cos();
+        let mut tilted = 0u64;
         let mut points = [Point3::origin(); 9];
         self.cell_points(node, &mut points);
         let centre = points[0];
@@ -803,6 +815,12 @@ impl<'m> Initialiser<'m> {
             {
                 continue;
             }
+            // The rig's up axis in the world: a worn rig is never upside down, and a symmetric
+            // building's upside-down twin explains as much as the truth on one frame.
+            if (pose.rotation * Vector3::z()).z < min_up {
+                tilted += 1;
+                continue;
+            }
             let s = self.loose_score(w, &pose);
             if s < kept[KEEP_PER_CELL - 1].0 {
                 kept[KEEP_PER_CELL - 1] = (s, pose);
@@ -814,7 +832,7 @@ impl<'m> Initialiser<'m> {
                 keep_best(&mut w.pool, (s, pose));
             }
         }
-        drawn
+        (drawn, tilted)
     }
 
     /// The pose of three correspondences (segment slot, top-edge index): Wahba rotation from the
