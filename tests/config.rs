@@ -74,6 +74,10 @@ fn bad_values_name_the_key() {
             "[maintenance]\nmin_explained_ratio = 1.5\n",
             "key 'maintenance.min_explained_ratio': must lie in [0, 1)",
         ),
+        (
+            "[motion]\nmax_tilt_deg = 200\n",
+            "key 'motion.max_tilt_deg': must be in (0, 180]",
+        ),
         ("[typo]\n", "unknown field `typo`"),
     ];
     for (text, expected) in cases {

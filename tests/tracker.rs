@@ -67,7 +67,7 @@ fn replay(f: &LabRecording) -> (ReplaySource, Rig, TrackerConfig, FrameSet, Edge
     (source, rig, cfg, frame, detector)
 }
 
-/// Tracks `source` with the default configuration from the 3 m hint, each frame to `sink`.
+/// Tracks `source` with the test configuration from the 3 m hint, each frame to `sink`.
 fn run_hinted(
     f: &LabRecording,
     source: &mut dyn FrameSource,

@@ -40,8 +40,8 @@ use std::time::{Duration, Instant};
 /// as much of VIS(T).
 const SUSPECT_MARGIN: f64 = 1.2;
 
-/// A solved pose this far from the constant-velocity prediction (beyond what smooth motion
-/// leaves between them) is checked against the polished prediction.
+/// A solved pose this far (5 cm, or 0.035 rad ≈ 2°) from the constant-velocity prediction,
+/// beyond what smooth motion leaves between them, is checked against the polished prediction.
 const SECOND_OPINION_M: f64 = 0.05;
 const SECOND_OPINION_RAD: f64 = 0.035;
 
@@ -101,9 +101,8 @@ impl Tracker<'_> {
     /// not stop the tracker from finding its place again. The search keeps to the turns the rig
     /// can have made since the last good frame; the prediction, the last pose and the frame's
     /// `solved` pose, each polished, compete with its candidates; and one that turns more than
-    /// `max_jump_deg` from the prediction
-    /// wins only by `clear_winner_ratio` (a symmetric corridor's quarter-turn twin explains about
-    /// as much as the truth on one frame).
+    /// `max_jump_deg` from the prediction wins only by `clear_winner_ratio` (a symmetric
+    /// corridor's quarter-turn twin explains about as much as the truth on one frame).
     fn relocalise(
         &mut self,
         edges: &[Edge],
