@@ -1,6 +1,7 @@
 //! The desk renderer against geometry: corners of a room land on colour boundaries where the
 //! lens model says they project, the BVH agrees with brute force, ear clipping covers non-convex
-//! faces, recordings have the INTERFACES.md layout, and renders are deterministic.
+//! faces, recordings have the INTERFACES.md layout, renders are deterministic, and several rays
+//! per pixel blend colours across boundaries only.
 #![cfg(feature = "desk")]
 
 use nalgebra::{Isometry3, Point2, Point3, Translation3, UnitQuaternion, Vector3};
@@ -378,6 +379,38 @@ fn renders_are_deterministic() {
     assert!(a.as_raw() == b.as_raw(), "two renders of one frame differ");
     let c = Renderer::new(&model, &rig, Appearance { seed: 43, ..appearance }, &keep).render_sensor(1, &f);
     assert!(a.as_raw() != c.as_raw(), "the seed changes nothing");
+}
+
+/// Several rays per pixel average the light over the pixel's area: where a colour boundary
+/// crosses a pixel it gets a blend, elsewhere the value of the one-ray render.
+#[test]
+fn pixel_samples_blend_colours_across_boundaries_only() {
+    let model = Model::from_obj_str(&room_obj(), "room.obj").unwrap();
+    let rig = rig();
+    let keep = [Point3::new(2.1, 1.7, 1.45)];
+    let f = frame(5, pose());
+    let render = |n: u32| {
+        let appearance = Appearance {
+            pixel_samples: n,
+            ..Appearance::plain()
+        };
+        Renderer::new(&model, &rig, appearance, &keep).render_sensor(1, &f)
+    };
+    let (one, area) = (render(1), render(3));
+    let colours = |img: &image::RgbImage| {
+        img.pixels()
+            .map(|p| p.0)
+            .collect::<std::collections::HashSet<_>>()
+            .len()
+    };
+    // Flat surface colours only: one ray per pixel gives one colour per surface seen (and
+    // black past the lens's field).
+    assert!(colours(&one) <= 8, "{} colours", colours(&one));
+    assert!(colours(&area) > 5 * colours(&one), "{} colours", colours(&area));
+    let same = one.pixels().zip(area.pixels()).filter(|(a, b)| a == b).count();
+    let n = (one.width() * one.height()) as usize;
+    assert!(same > n * 95 / 100, "{same} of {n} pixels unchanged");
+    assert!(same < n, "nothing blended");
 }
 
 #[test]

@@ -29,6 +29,11 @@ pub struct Appearance {
     pub motion_blur: f64,
     /// Sub-frame renders averaged when `motion_blur > 0` (cost scales with it).
     pub motion_blur_samples: u32,
+    /// Rays per pixel along each axis, on a regular grid over the pixel's area, averaged: a
+    /// real pixel integrates the light falling on it, so an edge crossing it gives a value in
+    /// between (what sub-pixel edge location relies on). 1 = one ray through the pixel centre
+    /// (aliased edges); cost scales with its square.
+    pub pixel_samples: u32,
     /// Amplitude of the global lighting drift over time: brightness varies by about ±this,
     /// white balance by about ±0.4× this per channel, as smooth functions of time. 0 = none.
     pub lighting_drift: f64,
@@ -53,6 +58,7 @@ impl Default for Appearance {
             vignetting: 0.3,
             motion_blur: 0.0,
             motion_blur_samples: 4,
+            pixel_samples: 1,
             lighting_drift: 0.1,
             clutter: 1.0,
             people: 1.0,
@@ -73,6 +79,7 @@ impl Appearance {
             vignetting: 0.0,
             motion_blur: 0.0,
             motion_blur_samples: 1,
+            pixel_samples: 1,
             lighting_drift: 0.0,
             clutter: 0.0,
             people: 0.0,

@@ -5,7 +5,8 @@
 //! previous pose for motion blur). Out: one 8-bit RGB image per sensor. Every pixel's ray goes
 //! through the pixel centre from the sensor's optical centre through its lens model
 //! ([`crate::rig::Sensor::ray_in_rig`]), so the images carry the true fisheye distortion; pixels
-//! with no ray are black. Rays are cast into a [`Scene`]: the model's faces ear-clipped into
+//! with no ray are black. With `Appearance::pixel_samples` > 1 a grid of rays covers each
+//! pixel's area and is averaged, as a real pixel integrates light (no aliased edges). Rays are cast into a [`Scene`]: the model's faces ear-clipped into
 //! triangles in a binned-SAH [`bvh::Bvh`], plus clutter and people that exist only in the images
 //! (never in the model). Rows are rendered in parallel (rayon). Output is a pure function of
 //! model, rig, appearance (with its seed), keep-out points and frame: byte-identical on rerun.
@@ -51,7 +52,8 @@ pub struct SceneHit {
 }
 
 /// Per-pixel rays of one sensor: unit direction in the rig frame and the vignetting factor;
-/// `x` is NaN where the lens has no ray.
+/// `x` is NaN where the lens has no ray. `Appearance::pixel_samples`² rays per pixel, stored
+/// together.
 struct SensorRays {
     sensor: Sensor,
     rays: Vec<[f32; 4]>,
@@ -91,10 +93,13 @@ impl Renderer {
             .map(|s| {
                 let theta_max = s.max_off_axis().max(1e-6);
                 let (w, h) = (s.width as usize, s.height as usize);
-                let mut rays = vec![[f32::NAN; 4]; w * h];
-                rays.par_chunks_mut(w).enumerate().for_each(|(v, row)| {
-                    for (u, out) in row.iter_mut().enumerate() {
-                        let px = Point2::new(u as f64, v as f64);
+                let n = appearance.pixel_samples.max(1) as usize;
+                let mut rays = vec![[f32::NAN; 4]; w * h * n * n];
+                rays.par_chunks_mut(w * n * n).enumerate().for_each(|(v, row)| {
+                    for (k, out) in row.iter_mut().enumerate() {
+                        let (u, sub) = (k / (n * n), k % (n * n));
+                        let off = |i: usize| (i as f64 + 0.5) / n as f64 - 0.5;
+                        let px = Point2::new(u as f64 + off(sub % n), v as f64 + off(sub / n));
                         if let (Some(r), Some(rs)) = (s.ray_in_rig(&px), s.lens.unproject(&px)) {
                             let theta = rs.z.clamp(-1.0, 1.0).acos() / theta_max;
                             let vig = (1.0 - appearance.vignetting * theta * theta).max(0.0);
@@ -197,29 +202,41 @@ impl Renderer {
                 ([o.x as f32, o.y as f32, o.z as f32], rows)
             })
             .collect();
-        let inv_k = 1.0 / samples.len() as f32;
+        let per_pixel = (self.appearance.pixel_samples.max(1) as usize).pow(2);
+        let inv_k = 1.0 / (samples.len() * per_pixel) as f32;
         let mut buf = vec![0u8; w * h * 3];
         buf.par_chunks_mut(w * 3).enumerate().for_each(|(v, row)| {
             for u in 0..w {
                 let pix = v * w + u;
-                let r = sr.rays[pix];
-                if r[0].is_nan() {
+                let rays = &sr.rays[pix * per_pixel..(pix + 1) * per_pixel];
+                if rays.iter().all(|r| r[0].is_nan()) {
                     continue; // black: no ray
                 }
+                // Vignetting per ray; with one ray per pixel it is applied last, as it always
+                // was, so that those images stay byte-identical.
+                let (vig_each, vig_last) = if per_pixel == 1 {
+                    (false, rays[0][3])
+                } else {
+                    (true, 1.0)
+                };
                 let mut acc = [0.0f32; 3];
-                for (sample, (o, m)) in samples.iter().zip(&frames) {
-                    let d = [
-                        dot(m[0], [r[0], r[1], r[2]]),
-                        dot(m[1], [r[0], r[1], r[2]]),
-                        dot(m[2], [r[0], r[1], r[2]]),
-                    ];
-                    let c = self.shade(&Ray::new(*o, d), sample);
-                    for k in 0..3 {
-                        acc[k] += c[k];
+                // Part of the pixel without a ray (past the lens's field) counts as black.
+                for r in rays.iter().filter(|r| !r[0].is_nan()) {
+                    let vig = if vig_each { r[3] } else { 1.0 };
+                    for (sample, (o, m)) in samples.iter().zip(&frames) {
+                        let d = [
+                            dot(m[0], [r[0], r[1], r[2]]),
+                            dot(m[1], [r[0], r[1], r[2]]),
+                            dot(m[2], [r[0], r[1], r[2]]),
+                        ];
+                        let c = self.shade(&Ray::new(*o, d), sample);
+                        for k in 0..3 {
+                            acc[k] += c[k] * vig;
+                        }
                     }
                 }
                 for k in 0..3 {
-                    let mut x = acc[k] * inv_k * gain[k] * r[3] * 255.0;
+                    let mut x = acc[k] * inv_k * gain[k] * vig_last * 255.0;
                     if noise > 0.0 {
                         x += noise * gaussian_from_hash(hash64(noise_seed ^ (pix as u64 * 3 + k as u64)));
                     }
