@@ -2,7 +2,16 @@
 //! whole six-sensor frame, beside OpenCV's LSD and FastLineDetector on the same images.
 //!
 //! Run: `cargo bench --bench edges` (needs the `desk` feature, on by default). Options after
-//! `--`: `--quick` (fewer frames), `--no-opencv` (skip tools/bench_edges.py).
+//! `--`: `--quick` (fewer frames), `--no-opencv` (skip tools/bench_edges.py), `--seed S`
+//! (another draw of every appearance's colours, clutter, people and lights, and of the
+//! trajectory the frames are taken from: the defaults are appearance seed 1, trajectory seed 7),
+//! `--pixel-samples N` (rays per pixel side, default 3).
+//!
+//! Images. Each pixel averages 3×3 rays over its area (`Appearance::pixel_samples`), as a
+//! camera's pixel integrates the light falling on it: an edge crossing a pixel gives it a value
+//! in between, which is what sub-pixel location reads. One ray through the pixel centre (the
+//! tracker's recordings, which are cheaper to render) gives aliased staircase edges that carry
+//! no sub-pixel information; one row measures that too.
 //!
 //! Accuracy. Ground truth per sensor image: the model segments, sampled every centimetre, each
 //! sample kept when it projects onto the image (3 px from the border) and the first hit of the
@@ -142,7 +151,7 @@ mod bench {
         missed_fragmented: usize,
     }
 
-    fn score(truths: &[Truth], edges: &[Edge], s: &mut Score) {
+    fn score(truths: &[Truth], edges: &[Edge], s: &mut Score, rig: &Rig, frame: usize) {
         let cos1 = 1f64.to_radians().cos();
         s.edges += edges.len();
         for t in truths {
@@ -168,6 +177,7 @@ mod bench {
             if best.is_none() && std::env::var("EDGES_MISSES").is_ok() {
                 // Diagnostics: nearest plane among overlapping edges, best overlap within 1°.
                 let mut near = (f64::INFINITY, 0.0);
+                let mut near_px = [nalgebra::Point2::new(f64::NAN, f64::NAN); 2];
                 let mut cover = 0.0f64;
                 for e in edges.iter().filter(|e| e.sensor as usize == t.sensor) {
                     let ei = interval(&t.normal, &e1, &e.plane.ends[0], &e.plane.ends[1]);
@@ -175,18 +185,34 @@ mod bench {
                     let ang = e.plane.normal.dot(&t.normal).abs().min(1.0).acos().to_degrees();
                     if overlap > 0.3 && ang < near.0 {
                         near = (ang, overlap);
+                        near_px = e.px;
                     }
                     if ang < 1.0 {
                         cover = cover.max(overlap);
                     }
                 }
+                let sn = &rig.sensors[t.sensor];
+                let px = |r: &Vector3<f64>| {
+                    sn.project_from_rig(&(sn.centre() + r))
+                        .unwrap_or(nalgebra::Point2::new(f64::NAN, f64::NAN))
+                };
+                let (a, b) = (px(&t.r1), px(&t.r2));
                 eprintln!(
-                    "miss s{} len {:.2}° nearest-plane {:.2}° (overlap {:.2}) best-cover-within-1° {:.2}",
+                    "miss frame {frame} s{} len {:.2}° nearest-plane {:.2}° (overlap {:.2}) best-cover-within-1° {:.2} \
+                     truth px ({:.1}, {:.1})–({:.1}, {:.1}) nearest edge px ({:.1}, {:.1})–({:.1}, {:.1})",
                     t.sensor,
                     tlen.to_degrees(),
                     near.0,
                     near.1,
-                    cover
+                    cover,
+                    a.x,
+                    a.y,
+                    b.x,
+                    b.y,
+                    near_px[0].x,
+                    near_px[0].y,
+                    near_px[1].x,
+                    near_px[1].y
                 );
             }
             if let Some(err) = best {
@@ -222,6 +248,8 @@ mod bench {
         name: String,
         scenario: ScenarioName,
         appearance: Appearance,
+        /// Rendered with one ray per pixel whatever `--pixel-samples` says.
+        point_sampled: bool,
     }
 
     fn setups() -> Vec<Setup> {
@@ -230,9 +258,14 @@ mod bench {
             name: name.to_string(),
             scenario,
             appearance,
+            point_sampled: false,
         };
         vec![
             mk("lab default", ScenarioName::Lab, d()),
+            Setup {
+                point_sampled: true,
+                ..mk("lab default, one ray per pixel (aliased)", ScenarioName::Lab, d())
+            },
             mk("lab plain (all effects off)", ScenarioName::Lab, Appearance::plain()),
             mk(
                 "lab clutter 0",
@@ -298,7 +331,7 @@ mod bench {
 
     /// `EdgeParams::default()`, with overrides from EDGES_THRESHOLD, EDGES_SPLIT_DEG,
     /// EDGES_MERGE_DEG, EDGES_GAP_DEG, EDGES_SMOOTH (0 none, 1 binomial², 2 along the edge),
-    /// EDGES_MIN_CHAIN (for tuning sweeps). EDGES_MISSES=1 prints every missed segment to stderr.
+    /// EDGES_MIN_CHAIN, EDGES_TWO_LINE (`two_line_excess`; for tuning sweeps). EDGES_MISSES=1 prints every missed segment to stderr.
     fn params() -> EdgeParams {
         let get = |k: &str| std::env::var(k).ok().and_then(|v| v.parse::<f64>().ok());
         let mut p = EdgeParams::default();
@@ -325,6 +358,9 @@ mod bench {
         if let Some(v) = get("EDGES_MIN_CHAIN") {
             p.min_chain_edgels = v as usize;
         }
+        if let Some(v) = get("EDGES_TWO_LINE") {
+            p.two_line_excess = v;
+        }
         p
     }
 
@@ -339,6 +375,12 @@ mod bench {
         let rig = Rig::load(&root().join("firmware_config/ladybug2.toml")).expect("rig");
         let config = EdgeConfig::default();
         let frames_per_setup = if quick { 3 } else { 8 };
+        let value = |flag: &str| args.iter().position(|a| a == flag).and_then(|k| args.get(k + 1));
+        let seed: Option<u64> = value("--seed").and_then(|v| v.parse().ok());
+        let pixel_samples: u32 = value("--pixel-samples")
+            .and_then(|v| v.parse().ok())
+            .filter(|&n| n >= 1)
+            .unwrap_or(3);
         let traj_len = 400;
 
         println!(
@@ -348,6 +390,10 @@ mod bench {
         );
         println!("config: {config:?}");
         println!("params: {:?}", params());
+        if let Some(seed) = seed {
+            println!("seed: appearance {seed}, trajectory {}", seed + 6);
+        }
+        println!("pixels: {pixel_samples}×{pixel_samples} rays each, averaged (but where the row says one ray)");
         println!();
         println!("## Accuracy ({frames_per_setup} frames per row, visible model segments > 30 px)");
         println!();
@@ -360,13 +406,17 @@ mod bench {
         let mut truths = Vec::new();
         let mut speed_frames: Vec<Vec<image::RgbImage>> = Vec::new();
         let only = std::env::var("EDGES_BENCH_ONLY").ok();
-        for setup in setups() {
+        for mut setup in setups() {
+            if let Some(seed) = seed {
+                setup.appearance.seed = seed;
+            }
+            setup.appearance.pixel_samples = if setup.point_sampled { 1 } else { pixel_samples };
             if only.as_ref().is_some_and(|o| !setup.name.contains(o.as_str())) && setup.name != "lab default" {
                 continue;
             }
             let scenario = Scenario::get(setup.scenario);
             let model = Model::from_obj_str(&scenario.model_obj().expect("model"), "scenario").expect("model");
-            let traj = scenario.trajectory(traj_len, 7);
+            let traj = scenario.trajectory(traj_len, seed.map_or(7, |s| s + 6));
             let keep: Vec<Point3<f64>> = traj.iter().map(|s| Point3::from(s.pose.translation.vector)).collect();
             let renderer = Renderer::new(&model, &rig, setup.appearance.clone(), &keep);
             let mut sc = Score::default();
@@ -389,9 +439,10 @@ mod bench {
                     traj[k].timestamp_ns as f64 * 1e-9,
                     &mut truths,
                 );
-                score(&truths, edges, &mut sc);
-                if f == 0 && std::env::var("EDGES_DEBUG").is_ok() {
+                score(&truths, edges, &mut sc, &rig, f);
+                if std::env::var("EDGES_DEBUG").is_ok() {
                     for (k, image) in images.iter().enumerate() {
+                        let _ = image.save(format!("/tmp/edges_raw_{}_f{f}_s{k}.png", setup.name.replace(' ', "_")));
                         let mut img = image.clone();
                         let s = &rig.sensors[k];
                         let mut arc = |r1: &Vector3<f64>, r2: &Vector3<f64>, col: [u8; 3]| {
@@ -412,7 +463,10 @@ mod bench {
                         for e in edges.iter().filter(|e| e.sensor as usize == k) {
                             arc(&e.plane.ends[0], &e.plane.ends[1], [0, 255, 0]);
                         }
-                        let _ = img.save(format!("/tmp/edges_debug_{}_s{k}.png", setup.name.replace(' ', "_")));
+                        let _ = img.save(format!(
+                            "/tmp/edges_debug_{}_f{f}_s{k}.png",
+                            setup.name.replace(' ', "_")
+                        ));
                     }
                 }
                 sc.sensor_frames += rig.sensors.len();

@@ -1,6 +1,7 @@
 //! Edge + hue extraction: exact planes of known great circles, one edge for a strongly curved
-//! fisheye line, hue strips (wrap-around at red, unsaturated pixels left out), blank images,
-//! the CSV, and zero heap allocations per frame after warm-up (counting allocator).
+//! fisheye line, two edges for two lines end to end a pixel and a half apart (two-line test),
+//! hue strips (wrap-around at red, unsaturated pixels left out), blank images, the CSV, and zero
+//! heap allocations per frame after warm-up (counting allocator).
 
 use nalgebra::{Point2, Vector3};
 use omnitrack::capture::{FrameSet, SensorImage};
@@ -193,6 +194,52 @@ fn curved_fisheye_line_is_one_edge() {
         "sagitta {sag:.1} px: the test line should be strongly curved"
     );
     assert!(chord.norm() > 300.0, "the edge spans the image: {e:?}");
+}
+
+/// A wall's corner continued, a pixel and a half aside, by the edge of a box standing in front of
+/// it (the same colours on both sides, so no edge marks the junction): with the two-line test
+/// on (`EdgeParams::two_line_excess`), two lines, each found on its own plane, not one edge
+/// tilted between them.
+#[test]
+fn two_lines_a_pixel_and_a_half_apart_end_to_end_are_two_edges() {
+    let _g = serial();
+    let rig = rig();
+    let k = 0;
+    let s = &rig.sensors[k];
+    // Near-vertical lines ~28 px left of the centre; the lower one 0.005 / 0.1 of that further
+    // left: ≈ 1.4 px at f = 285.
+    let upper = Vector3::new(1.0, 0.02, 0.1).normalize();
+    let lower = Vector3::new(1.0, 0.02, 0.105).normalize();
+    let side = |r: &Vector3<f64>| if r.y < 0.0 { upper.dot(r) } else { lower.dot(r) };
+    let img = render(&rig, k, &[upper, lower], |r| {
+        if side(r) > 0.0 {
+            [190.0, 150.0, 80.0]
+        } else {
+            [60.0, 80.0, 130.0]
+        }
+    });
+    let params = EdgeParams {
+        two_line_excess: 0.3,
+        ..EdgeParams::default()
+    };
+    let mut det = EdgeDetector::with_params(&rig, &EdgeConfig::default(), params);
+    let edges = det.detect_sensor(&img).to_vec();
+    let worst = |edges: &[Edge]| {
+        let mut worst = 0.0f64;
+        for (name, n) in [("upper", upper), ("lower", lower)] {
+            let (e, err) = closest(edges, &(s.t_rig_sensor.rotation * n)).expect("an edge");
+            assert!(e.length_rad.to_degrees() > 20.0, "{name} line: {e:?}");
+            worst = worst.max(err);
+        }
+        worst
+    };
+    let err = worst(&edges);
+    assert!(err <= 0.05, "a line's closest edge is {err:.4}° off ({edges:#?})");
+    // With the test off (the default), one edge runs between the two.
+    let mut det = EdgeDetector::new(&rig, &EdgeConfig::default());
+    let edges = det.detect_sensor(&img).to_vec();
+    let err = worst(&edges);
+    assert!(err > 0.1, "{err:.4}°: the lines should blend without the two-line test");
 }
 
 /// Colour of a hue in [0,1) at full saturation and value 200.

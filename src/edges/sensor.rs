@@ -399,10 +399,63 @@ impl Workspace {
             out += 1;
         }
         pieces.truncate(out);
-        for &(a, b) in &pieces {
-            self.add_piece(a as usize, b as usize, rgb);
+        // The chord test misses two lines that meet at a shallow angle or run side by side a
+        // pixel or two apart (a wall corner continued by a box's edge): with the two-line test
+        // on, each piece is also cut where two planes fit it much better than one.
+        self.stack.clear();
+        self.stack.extend(pieces.iter().rev().copied());
+        while let Some((a, b)) = self.stack.pop() {
+            if let Some(k) = self.two_lines(a as usize, b as usize) {
+                self.stack.push((k as u32 + 1, b));
+                self.stack.push((a, k as u32));
+            } else {
+                self.add_piece(a as usize, b as usize, rgb);
+            }
         }
         self.pieces = pieces;
+    }
+
+    /// Where edgels a..=b are two lines rather than one (see [`two_lines_apart`]): the last
+    /// edgel of the first line at the cut that lowers the residual most. None when the test is
+    /// off (`EdgeParams::two_line_excess` 0).
+    fn two_lines(&self, a: usize, b: usize) -> Option<usize> {
+        let min_n = self.params.min_chain_edgels.max(3);
+        let len = b + 1 - a;
+        let excess = self.params.two_line_excess;
+        if excess <= 0.0 || len < 2 * min_n {
+            return None;
+        }
+        let m = self.moments(a, b);
+        let rss = plane_residual(&m, &plane_normal(&m)?).max(0.0);
+        let tol = self.params.split_tolerance_rad.sin();
+        if !two_lines_apart(rss, 0.0, m[6], len, tol, excess) {
+            return None;
+        }
+        let split_rss = |k: usize| -> f64 {
+            let (ml, mr) = (self.moments(a, k), self.moments(k + 1, b));
+            match (plane_normal(&ml), plane_normal(&mr)) {
+                (Some(nl), Some(nr)) => plane_residual(&ml, &nl).max(0.0) + plane_residual(&mr, &nr).max(0.0),
+                _ => f64::INFINITY,
+            }
+        };
+        // Coarse scan, then every edgel around the best coarse cut.
+        let (first, last) = (a + min_n - 1, b - min_n);
+        let step = (len / 32).max(1);
+        let mut best = (f64::INFINITY, first);
+        for k in (first..=last).step_by(step) {
+            let r = split_rss(k);
+            if r < best.0 {
+                best = (r, k);
+            }
+        }
+        let centre = best.1;
+        for k in centre.saturating_sub(step - 1).max(first)..=(centre + step - 1).min(last) {
+            let r = split_rss(k);
+            if r < best.0 {
+                best = (r, k);
+            }
+        }
+        two_lines_apart(rss, best.0, m[6], len, tol, excess).then_some(best.1)
     }
 
     /// Moments, count and plane normal of edgels a..=b without the outliers of their plane
@@ -532,6 +585,7 @@ impl Workspace {
         let cos_max = self.params.merge_angle_rad.cos();
         let gap_max = self.params.merge_gap_rad;
         let tol = self.params.split_tolerance_rad.sin();
+        let two_line = self.params.two_line_excess;
         for pass in 0..3 {
             let mut merged_any = false;
             for i in 0..self.cands.len() {
@@ -548,7 +602,7 @@ impl Workspace {
                     if dot.abs() < cos_max {
                         continue;
                     }
-                    if let Some(m) = try_merge(ci, cj, gap_max, tol) {
+                    if let Some(m) = try_merge(ci, cj, gap_max, tol, two_line) {
                         self.cands[i] = m;
                         self.cands[j].alive = false;
                         self.stats.merged += 1;
@@ -618,6 +672,25 @@ impl Workspace {
         }
     }
 }
+
+/// Whether runs of edgels fitted by two planes with residual `two` (Σ w sin²), and by one plane
+/// with residual `one`, are two lines: the rise from two planes to one (the excess) is more
+/// than noise explains and more than Σ w (`excess` · `tol`)²; `weight` is Σ w, `n` the edgels,
+/// `tol` the split tolerance (sine).
+///
+/// For two parallel lines d apart, or meeting at a kink, the excess per unit weight is
+/// (w₁w₂/(w₁+w₂)²) d²: about d²/4 when the runs are equal. For one line it is noise absorbed by
+/// the second plane's three degrees of freedom: the F statistic (excess / 3) / (residual /
+/// (n − 6)) stays near 1, and `TWO_LINE_F` keeps a noisy short run whole. The excess floor keeps
+/// one long line whole when a regular pattern (pixel staircases) makes a tiny excess significant.
+fn two_lines_apart(one: f64, two: f64, weight: f64, n: usize, tol: f64, excess: f64) -> bool {
+    let rise = one - two;
+    let c = excess * tol;
+    n > 6 && rise > c * c * weight && rise * (n - 6) as f64 > TWO_LINE_F * 3.0 * two.max(0.0)
+}
+
+/// See [`two_lines_apart`].
+const TWO_LINE_F: f64 = 10.0;
 
 /// Rays further off their piece's plane than this many RMS are left out of its fit…
 const OUTLIER_SIGMAS: f64 = 2.5;
@@ -731,7 +804,7 @@ fn angle_in_plane(n: &Vector3<f64>, e1: &Vector3<f64>, r: &Vector3<f64>) -> f64 
     r.dot(&e2).atan2(r.dot(e1))
 }
 
-fn try_merge(ci: &Candidate, cj: &Candidate, gap_max: f64, tol: f64) -> Option<Candidate> {
+fn try_merge(ci: &Candidate, cj: &Candidate, gap_max: f64, tol: f64, two_line: f64) -> Option<Candidate> {
     // Orient j like i.
     let di = ci.r2 - ci.r1;
     let same = di.dot(&(cj.r2 - cj.r1)) >= 0.0;
@@ -764,7 +837,13 @@ fn try_merge(ci: &Candidate, cj: &Candidate, gap_max: f64, tol: f64) -> Option<C
         }
     }
     let count = ci.count + cj.count;
-    if plane_residual(&m, &n) / m[6] > tol * tol * 0.25 {
+    let rss = plane_residual(&m, &n);
+    if rss / m[6] > tol * tol * 0.25 {
+        return None;
+    }
+    // Nor, with the two-line test on, may it be two lines side by side or at a kink.
+    let two = plane_residual(&ci.m, &ci.n) + plane_residual(&cj.m, &cj.n);
+    if two_line > 0.0 && two_lines_apart(rss, two, m[6], count as usize, tol, two_line) {
         return None;
     }
     // Intervals along the great circle: must not overlap (beyond a sliver), gap small.
