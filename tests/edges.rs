@@ -427,9 +427,11 @@ fn zero_allocations_per_frame_after_warm_up() {
     frames[1]
         .sensor_mut(3)
         .set_invalid(omnitrack::capture::ImageFault::Dropped, 0);
-    for threads in [2, 1] {
+    // The two-line test's cuts and refused merges take the same pre-sized buffers.
+    for (threads, two_line_excess) in [(2, 0.0), (1, 0.0), (2, 0.3)] {
         let params = EdgeParams {
             threads,
+            two_line_excess,
             ..EdgeParams::default()
         };
         let mut det = EdgeDetector::with_params(&rig, &config, params);
