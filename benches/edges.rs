@@ -331,7 +331,8 @@ mod bench {
 
     /// `EdgeParams::default()`, with overrides from EDGES_THRESHOLD, EDGES_SPLIT_DEG,
     /// EDGES_MERGE_DEG, EDGES_GAP_DEG, EDGES_SMOOTH (0 none, 1 binomial², 2 along the edge),
-    /// EDGES_MIN_CHAIN, EDGES_TWO_LINE (`two_line_excess`; for tuning sweeps). EDGES_MISSES=1 prints every missed segment to stderr.
+    /// EDGES_MIN_CHAIN, EDGES_TWO_LINE (`two_line_excess`; for tuning sweeps). EDGES_MISSES=1
+    /// prints every missed segment to stderr (frame, pixel ends, the nearest edge).
     fn params() -> EdgeParams {
         let get = |k: &str| std::env::var(k).ok().and_then(|v| v.parse::<f64>().ok());
         let mut p = EdgeParams::default();
@@ -375,12 +376,25 @@ mod bench {
         let rig = Rig::load(&root().join("firmware_config/ladybug2.toml")).expect("rig");
         let config = EdgeConfig::default();
         let frames_per_setup = if quick { 3 } else { 8 };
-        let value = |flag: &str| args.iter().position(|a| a == flag).and_then(|k| args.get(k + 1));
-        let seed: Option<u64> = value("--seed").and_then(|v| v.parse().ok());
-        let pixel_samples: u32 = value("--pixel-samples")
-            .and_then(|v| v.parse().ok())
-            .filter(|&n| n >= 1)
-            .unwrap_or(3);
+        // A flag's value, or a one-line error naming the flag.
+        let value = |flag: &str| -> Option<u64> {
+            let k = args.iter().position(|a| a == flag)?;
+            match args.get(k + 1).and_then(|v| v.parse::<u64>().ok()) {
+                Some(v) => Some(v),
+                None => {
+                    eprintln!("edges bench: {flag} needs a whole number");
+                    std::process::exit(2);
+                }
+            }
+        };
+        let seed = value("--seed");
+        let pixel_samples = match value("--pixel-samples").unwrap_or(3) {
+            n @ 1..=16 => n as u32,
+            n => {
+                eprintln!("edges bench: --pixel-samples must be 1 to 16, found {n}");
+                std::process::exit(2);
+            }
+        };
         let traj_len = 400;
 
         println!(

@@ -6,9 +6,9 @@
 //! through the pixel centre from the sensor's optical centre through its lens model
 //! ([`crate::rig::Sensor::ray_in_rig`]), so the images carry the true fisheye distortion; pixels
 //! with no ray are black. With `Appearance::pixel_samples` > 1 a grid of rays covers each
-//! pixel's area and is averaged, as a real pixel integrates light (no aliased edges). Rays are cast into a [`Scene`]: the model's faces ear-clipped into
-//! triangles in a binned-SAH [`bvh::Bvh`], plus clutter and people that exist only in the images
-//! (never in the model). Rows are rendered in parallel (rayon). Output is a pure function of
+//! pixel's area and is averaged, as a real pixel integrates light (no aliased edges). Rays are
+//! cast into a [`Scene`]: the model's faces ear-clipped into triangles in a binned-SAH
+//! [`bvh::Bvh`], plus clutter and people that exist only in the images (never in the model). Rows are rendered in parallel (rayon). Output is a pure function of
 //! model, rig, appearance (with its seed), keep-out points and frame: byte-identical on rerun.
 
 pub mod appearance;
