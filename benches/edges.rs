@@ -5,7 +5,9 @@
 //! `--`: `--quick` (fewer frames), `--no-opencv` (skip tools/bench_edges.py), `--seed S`
 //! (another draw of every appearance's colours, clutter, people and lights, and of the
 //! trajectory the frames are taken from: the defaults are appearance seed 1, trajectory seed 7),
-//! `--pixel-samples N` (rays per pixel side, default 3).
+//! `--pixel-samples N` (rays per pixel side, default 3), `--half-resolution` (detect on 2×2-binned
+//! images through the rig with its intrinsics halved: what the 5× target against
+//! FastLineDetector would cost in accuracy).
 //!
 //! Images. Each pixel averages 3×3 rays over its area (`Appearance::pixel_samples`), as a
 //! camera's pixel integrates the light falling on it: an edge crossing a pixel gives it a value
@@ -236,6 +238,40 @@ mod bench {
         }
     }
 
+    /// The rig as its cameras would be with 2×2 binning: half the resolution, the focal lengths
+    /// halved and the principal point moved with the pixel centres (pixel u's centre is at
+    /// u + 0.5 in pixel-edge coordinates, so c ↦ (c + 0.5) / 2 − 0.5).
+    fn binned_rig(rig: &Rig) -> Rig {
+        use omnitrack::geometry::lens::{Kb4, Lens, Pinhole};
+        let mut r = rig.clone();
+        let c = |c: f64| (c + 0.5) / 2.0 - 0.5;
+        for s in &mut r.sensors {
+            s.width /= 2;
+            s.height /= 2;
+            s.lens = match s.lens {
+                Lens::Kb4(k) => Lens::Kb4(Kb4::new(k.fx / 2.0, k.fy / 2.0, c(k.cx), c(k.cy), k.k).expect("halved kb4")),
+                Lens::Pinhole(p) => {
+                    Lens::Pinhole(Pinhole::new(p.fx / 2.0, p.fy / 2.0, c(p.cx), c(p.cy)).expect("halved pinhole"))
+                }
+            };
+        }
+        r
+    }
+
+    /// 2×2 binning: each output pixel the rounded mean of four.
+    fn bin2x2(img: &image::RgbImage) -> image::RgbImage {
+        image::RgbImage::from_fn(img.width() / 2, img.height() / 2, |x, y| {
+            let mut sum = [2u32; 3];
+            for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                let p = img.get_pixel(2 * x + dx, 2 * y + dy);
+                for (s, &v) in sum.iter_mut().zip(&p.0) {
+                    *s += v as u32;
+                }
+            }
+            image::Rgb(sum.map(|v| (v / 4) as u8))
+        })
+    }
+
     fn to_frameset(rig: &Rig, images: &[image::RgbImage], frame: &mut FrameSet) {
         for (k, img) in images.iter().enumerate().take(rig.sensors.len()) {
             let si = frame.sensor_mut(k);
@@ -388,6 +424,28 @@ mod bench {
             }
         };
         let seed = value("--seed");
+        // Detection at half resolution (the trade the 5× target against FastLineDetector would
+        // need): every rendered image 2×2-binned, through the rig with its intrinsics halved, and
+        // chains of half as many edgels. Ground truth, recall and normal error stay those of the
+        // full-resolution rig (planes are resolution-free); OpenCV still gets the full images.
+        let half = args.iter().any(|a| a == "--half-resolution");
+        let det_rig = if half { binned_rig(&rig) } else { rig.clone() };
+        let det_params = || {
+            let p = params();
+            let min_chain_edgels = if half {
+                (p.min_chain_edgels / 2).max(3)
+            } else {
+                p.min_chain_edgels
+            };
+            EdgeParams { min_chain_edgels, ..p }
+        };
+        let for_detector = |images: &[image::RgbImage]| -> Vec<image::RgbImage> {
+            if half {
+                images.iter().map(bin2x2).collect()
+            } else {
+                images.to_vec()
+            }
+        };
         let pixel_samples = match value("--pixel-samples").unwrap_or(3) {
             n @ 1..=16 => n as u32,
             n => {
@@ -403,7 +461,10 @@ mod bench {
             rig.sensors.len()
         );
         println!("config: {config:?}");
-        println!("params: {:?}", params());
+        println!("params: {:?}", det_params());
+        if half {
+            println!("detection at half resolution: 2×2-binned images, intrinsics halved (OpenCV: full images)");
+        }
         if let Some(seed) = seed {
             println!("seed: appearance {seed}, trajectory {}", seed + 6);
         }
@@ -415,8 +476,8 @@ mod bench {
             "| setup | visible segs | recall | median normal err (°) | p90 err (°) | edges/sensor | edges on model | missed: no plane / fragmented |"
         );
         println!("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |");
-        let mut detector = EdgeDetector::with_params(&rig, &config, params());
-        let mut frame = FrameSet::for_rig(&rig);
+        let mut detector = EdgeDetector::with_params(&det_rig, &config, det_params());
+        let mut frame = FrameSet::for_rig(&det_rig);
         let mut truths = Vec::new();
         let mut speed_frames: Vec<Vec<image::RgbImage>> = Vec::new();
         let only = std::env::var("EDGES_BENCH_ONLY").ok();
@@ -443,7 +504,7 @@ mod bench {
                     previous: Some(traj[k - 1]),
                 };
                 let images = renderer.render_frame(&spec);
-                to_frameset(&rig, &images, &mut frame);
+                to_frameset(&det_rig, &for_detector(&images), &mut frame);
                 let edges = detector.detect(&frame);
                 ground_truth(
                     &model,
@@ -516,8 +577,8 @@ mod bench {
         let frames: Vec<FrameSet> = speed_frames
             .iter()
             .map(|images| {
-                let mut fs = FrameSet::for_rig(&rig);
-                to_frameset(&rig, images, &mut fs);
+                let mut fs = FrameSet::for_rig(&det_rig);
+                to_frameset(&det_rig, &for_detector(images), &mut fs);
                 fs
             })
             .collect();
@@ -533,8 +594,11 @@ mod bench {
         let mut ours_p50 = f64::NAN;
         let mut phases = Vec::new();
         for threads in [2usize, 1] {
-            let params = EdgeParams { threads, ..params() };
-            let mut det = EdgeDetector::with_params(&rig, &config, params);
+            let params = EdgeParams {
+                threads,
+                ..det_params()
+            };
+            let mut det = EdgeDetector::with_params(&det_rig, &config, params);
             for fs in &frames {
                 det.detect(fs); // warm-up
             }
