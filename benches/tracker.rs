@@ -534,7 +534,7 @@ mod bench {
                 stats.frames as f64 / busy.as_secs_f64(),
             );
             eprintln!(
-                "{name}: {} solves far from the prediction replaced by the polished prediction",
+                "{name}: {} solves far from the prediction replaced by a second opinion",
                 stats.second_opinions
             );
         }

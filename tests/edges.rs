@@ -235,8 +235,13 @@ fn two_lines_a_pixel_and_a_half_apart_end_to_end_are_two_edges() {
     };
     let err = worst(&edges);
     assert!(err <= 0.05, "a line's closest edge is {err:.4}° off ({edges:#?})");
-    // With the test off (the default), one edge runs between the two.
-    let mut det = EdgeDetector::new(&rig, &EdgeConfig::default());
+    // The default has it on; with it off, one edge runs between the two.
+    assert_eq!(EdgeParams::default().two_line_excess, params.two_line_excess);
+    let off = EdgeParams {
+        two_line_excess: 0.0,
+        ..EdgeParams::default()
+    };
+    let mut det = EdgeDetector::with_params(&rig, &EdgeConfig::default(), off);
     let edges = det.detect_sensor(&img).to_vec();
     let err = worst(&edges);
     assert!(err > 0.1, "{err:.4}°: the lines should blend without the two-line test");

@@ -45,6 +45,48 @@ const SUSPECT_MARGIN: f64 = 1.2;
 const SECOND_OPINION_M: f64 = 0.05;
 const SECOND_OPINION_RAD: f64 = 0.035;
 
+/// Where a relocalisation candidate stands: `plausible` (enough inliers, within reach of the
+/// prediction and of the turns the rig can have made), `acceptable` (plausible and explaining
+/// enough of VIS(T)), `jumps` (turned further than `max_jump_deg` from the prediction).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Standing {
+    plausible: bool,
+    acceptable: bool,
+    jumps: bool,
+}
+
+/// The relocalisation's choice, or None.
+///
+/// The score is a mean over VIS(pose), and a place that sees few segments can match its few
+/// about as well as the true place matches its many (a pose slid into a wall's corner of a
+/// corridor: 22 inliers against 64, scoring 4 % better). So on each side of the turn limit the
+/// best score wins over the best-supported candidate (most inliers, among all plausible ones)
+/// only by `ratio`; otherwise the best-supported wins, or, when it does not explain enough (a
+/// suspect frame's own pose), nothing does. A candidate that turns beyond the limit must then
+/// beat one that does not by `ratio` too (a symmetric corridor's quarter-turn twin explains
+/// about as much as the truth on one frame).
+fn choose(candidates: &[Option<(Candidate, Standing)>], ratio: f64) -> Option<Candidate> {
+    let pick = |jumping: bool| -> Option<Candidate> {
+        let side = || candidates.iter().flatten().filter(move |(_, s)| s.jumps == jumping);
+        let (fit, _) = side()
+            .filter(|(_, s)| s.acceptable)
+            .min_by(|a, b| a.0.score.total_cmp(&b.0.score))?;
+        let (support, standing) = side()
+            .filter(|(_, s)| s.plausible)
+            .max_by(|a, b| a.0.inliers.cmp(&b.0.inliers).then(b.0.score.total_cmp(&a.0.score)))?;
+        if fit.inliers < support.inliers && fit.score >= ratio * support.score {
+            standing.acceptable.then_some(*support)
+        } else {
+            Some(*fit)
+        }
+    };
+    match (pick(false), pick(true)) {
+        (Some(k), Some(j)) if j.score < ratio * k.score => Some(j),
+        (Some(k), _) => Some(k),
+        (None, j) => j,
+    }
+}
+
 /// The pose and S_t the next frame will be predicted from.
 fn constant_velocity(previous: &Pose, previous_t: u64, current: &Pose, current_t: u64, next_t: u64) -> Pose {
     let dt_prev = current_t.saturating_sub(previous_t) as f64;
@@ -99,10 +141,9 @@ impl Tracker<'_> {
     /// found pose with a fresh S_t, as after initialisation. A bad frame takes any plausible
     /// candidate (`min_explained` 0): a view poorer than before, such as sensors covered, must
     /// not stop the tracker from finding its place again. The search keeps to the turns the rig
-    /// can have made since the last good frame; the prediction, the last pose and the frame's
-    /// `solved` pose, each polished, compete with its candidates; and one that turns more than
-    /// `max_jump_deg` from the prediction wins only by `clear_winner_ratio` (a symmetric
-    /// corridor's quarter-turn twin explains about as much as the truth on one frame).
+    /// can have made since the last good frame; the prediction, the last pose, the frame's
+    /// `solved` pose, its rotation at the predicted position and the prediction turned by ± one
+    /// gate width, each polished, compete with its candidates, and [`choose`] decides.
     fn relocalise(
         &mut self,
         edges: &[Edge],
@@ -130,38 +171,53 @@ impl Tracker<'_> {
         let (found, _) = self.init.run(edges, &volume, &mut self.rng);
         // The search's best few (the tracker asks for three), then, polished, the prediction,
         // the last pose and this frame's solved pose: the search may find only a twin of the
-        // place (a symmetric corridor seen a quarter turn away), a pose that jumps away from the
-        // motion must explain clearly more than one that continues it, and where a turn stopped
-        // short the prediction overshoots into a local minimum a few degrees off that the last
-        // pose does not fall into.
-        let mut candidates = [None; 6];
+        // place (a symmetric corridor seen a quarter turn away), and where a turn stopped short
+        // the prediction overshoots into a local minimum a few degrees off that the last pose
+        // does not fall into.
+        let mut candidates = [None; 9];
         for (slot, c) in candidates[..3].iter_mut().zip(found) {
             *slot = Some(*c);
         }
         let last = self.pose;
-        for (slot, start) in candidates[3..].iter_mut().zip([Some(predicted), Some(&last), solved]) {
+        // Lines fix the rotation by their directions alone (R_then_T), while a repeated structure
+        // leaves the translation along it free: a solve that slid to a neighbouring doorway often
+        // has the turn right, so its rotation is also tried at the predicted position.
+        let reseated = solved.map(|s| Pose::from_parts(predicted.translation, s.rotation));
+        // A turn faster than the motion model expects leaves the prediction a gate width or more
+        // off, where polishing stays in a local minimum: the prediction turned by ± one gate width
+        // is polished too.
+        let gate = self.cfg.maintenance.angular_gate_deg.to_radians();
+        let (left, right) = (turned(predicted, gate), turned(predicted, -gate));
+        let starts = [
+            Some(predicted),
+            Some(&last),
+            solved,
+            reseated.as_ref(),
+            Some(&left),
+            Some(&right),
+        ];
+        for (slot, start) in candidates[3..].iter_mut().zip(starts) {
             if let Some(start) = start {
                 *slot = self.init.polish(start, edges);
             }
         }
         let m = &self.cfg.maintenance;
-        let acceptable = |c: &Candidate| {
-            c.inliers >= m.min_inliers as usize
-                && c.explained >= floor
-                && (c.pose.translation.vector - predicted.translation.vector).norm() <= 0.5 * d + m.max_jump_m
-                && c.pose.rotation.angle_to(&turned_from) <= turn_limit
-        };
+        let reach = 0.5 * d + m.max_jump_m;
         let jump_rad = m.max_jump_deg.to_radians();
-        let jumps = |c: &Candidate| c.pose.rotation.angle_to(&predicted.rotation) > jump_rad;
-        let ok = || candidates.iter().flatten().filter(|c| acceptable(c));
-        let by_score = |a: &&Candidate, b: &&Candidate| a.score.total_cmp(&b.score);
-        let continuing = ok().filter(|c| !jumps(c)).min_by(by_score).copied();
-        let ratio = self.cfg.initialisation.clear_winner_ratio;
-        let best = match (continuing, ok().filter(|c| jumps(c)).min_by(by_score).copied()) {
-            (Some(k), Some(j)) if j.score < ratio * k.score => j,
-            (Some(k), _) => k,
-            (None, j) => j?,
-        };
+        let standings = candidates.map(|c| {
+            c.map(|c| {
+                let plausible = c.inliers >= m.min_inliers as usize
+                    && (c.pose.translation.vector - predicted.translation.vector).norm() <= reach
+                    && c.pose.rotation.angle_to(&turned_from) <= turn_limit;
+                let standing = Standing {
+                    plausible,
+                    acceptable: plausible && c.explained >= floor,
+                    jumps: c.pose.rotation.angle_to(&predicted.rotation) > jump_rad,
+                };
+                (c, standing)
+            })
+        });
+        let best = choose(&standings, self.cfg.initialisation.clear_winner_ratio)?;
         self.stats.relocalisations += 1;
         let mut r = self.commit(&best.pose, edges, timestamp_ns);
         r.event = Some(TrackerEvent::Relocalised);
@@ -343,18 +399,28 @@ impl Tracker<'_> {
         // A solve that moved well away from the prediction may have taken a repeated
         // structure's neighbour (a door jamb's two corners a wall's thickness apart, matched
         // across): S̄ agrees with itself there, but VIS(T) as a whole does not. The prediction,
-        // polished, competes by the search's measure over all of VIS(T).
+        // polished, competes by the search's measure over all of VIS(T), and so does the solve's
+        // rotation at the predicted position when the solve turned: in a turn the prediction
+        // lags, and the solve often has the turn right but has slid along the structure.
         if let Some(p) = solved {
             let moved = (p.translation.vector - predicted.translation.vector).norm();
             let turned = p.rotation.angle_to(&predicted.rotation);
             if moved > SECOND_OPINION_M || turned > SECOND_OPINION_RAD {
-                if let Some(c) = self.init.polish(&predicted, edges) {
-                    let ratio = self.cfg.initialisation.clear_winner_ratio;
-                    if c.score < ratio * self.init.score(&p, edges) {
-                        self.stats.second_opinions += 1;
-                        solved = Some(c.pose);
-                        prior = predicted;
+                let reseated = Pose::from_parts(predicted.translation, p.rotation);
+                let starts = [Some(predicted), (turned > SECOND_OPINION_RAD).then_some(reseated)];
+                let bar = self.cfg.initialisation.clear_winner_ratio * self.init.score(&p, edges);
+                let mut best: Option<Candidate> = None;
+                for start in starts.iter().flatten() {
+                    if let Some(c) = self.init.polish(start, edges) {
+                        if c.score < bar && best.is_none_or(|b| c.score < b.score) {
+                            best = Some(c);
+                        }
                     }
+                }
+                if let Some(c) = best {
+                    self.stats.second_opinions += 1;
+                    solved = Some(c.pose);
+                    prior = predicted;
                 }
             }
         }
@@ -485,5 +551,80 @@ impl Tracker<'_> {
             }
         }
         result
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cand(x: f64, score: f64, inliers: usize) -> Candidate {
+        Candidate {
+            pose: Pose::from_parts(Translation3::new(x, 0.0, 0.0), UnitQuaternion::identity()),
+            score,
+            inliers,
+            xi_rad2: score,
+            explained: 0.5,
+        }
+    }
+
+    const OK: Standing = Standing {
+        plausible: true,
+        acceptable: true,
+        jumps: false,
+    };
+
+    fn winner(c: &[Option<(Candidate, Standing)>]) -> Option<f64> {
+        choose(c, 0.8).map(|c| c.pose.translation.x)
+    }
+
+    #[test]
+    fn a_few_segments_matched_slightly_better_lose_to_many() {
+        // The corridor's failure: 22 inliers scoring 4 % better than the prediction's 64.
+        let c = [
+            Some((cand(0.0, 4.55e-4, 64), OK)),
+            Some((cand(0.73, 4.39e-4, 22), OK)),
+            None,
+        ];
+        assert_eq!(winner(&c), Some(0.0));
+        // Clearly better (below 0.8 ×), fewer inliers still win.
+        let c = [Some((cand(0.0, 4.55e-4, 64), OK)), Some((cand(0.73, 3.5e-4, 22), OK))];
+        assert_eq!(winner(&c), Some(0.73));
+        // More inliers and a better score: no contest.
+        let c = [Some((cand(0.0, 4.55e-4, 64), OK)), Some((cand(0.73, 4.4e-4, 70), OK))];
+        assert_eq!(winner(&c), Some(0.73));
+    }
+
+    #[test]
+    fn a_better_supported_pose_that_explains_too_little_vetoes_the_replacement() {
+        // A suspect frame: its own pose (70 inliers) does not explain enough to be taken, and
+        // a place seeing few segments (29) is not clearly better: nothing replaces the frame.
+        let own = Standing {
+            acceptable: false,
+            ..OK
+        };
+        let c = [Some((cand(0.0, 3.88e-4, 70), own)), Some((cand(0.55, 3.77e-4, 29), OK))];
+        assert_eq!(winner(&c), None);
+        // Implausible candidates neither win nor veto.
+        let far = Standing {
+            plausible: false,
+            acceptable: false,
+            jumps: false,
+        };
+        let c = [Some((cand(0.0, 3.88e-4, 70), far)), Some((cand(0.55, 3.77e-4, 29), OK))];
+        assert_eq!(winner(&c), Some(0.55));
+    }
+
+    #[test]
+    fn a_turn_beyond_the_limit_must_win_clearly() {
+        let jump = Standing { jumps: true, ..OK };
+        let c = [Some((cand(0.0, 4.5e-4, 60), OK)), Some((cand(0.4, 4.0e-4, 60), jump))];
+        assert_eq!(winner(&c), Some(0.0));
+        let c = [Some((cand(0.0, 4.5e-4, 60), OK)), Some((cand(0.4, 3.5e-4, 60), jump))];
+        assert_eq!(winner(&c), Some(0.4));
+        // With nothing that continues the motion, the best jump is taken.
+        let c = [None, Some((cand(0.4, 4.0e-4, 60), jump))];
+        assert_eq!(winner(&c), Some(0.4));
+        assert_eq!(winner(&[None, None]), None);
     }
 }

@@ -120,7 +120,8 @@ pub struct TrackerStats {
     pub search_time: Duration,
     /// Commits where the confirmation frames overruled the search frame's best candidate.
     pub changed_mind: u64,
-    /// Frames whose solve, far from the prediction, the polished prediction replaced.
+    /// Frames whose solve, far from the prediction, a second opinion replaced (the polished
+    /// prediction, or the solve's rotation polished at the predicted position).
     pub second_opinions: u64,
 }
 
