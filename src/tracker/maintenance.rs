@@ -58,13 +58,13 @@ struct Standing {
 /// The relocalisation's choice, or None.
 ///
 /// The score is a mean over VIS(pose), and a place that sees few segments can match its few
-/// about as well as the true place matches its many (a pose slid into a wall's corner of a
-/// corridor: 22 inliers against 64, scoring 4 % better). So on each side of the turn limit the
-/// best score wins over the best-supported candidate (most inliers, among all plausible ones)
-/// only by `ratio`; otherwise the best-supported wins, or, when it does not explain enough (a
-/// suspect frame's own pose), nothing does. A candidate that turns beyond the limit must then
-/// beat one that does not by `ratio` too (a symmetric corridor's quarter-turn twin explains
-/// about as much as the truth on one frame).
+/// about as well as the true place matches its many (`corridor`, frame 5076: a pose 73 cm off
+/// with 22 inliers scored 4 % better than the polished prediction with 64). So on each side of
+/// the turn limit the best score wins over the best-supported candidate (most inliers, among
+/// all plausible ones) only by `ratio`; otherwise the best-supported wins, or, when it does not
+/// explain enough (a suspect frame's own pose), nothing does. A candidate that turns beyond the
+/// limit must then beat one that does not by `ratio` too (a symmetric corridor's quarter-turn
+/// twin explains about as much as the truth on one frame).
 fn choose(candidates: &[Option<(Candidate, Standing)>], ratio: f64) -> Option<Candidate> {
     let pick = |jumping: bool| -> Option<Candidate> {
         let side = || candidates.iter().flatten().filter(move |(_, s)| s.jumps == jumping);
