@@ -368,7 +368,8 @@ mod bench {
     /// `EdgeParams::default()`, with overrides from EDGES_THRESHOLD, EDGES_SPLIT_DEG,
     /// EDGES_MERGE_DEG, EDGES_GAP_DEG, EDGES_SMOOTH (0 none, 1 binomial², 2 along the edge),
     /// EDGES_MIN_CHAIN, EDGES_TWO_LINE (`two_line_excess`; for tuning sweeps). EDGES_MISSES=1
-    /// prints every missed segment to stderr (frame, pixel ends, the nearest edge).
+    /// prints every missed segment to stderr (frame, pixel ends, the nearest edge; with
+    /// `--half-resolution` the edge's pixel ends are binned pixels, the truth's full ones).
     fn params() -> EdgeParams {
         let get = |k: &str| std::env::var(k).ok().and_then(|v| v.parse::<f64>().ok());
         let mut p = EdgeParams::default();
