@@ -7,7 +7,8 @@
 //! trajectory the frames are taken from: the defaults are appearance seed 1, trajectory seed 7),
 //! `--pixel-samples N` (rays per pixel side, default 3), `--half-resolution` (detect on 2×2-binned
 //! images through the rig with its intrinsics halved: what the 5× target against
-//! FastLineDetector would cost in accuracy).
+//! FastLineDetector would cost in accuracy), `--rig RIG.toml` (another rig: `tools/rigs/` has
+//! examples; the speed section then times that rig's whole frame).
 //!
 //! Images. Each pixel averages 3×3 rays over its area (`Appearance::pixel_samples`), as a
 //! camera's pixel integrates the light falling on it: an edge crossing a pixel gives it a value
@@ -410,7 +411,24 @@ mod bench {
         let args: Vec<String> = std::env::args().collect();
         let quick = args.iter().any(|a| a == "--quick");
         let opencv = !args.iter().any(|a| a == "--no-opencv");
-        let rig = Rig::load(&root().join("firmware_config/ladybug2.toml")).expect("rig");
+        // `--rig RIG.toml`: another rig's images (tools/rigs/ has examples); one-line errors.
+        let rig_path = match args.iter().position(|a| a == "--rig") {
+            None => root().join("firmware_config/ladybug2.toml"),
+            Some(k) => match args.get(k + 1) {
+                Some(p) => PathBuf::from(p),
+                None => {
+                    eprintln!("edges bench: --rig needs a rig TOML path");
+                    std::process::exit(2);
+                }
+            },
+        };
+        let rig = match Rig::load(&rig_path) {
+            Ok(rig) => rig,
+            Err(e) => {
+                eprintln!("edges bench: {e}");
+                std::process::exit(2);
+            }
+        };
         let config = EdgeConfig::default();
         let frames_per_setup = if quick { 3 } else { 8 };
         // A flag's value, or a one-line error naming the flag.
@@ -586,7 +604,8 @@ mod bench {
         let passes = if quick { 60 } else { 300 };
         println!();
         println!(
-            "## Speed: whole six-sensor frame, lab default appearance, {} distinct frames, {passes} passes",
+            "## Speed: whole {}-sensor frame, lab default appearance, {} distinct frames, {passes} passes",
+            rig.sensors.len(),
             frames.len()
         );
         println!();

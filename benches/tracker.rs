@@ -10,7 +10,8 @@
 //! a new seed renders a new recording), `--tracker-seed S` (the tracker's random sampling, default
 //! 1: the same recording tracked by another draw), `--verbose` (one line
 //! per frame), `--upright` (KT §5.4 mode for the rolling scenarios), `--no-hint` (search the
-//! whole model instead of a 3 m volume around the first ground-truth pose), `--config tracker.toml`.
+//! whole model instead of a 3 m volume around the first ground-truth pose), `--config tracker.toml`,
+//! `--rig RIG.toml` (render and track with another rig: `tools/rigs/` has examples).
 //!
 //! It first reproduces Koch–Teller Figure 15 as a table (`--no-figure15` skips it).
 //!
@@ -52,6 +53,7 @@ mod bench {
         upright: bool,
         hint: bool,
         config: Option<PathBuf>,
+        rig: Option<PathBuf>,
         figure15: bool,
         init_trials: usize,
         tracker_seed: u64,
@@ -67,6 +69,7 @@ mod bench {
             upright: false,
             hint: true,
             config: None,
+            rig: None,
             figure15: true,
             init_trials: 0,
             tracker_seed: 1,
@@ -84,6 +87,7 @@ mod bench {
                 "--upright" => a.upright = true,
                 "--no-hint" => a.hint = false,
                 "--config" => a.config = it.next().map(PathBuf::from),
+                "--rig" => a.rig = Some(it.next().map(PathBuf::from).expect("--rig RIG.toml")),
                 "--no-figure15" => a.figure15 = false,
                 "--tracker-seed" => a.tracker_seed = it.next().and_then(|s| s.parse().ok()).expect("--tracker-seed S"),
                 "--init-trials" => a.init_trials = it.next().and_then(|s| s.parse().ok()).expect("--init-trials N"),
@@ -343,7 +347,19 @@ mod bench {
 
     pub fn main() {
         let a = args();
-        let rig = Rig::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("firmware_config/ladybug2.toml")).unwrap();
+        let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("firmware_config/ladybug2.toml");
+        let rig = match Rig::load(a.rig.as_ref().unwrap_or(&shipped)) {
+            Ok(rig) => rig,
+            Err(e) => {
+                eprintln!("{e}");
+                std::process::exit(2);
+            }
+        };
+        // Recordings of other rigs are cached apart from the shipped rig's.
+        let label = match &a.rig {
+            None => "default".to_string(),
+            Some(_) => format!("rig-{}", rig.name),
+        };
         println!(
             "| scenario | frames | tracked | re-inits (relocalised) | ATE pos RMSE / max (cm) | ATE rot RMSE / max (°) | init (ms) | frame p50 / p99 / max (ms) | frames/s |"
         );
@@ -359,7 +375,7 @@ mod bench {
                 &scenario,
                 frames,
                 a.seed,
-                "default",
+                &label,
                 &rig,
                 &RecordingOptions::default(),
                 |d, t| eprint!("\rrendering {name}: {d}/{t}"),
