@@ -1,6 +1,7 @@
 //! The tracker end to end on a rendered `lab` recording (Koch–Teller §4.1, §4.2): initialisation
 //! from a 3 m search volume, 100 frames without loss of lock, recovery after the rig is occluded
-//! for a second, and no heap allocation while tracking.
+//! for a second, no heap allocation while tracking, and the same through rigs other than the
+//! shipped one (`tools/rigs/`).
 #![cfg(feature = "desk")]
 
 use nalgebra::{Point3, Vector3};
@@ -334,4 +335,59 @@ fn a_rotation_prior_and_a_tilt_limit_keep_the_search_to_plausible_rotations() {
     assert!(report.tilted > 0, "{report:?}");
     let tilt = |c: &omnitrack::tracker::Candidate| (c.pose.rotation * Vector3::z()).z.acos().to_degrees();
     assert!(found.iter().all(|c| tilt(c) < 12.0), "{found:?}");
+}
+
+/// Frames of the other-rig runs (5 Hz: eight seconds of the lab tour).
+const OTHER_RIG_FRAMES: usize = 40;
+
+/// Every rig of the TOML format is first-class: the lab, rendered through `rig`, initialises
+/// from the same 3 m volume within 10 cm and 1° and tracks every frame to the shipped rig's
+/// limits (those of the first test above).
+fn tracks_through(rig: &str, sensors: usize) {
+    let f = common::lab_recording_with_rig(OTHER_RIG_FRAMES, rig);
+    let mut source = ReplaySource::open(&f.rec, Pacing::AsFastAsPossible).unwrap();
+    assert_eq!(source.rig().sensors.len(), sensors, "{rig}");
+    let mut errs = Vec::new();
+    let stats = run_hinted(&f, &mut source, &mut |r, _| {
+        if let Some(p) = &r.result.pose {
+            errs.push(errors(&f, r.timestamp_ns, p));
+        }
+        Ok(())
+    });
+    assert_eq!(stats.frames, OTHER_RIG_FRAMES as u64, "{rig}");
+    assert_eq!(stats.losses, 0, "{rig}: {stats:?}");
+    assert!(
+        errs.len() >= OTHER_RIG_FRAMES - 3,
+        "{rig}: {} frames with a pose",
+        errs.len()
+    );
+    let (dp, dr) = errs[0];
+    assert!(
+        dp < 0.10 && dr < 1.0,
+        "{rig}: first pose {:.1} cm, {dr:.2}°",
+        dp * 100.0
+    );
+    let rmse = (errs.iter().map(|e| e.0 * e.0).sum::<f64>() / errs.len() as f64).sqrt();
+    let worst = errs.iter().fold(0.0f64, |m, e| m.max(e.0));
+    assert!(
+        rmse < 0.05,
+        "{rig}: RMSE {:.1} cm, worst {:.1} cm",
+        rmse * 100.0,
+        worst * 100.0
+    );
+}
+
+/// Four landscape pinhole sensors 90° apart, none of which sees up (`tools/rigs/pinhole4.toml`):
+/// no lens distortion, no zenith, a narrower vertical view than the shipped rig's.
+#[test]
+fn a_rig_of_four_landscape_pinhole_sensors_tracks_as_the_shipped_one() {
+    tracks_through("tools/rigs/pinhole4.toml", 4);
+}
+
+/// Two fisheye lenses back to back whose images reach 144° off their axes
+/// (`tools/rigs/dual_fisheye.toml`): much of every image lies past 90°, where a pinhole has no
+/// image at all, and each sensor covers more than a hemisphere.
+#[test]
+fn a_rig_of_two_fisheye_lenses_seeing_past_90_degrees_tracks_as_the_shipped_one() {
+    tracks_through("tools/rigs/dual_fisheye.toml", 2);
 }

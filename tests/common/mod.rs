@@ -88,16 +88,18 @@ pub struct LabRecording {
 
 #[cfg(feature = "desk")]
 pub fn lab_recording(frames: usize) -> LabRecording {
+    lab_recording_with_rig(frames, "firmware_config/ladybug2.toml")
+}
+
+/// [`lab_recording`] rendered through another rig (`rig`: a path in the crate).
+#[cfg(feature = "desk")]
+pub fn lab_recording_with_rig(frames: usize, rig: &str) -> LabRecording {
     use omnitrack::capture::{Pacing, ReplaySource};
     use omnitrack::desk::recording::{cached_scenario, RecordingOptions};
     use omnitrack::desk::scenario::{Scenario, ScenarioName};
     use omnitrack::visibility::build::{build_table, BuildOptions};
     let dir = tempfile::tempdir().unwrap();
-    let rig = omnitrack::Rig::load(std::path::Path::new(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/firmware_config/ladybug2.toml"
-    )))
-    .unwrap();
+    let rig = omnitrack::Rig::load(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(rig)).unwrap();
     let (rec, _) = cached_scenario(
         dir.path(),
         &Scenario::get(ScenarioName::Lab),
