@@ -261,6 +261,55 @@ fn tracking_and_bounded_searches_allocate_nothing() {
     assert_eq!(search_allocated, 0, "allocations in the hinted search");
 }
 
+/// The confirmation frames apply the search's acceptance test again: on a frame where the
+/// candidates explain less than `accept_explained_fraction` of what they predict (here: only two
+/// of the six sensors' edges), they are dropped and the tracker searches afresh on the next
+/// frame, rather than committing whatever kept a few inliers (the wrong commits of `lab`'s
+/// initialisation trials were such candidates, while the search had missed the truth).
+#[test]
+fn confirmation_drops_candidates_that_explain_too_little_and_searches_again() {
+    let f = fixture();
+    let (mut source, rig, mut cfg, mut frame, mut detector) = replay(f);
+    // No early commit: every candidate goes through the confirmation frames.
+    cfg.initialisation.clear_winner_ratio = 1e-9;
+    let mut tracker = Tracker::new(&rig, &f.model, &f.table, &cfg, Some(hint(f)), 1);
+    assert!(source.next_frame(&mut frame).unwrap());
+    let r = tracker.process(detector.detect(&frame), frame.timestamp_ns().unwrap());
+    assert_eq!(r.state, TrackerState::Initializing, "{:?}", r.event);
+    let confirming = tracker.candidates().filter(|c| c.3).count();
+    assert!(confirming >= 2, "{confirming} candidates to confirm");
+
+    assert!(source.next_frame(&mut frame).unwrap());
+    let few: Vec<_> = detector
+        .detect(&frame)
+        .iter()
+        .filter(|e| e.sensor < 2)
+        .cloned()
+        .collect();
+    let r = tracker.process(&few, frame.timestamp_ns().unwrap());
+    assert_eq!(r.state, TrackerState::Initializing);
+    assert_eq!(
+        tracker.candidates().filter(|c| c.3).count(),
+        0,
+        "every candidate dropped"
+    );
+
+    // The next whole frame searches again, and the tracker commits to the truth.
+    let mut searched = false;
+    let mut committed = None;
+    while committed.is_none() && source.next_frame(&mut frame).unwrap() {
+        let ts = frame.timestamp_ns().unwrap();
+        let r = tracker.process(detector.detect(&frame), ts);
+        searched |= matches!(r.event, Some(TrackerEvent::Searched(_)));
+        if let (TrackerState::Tracking, Some(p)) = (r.state, r.pose) {
+            committed = Some(errors(f, ts, &p));
+        }
+    }
+    assert!(searched, "searched again");
+    let (dp, dr) = committed.expect("committed");
+    assert!(dp < 0.10 && dr < 1.0, "committed {:.1} cm, {dr:.2}°", dp * 100.0);
+}
+
 /// A search told where the rotation is (after a bad frame: the last good one and the turn the
 /// rig can have made since) keeps to it: with the prior on the truth it still finds the truth,
 /// with the prior on the truth's half-turn twin nothing near the truth comes out, although the

@@ -325,13 +325,11 @@ impl<'m> Tracker<'m> {
             self.init
                 .set_yaw_twins(turn_limit.is_none_or(|(_, limit)| limit >= std::f64::consts::PI));
             self.init.set_rotation_prior(turn_limit);
+            // A candidate must explain at least `accept_explained_fraction` of the segments it
+            // predicts; when none does, the next frame searches more broadly.
+            let max_score = self.max_accepted_score();
             let (candidates, report) = self.init.run(edges, &volume, &mut self.rng);
             let min = self.cfg.maintenance.min_inliers as usize;
-            // A candidate must explain at least `accept_explained_fraction` of the segments it
-            // predicts (its truncated ξ is ≈ (1 − explained) × cap²); when none does, the next
-            // frame searches more broadly.
-            let cap2 = self.cfg.maintenance.inlier_angle_deg.to_radians().powi(2);
-            let max_score = (1.0 - i.accept_explained_fraction) * cap2;
             let plausible = |c: &Candidate| turn_limit.is_none_or(|(r, limit)| c.pose.rotation.angle_to(&r) <= limit);
             let accepted =
                 |c: &&Candidate| c.inliers >= min && c.score <= max_score && plausible(c) && c.explained >= floor;
@@ -366,12 +364,18 @@ impl<'m> Tracker<'m> {
                 return result;
             }
         } else {
+            // Each confirmation frame applies the search's acceptance test again: a candidate
+            // that explains less than `accept_explained_fraction` of what it predicts here is
+            // dropped, and when none is left the next frame searches afresh. (The wrong
+            // commits in `lab`'s initialisation trials were candidates that barely passed on
+            // the search frame and failed it on the next while the truth was never found.)
+            let max_score = self.max_accepted_score();
             for k in 0..self.confirm_count {
                 if !self.confirming[k].alive {
                     continue;
                 }
                 match self.init.polish(&self.confirming[k].pose, edges) {
-                    Some(c) if c.inliers >= self.cfg.maintenance.min_inliers as usize => {
+                    Some(c) if c.inliers >= self.cfg.maintenance.min_inliers as usize && c.score <= max_score => {
                         let slot = &mut self.confirming[k];
                         slot.pose = c.pose;
                         slot.score_sum += c.score;
@@ -412,6 +416,14 @@ impl<'m> Tracker<'m> {
         }
         result.match_time = started.elapsed();
         result
+    }
+
+    /// The worst truncated ξ a candidate may score and be accepted: explaining
+    /// `accept_explained_fraction` of the segments it predicts, it scores about
+    /// (1 − explained) × cap².
+    fn max_accepted_score(&self) -> f64 {
+        let cap2 = self.cfg.maintenance.inlier_angle_deg.to_radians().powi(2);
+        (1.0 - self.cfg.initialisation.accept_explained_fraction) * cap2
     }
 
     /// Whether the best candidate so far beats every other by the configured margin (mean score
