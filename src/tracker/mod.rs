@@ -10,7 +10,9 @@
 //!   whole model without one, or after a loss a volume around the last good pose that grows with
 //!   every failed attempt). Its best distinct candidates are then scored on the next frames
 //!   (`confirm_frames`) before one is committed — the paper's admitted weakness is ambiguity from
-//!   repeated structure (doorways along a corridor): a single frame may prefer the wrong one.
+//!   repeated structure (doorways along a corridor): a single frame may prefer the wrong one. On
+//!   each of those frames a candidate must pass the search's acceptance test again, or it is
+//!   dropped; with none left, the next frame searches afresh.
 //! - **Tracking**: [`maintenance`] per Figure 7.
 //!
 //! A frame is "bad" when the solve fails, leaves fewer than `min_inliers` accepted inliers, or
