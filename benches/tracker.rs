@@ -297,7 +297,14 @@ mod bench {
                         )
                     });
                     if verbose {
-                        eprintln!("    committed at frame {}: {:.1} cm {:.2}°", start + k, dp * 100.0, dr);
+                        eprintln!(
+                            "    committed at frame {}: {:.1} cm {:.2}°, explains {:.2} with {} inliers",
+                            start + k,
+                            dp * 100.0,
+                            dr,
+                            r.explained,
+                            r.inliers
+                        );
                     }
                     committed = Some(k);
                     elapsed_ms = started.elapsed().as_secs_f64() * 1e3;
