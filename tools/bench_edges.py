@@ -1,12 +1,12 @@
 #!/usr/bin/env python3
-"""OpenCV line detectors on the same six-sensor frames as omnitrack's edge benchmark.
+"""OpenCV line detectors on the same rig frames as omnitrack's edge benchmark.
 
     python3 tools/bench_edges.py DIR [--repeats N]
 
 DIR holds PNG frames written by `cargo bench --bench edges` (DIR/frameNNN_sK.png; one frame =
-the six sensor images with the same NNN). The script creates (or reuses) the venv
-tools/.venv-bench-edges, installs numpy and opencv-contrib-python-headless into it, re-runs
-itself inside it, and times, for each frame, the whole six-image frame through
+the sensor images with the same NNN: six for the shipped rig). The script creates (or reuses)
+the venv tools/.venv-bench-edges, installs numpy and opencv-contrib-python-headless into it, re-runs
+itself inside it, and times, for each frame, the whole frame through
   - cv2.createLineSegmentDetector (LSD, default parameters), and
   - cv2.ximgproc.createFastLineDetector (FLD, default parameters),
 both on the grey image (cv2.cvtColor RGB->GRAY included in the time; PNG decoding excluded).

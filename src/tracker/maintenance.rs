@@ -170,10 +170,10 @@ impl Tracker<'_> {
         self.init.set_rotation_prior(Some((turned_from, turn_limit)));
         let (found, _) = self.init.run(edges, &volume, &mut self.rng);
         // The search's best few (the tracker asks for three), then, polished, the prediction,
-        // the last pose and this frame's solved pose: the search may find only a twin of the
-        // place (a symmetric corridor seen a quarter turn away), and where a turn stopped short
-        // the prediction overshoots into a local minimum a few degrees off that the last pose
-        // does not fall into.
+        // the last pose, this frame's solved pose and the starts below: the search may find only
+        // a twin of the place (a symmetric corridor seen a quarter turn away), and where a turn
+        // stopped short the prediction overshoots into a local minimum a few degrees off that the
+        // last pose does not fall into.
         let mut candidates = [None; 9];
         for (slot, c) in candidates[..3].iter_mut().zip(found) {
             *slot = Some(*c);
