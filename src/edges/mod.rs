@@ -95,8 +95,10 @@ pub struct EdgeParams {
     pub split_tolerance_rad: f64,
     /// Pieces of different chains merge when their normals agree within this (rad)…
     pub merge_angle_rad: f64,
-    /// …and the angular gap between them is at most this (rad).
+    /// …and the angular gap between them is at most this (rad)…
     pub merge_gap_rad: f64,
+    /// …and the pieces cover at least this fraction of the merged edge's span (0: no check).
+    pub merge_min_support: f64,
     /// Distance (px) from the edge to the first pixel of each hue strip.
     pub hue_strip_offset_px: f32,
     /// At most this many positions along an edge are sampled for hue (evenly spread).
@@ -121,6 +123,7 @@ impl Default for EdgeParams {
             split_tolerance_rad: 0.2f64.to_radians(),
             merge_angle_rad: 5.0f64.to_radians(),
             merge_gap_rad: 10.0f64.to_radians(),
+            merge_min_support: 0.0,
             hue_strip_offset_px: 2.0,
             hue_samples_per_edge: 48,
             threads: 0,

@@ -31,6 +31,9 @@ struct Candidate {
     r1: Vector3<f64>,
     r2: Vector3<f64>,
     strength: f32,
+    /// Angle (rad) covered by the chain pieces it is made of: its span less the gaps merging
+    /// bridged.
+    support: f64,
     /// Net count of edgels brighter on the left (> 0: left is the bright side).
     bright_left: i32,
     left: HueAcc,
@@ -504,7 +507,8 @@ impl Workspace {
         let r2 = (rb - nrm * nrm.dot(&rb)).normalize();
         // Pieces down to half the minimum length are kept for merging across chains; `select`
         // drops what is still short after it.
-        if r1.dot(&r2).clamp(-1.0, 1.0).acos() < 0.5 * self.min_len_rad {
+        let span = r1.dot(&r2).clamp(-1.0, 1.0).acos();
+        if span < 0.5 * self.min_len_rad {
             return;
         }
         // Hue strips and polarity; left of the walk from edgel a to edgel b.
@@ -552,6 +556,7 @@ impl Workspace {
             r1,
             r2,
             strength: strength / 64.0,
+            support: span,
             bright_left,
             left: lacc,
             right: racc,
@@ -586,6 +591,7 @@ impl Workspace {
         let gap_max = self.params.merge_gap_rad;
         let tol = self.params.split_tolerance_rad.sin();
         let two_line = self.params.two_line_excess;
+        let min_support = self.params.merge_min_support;
         for pass in 0..3 {
             let mut merged_any = false;
             for i in 0..self.cands.len() {
@@ -602,7 +608,7 @@ impl Workspace {
                     if dot.abs() < cos_max {
                         continue;
                     }
-                    if let Some(m) = try_merge(ci, cj, gap_max, tol, two_line) {
+                    if let Some(m) = try_merge(ci, cj, gap_max, tol, two_line, min_support) {
                         self.cands[i] = m;
                         self.cands[j].alive = false;
                         self.stats.merged += 1;
@@ -804,7 +810,14 @@ fn angle_in_plane(n: &Vector3<f64>, e1: &Vector3<f64>, r: &Vector3<f64>) -> f64 
     r.dot(&e2).atan2(r.dot(e1))
 }
 
-fn try_merge(ci: &Candidate, cj: &Candidate, gap_max: f64, tol: f64, two_line: f64) -> Option<Candidate> {
+fn try_merge(
+    ci: &Candidate,
+    cj: &Candidate,
+    gap_max: f64,
+    tol: f64,
+    two_line: f64,
+    min_support: f64,
+) -> Option<Candidate> {
     // Orient j like i.
     let di = ci.r2 - ci.r1;
     let same = di.dot(&(cj.r2 - cj.r1)) >= 0.0;
@@ -870,6 +883,13 @@ fn try_merge(ci: &Candidate, cj: &Candidate, gap_max: f64, tol: f64, two_line: f
     let hi = if ja.1 > ia.1 { jr2 } else { ci.r2 };
     let r1 = (lo - n * n.dot(&lo)).normalize();
     let r2 = (hi - n * n.dot(&hi)).normalize();
+    // Mostly edge: the pieces must cover `min_support` of the merged span, so that short
+    // collinear pieces far apart (a row of windows, tiles, texture) do not chain up into one
+    // long edge across what lies between them.
+    let support = ci.support + cj.support - (-gap).max(0.0);
+    if support < min_support * r1.dot(&r2).clamp(-1.0, 1.0).acos() {
+        return None;
+    }
     let mut left = ci.left;
     left.add(&jl);
     let mut right = ci.right;
@@ -881,6 +901,7 @@ fn try_merge(ci: &Candidate, cj: &Candidate, gap_max: f64, tol: f64, two_line: f
         r1,
         r2,
         strength: ci.strength + cj.strength,
+        support,
         bright_left: ci.bright_left + jb,
         left,
         right,
