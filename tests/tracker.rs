@@ -261,51 +261,36 @@ fn tracking_and_bounded_searches_allocate_nothing() {
     assert_eq!(search_allocated, 0, "allocations in the hinted search");
 }
 
-/// The confirmation frames apply the search's acceptance test again: on a frame where the
-/// candidates explain less than `accept_explained_fraction` of what they predict (here: only two
-/// of the six sensors' edges), they are dropped and the tracker searches afresh on the next
-/// frame, rather than committing whatever kept a few inliers (the wrong commits of `lab`'s
-/// initialisation trials were such candidates, while the search had missed the truth).
+/// A search frame that shows too little (here: only one of the six sensors' edges) commits
+/// nothing: its candidates explain less than `accept_explained_fraction` of what they predict,
+/// or less than `accept_support_fraction` of the longest edges, or no candidate is a clear
+/// winner over the others. The next whole frames search again and commit to the truth.
 #[test]
-fn confirmation_drops_candidates_that_explain_too_little_and_searches_again() {
+fn a_frame_that_shows_too_little_commits_nothing_and_the_next_frames_find_the_truth() {
     let f = fixture();
-    let (mut source, rig, mut cfg, mut frame, mut detector) = replay(f);
-    // No early commit: every candidate goes through the confirmation frames.
-    cfg.initialisation.clear_winner_ratio = 1e-9;
+    let (mut source, rig, cfg, mut frame, mut detector) = replay(f);
     let mut tracker = Tracker::new(&rig, &f.model, &f.table, &cfg, Some(hint(f)), 1);
-    assert!(source.next_frame(&mut frame).unwrap());
-    let r = tracker.process(detector.detect(&frame), frame.timestamp_ns().unwrap());
-    assert_eq!(r.state, TrackerState::Initializing, "{:?}", r.event);
-    let confirming = tracker.candidates().filter(|c| c.3).count();
-    assert!(confirming >= 2, "{confirming} candidates to confirm");
-
     assert!(source.next_frame(&mut frame).unwrap());
     let few: Vec<_> = detector
         .detect(&frame)
         .iter()
-        .filter(|e| e.sensor < 2)
+        .filter(|e| e.sensor == 0)
         .cloned()
         .collect();
     let r = tracker.process(&few, frame.timestamp_ns().unwrap());
-    assert_eq!(r.state, TrackerState::Initializing);
-    assert_eq!(
-        tracker.candidates().filter(|c| c.3).count(),
-        0,
-        "every candidate dropped"
-    );
+    assert_eq!(r.state, TrackerState::Initializing, "{:?}", r.event);
+    assert!(r.pose.is_none());
+    assert!(matches!(r.event, Some(TrackerEvent::Searched(_))), "{:?}", r.event);
 
-    // The next whole frame searches again, and the tracker commits to the truth.
-    let mut searched = false;
     let mut committed = None;
     while committed.is_none() && source.next_frame(&mut frame).unwrap() {
         let ts = frame.timestamp_ns().unwrap();
         let r = tracker.process(detector.detect(&frame), ts);
-        searched |= matches!(r.event, Some(TrackerEvent::Searched(_)));
         if let (TrackerState::Tracking, Some(p)) = (r.state, r.pose) {
             committed = Some(errors(f, ts, &p));
         }
     }
-    assert!(searched, "searched again");
+    assert!(tracker.stats().reinitialisations >= 1, "searched again");
     let (dp, dr) = committed.expect("committed");
     assert!(dp < 0.10 && dr < 1.0, "committed {:.1} cm, {dr:.2}°", dp * 100.0);
 }
@@ -384,6 +369,47 @@ fn a_rotation_prior_and_a_tilt_limit_keep_the_search_to_plausible_rotations() {
     assert!(report.tilted > 0, "{report:?}");
     let tilt = |c: &omnitrack::tracker::Candidate| (c.pose.rotation * Vector3::z()).z.acos().to_degrees();
     assert!(found.iter().all(|c| tilt(c) < 12.0), "{found:?}");
+}
+
+/// Real rooms hold more than their model: with three times the furniture, shelves and posters,
+/// twice the people and five times the surface texture of the default render, no frame of the
+/// lab's first 30 is given a pose more than 30 cm or 3° off, from the 3 m volume: "no pose yet"
+/// is allowed, a wrong one is not.
+#[test]
+fn heavy_clutter_and_texture_commit_no_wrong_pose() {
+    use omnitrack::desk::recording::RecordingOptions;
+    use omnitrack::desk::render::Appearance;
+    let options = RecordingOptions {
+        appearance: Appearance {
+            clutter: 3.0,
+            people: 2.0,
+            texture: 0.3,
+            ..Appearance::default()
+        },
+        ..RecordingOptions::default()
+    };
+    let f = common::lab_recording_with(30, "firmware_config/ladybug2.toml", "cluttered", &options);
+    let mut source = ReplaySource::open(&f.rec, Pacing::AsFastAsPossible).unwrap();
+    let mut errs = Vec::new();
+    run_hinted(&f, &mut source, &mut |r, _| {
+        if let Some(p) = &r.result.pose {
+            errs.push(errors(&f, r.timestamp_ns, p));
+        }
+        Ok(())
+    });
+    let worst = errs.iter().fold((0.0f64, 0.0f64), |m, e| (m.0.max(e.0), m.1.max(e.1)));
+    assert!(
+        worst.0 < 0.30 && worst.1 < 3.0,
+        "a pose {:.1} cm, {:.2}° off ({} frames with a pose)",
+        worst.0 * 100.0,
+        worst.1,
+        errs.len()
+    );
+    eprintln!(
+        "heavy clutter: {} of 30 frames with a pose, worst {:.1} cm",
+        errs.len(),
+        worst.0 * 100.0
+    );
 }
 
 /// Frames of the other-rig runs (5 Hz: eight seconds of the lab tour).

@@ -37,6 +37,8 @@ pub struct InitialisationConfig {
     pub whole_model_time_budget_ms: f64,
     pub clear_winner_ratio: f64,
     pub accept_explained_fraction: f64,
+    /// A candidate must also explain this share of the frame's longest edges.
+    pub accept_support_fraction: f64,
     pub wide_edges_considered: u32,
     pub wide_segments_considered: u32,
     pub wide_samples_per_cell: u32,
@@ -108,6 +110,10 @@ pub struct MotionConfig {
     /// Largest tilt of the rig's z axis from the world's up (deg) a search considers; 180 keeps
     /// every orientation.
     pub max_tilt_deg: f64,
+    /// The rig centre's height above the floor beneath it (m, lowest and highest): searches
+    /// refuse poses outside it, below every floor or outside the building. Ignored for a model
+    /// without floors and when `upright`.
+    pub height_above_floor_m: [f64; 2],
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -170,7 +176,8 @@ impl Default for InitialisationConfig {
             max_dihedral_range_deg: 10.0,
             whole_model_time_budget_ms: 10000.0,
             clear_winner_ratio: 0.8,
-            accept_explained_fraction: 0.5,
+            accept_explained_fraction: 0.4,
+            accept_support_fraction: 0.4,
             wide_edges_considered: 64,
             wide_segments_considered: 60,
             wide_samples_per_cell: 300,
@@ -242,8 +249,9 @@ impl Default for MotionConfig {
         Self {
             upright: false,
             upright_height_m: 1.2,
-            max_turn_rate_deg_s: 360.0, // ours: heads turn at up to ~300–400°/s
-            max_tilt_deg: 90.0,         // ours: a worn rig's up axis stays above the horizon
+            max_turn_rate_deg_s: 360.0,       // ours: heads turn at up to ~300–400°/s
+            max_tilt_deg: 60.0,               // ours: a worn rig leans less than a look at the floor
+            height_above_floor_m: [1.0, 2.0], // ours: worn 1.2–1.9 m, hand-held or on a cart 1.0–1.6 m
         } // Koch–Teller §5.4
     }
 }
@@ -382,6 +390,12 @@ impl TrackerConfig {
                 i.accept_explained_fraction
             ));
         }
+        if !(i.accept_support_fraction >= 0.0 && i.accept_support_fraction < 1.0) {
+            return Err(format!(
+                "key 'initialisation.accept_support_fraction': must lie in [0, 1), found {}",
+                i.accept_support_fraction
+            ));
+        }
         at_least(
             "initialisation.wide_edges_considered",
             i.wide_edges_considered,
@@ -459,6 +473,12 @@ impl TrackerConfig {
         let tilt = self.motion.max_tilt_deg;
         if !(tilt > 0.0 && tilt <= 180.0) {
             return Err(format!("key 'motion.max_tilt_deg': must be in (0, 180], found {tilt}"));
+        }
+        let [lo, hi] = self.motion.height_above_floor_m;
+        if !(lo.is_finite() && hi.is_finite() && lo >= 0.0 && hi > lo) {
+            return Err(format!(
+                "key 'motion.height_above_floor_m': must be [lowest, highest] with 0 <= lowest < highest, found [{lo}, {hi}]"
+            ));
         }
         positive("budgets.frame_ms", self.budgets.frame_ms)?;
         positive("budgets.edges_ms", self.budgets.edges_ms)?;

@@ -49,6 +49,30 @@
 //! height swept at each (`HEIGHT_STEP_M`), and the result polished and ranked with the rest.
 //! Measured on 40 starts along the full-length `corridor`: right 33–34 times against 26.
 //!
+//! **Rotation from vanishing directions, translation by a grid** (modules `vanishing`; beyond
+//! the paper). On real photographs the strongest edges are mostly texture (blinds,
+//! floorboards, sun patches), and the triplets of the 40 strongest held the truth for 1 of the
+//! 32 real panoramas of the ZInD benchmark (README). But buildings are drawn in few directions,
+//! and their lines (texture included) meet in few vanishing points: the frame's vertical and
+//! horizontal vanishing directions put onto the model's give a few rotations (a Manhattan
+//! building: four, a quarter turn apart), within a degree of the truth on all 32. Under each,
+//! the translation is three numbers: positions on a grid over the volume's cells (plan and
+//! height steps of 0.25 m, heights in the band above the cell's floor) are scored by
+//! *coverage*, the share of the long segments of their visibility set along which the frame's
+//! longest edges run, climbed in finer steps and polished. This runs first; the triplets get
+//! what is left of the time budget.
+//!
+//! **Scoring both ways.** A segment counts as explained in proportion to how much of it edges
+//! cover (half covered counts whole): a short piece of texture that happens to lie along a
+//! predicted line no longer explains it. And [`Candidate::support`] is the share of the frame's
+//! longest edges that the candidate's segments explain: texture is unexplained at every pose,
+//! but a wrong pose also leaves the building's own long lines unexplained. Candidates rank by
+//! [`Candidate::merit`], the product of the two.
+//!
+//! **The floor beneath** (module `floor`): every candidate must stand `height_above_floor_m`
+//! above a floor of the model (none outside the building, none above a ceiling); a model
+//! without floors gives no such prior.
+//!
 //! With `upright` set (KT §5.4), the cells are those of the layer nearest the known height, the
 //! rotation is the yaw alone (closed form) and every fit solves x, y and yaw only.
 //!
@@ -61,7 +85,9 @@
 //! re-initialisation, a relocalisation) is searched on the calling thread and allocates nothing;
 //! only the whole-model search starts threads.
 
-use super::matching::{best_edge, correspondence, Gate, Predicted};
+use super::floor::Floors;
+use super::matching::{best_edge, best_edge_and_cover, correspondence, overlap, Gate, Predicted};
+use super::vanishing::{VanishingDirections, MAX_ROTATIONS};
 use super::vote::{Grid, TranslationVote, PEAKS};
 use crate::config::TrackerConfig;
 use crate::edges::Edge;
@@ -91,7 +117,33 @@ const SAME_ROTATION_RAD: f64 = 0.0873;
 /// The translation vote runs under the rotations of this many of the best candidates (with
 /// their quarter turns: at most this many rotations in all).
 const VOTED_CANDIDATES: usize = 2;
-const VOTED_ROTATIONS: usize = 8;
+const VOTED_ROTATIONS: usize = 8 + MAX_ROTATIONS;
+/// The longest edges of the frame that vote for translations (module `vote`): many more than
+/// the triplet matching's strongest few, since under a known rotation only the edges whose
+/// planes are vertical vote, and clutter outshines structure on real photographs.
+const VOTE_EDGES: usize = 256;
+/// A segment covered this much by its matching edges counts as wholly explained: furniture
+/// hides parts of the walls' lines, and the model is coarse (KT §5.3's "10–25 cm").
+const FULL_COVER: f64 = 0.5;
+/// How far a pose may stray outside the height band above its floor (m): the polish moves a
+/// start by centimetres.
+const HEIGHT_SLACK_M: f64 = 0.1;
+/// The grid search under the vanishing directions' rotations: its spacing in plan and height
+/// (m, about the polish's basin at a few metres), the positions polished per rotation, and the
+/// coarse gate of its scoring (rad).
+const GRID_STEP_M: f64 = 0.25;
+/// The longest edges [`Initialiser::edge_support`] looks at: the lines that matter, not the
+/// texture.
+const EDGE_SUPPORT_EDGES: usize = 64;
+const GRID_KEEP: usize = 8;
+const GRID_GATE_RAD: f64 = 6.0 * std::f64::consts::PI / 180.0;
+/// The grid's best positions climb the coverage score in steps of these sizes (m) and gates
+/// (rad) before the polish: the true position's peak is narrower than the grid.
+const CLIMB: [(f64, f64); 3] = [
+    (0.12, 4.0 * std::f64::consts::PI / 180.0),
+    (0.06, 3.0 * std::f64::consts::PI / 180.0),
+    (0.03, 2.0 * std::f64::consts::PI / 180.0),
+];
 /// Step of the height sweep at a voted plan position (m).
 const HEIGHT_STEP_M: f64 = 0.1;
 
@@ -127,6 +179,8 @@ pub struct InitOptions {
     /// Samples whose rig z axis is further than this from the world's up are dropped (rad;
     /// π keeps every sample).
     pub max_tilt_rad: f64,
+    /// The rig centre's height above the floor beneath it (m): poses outside are refused.
+    pub height_above_floor_m: [f64; 2],
 }
 
 impl InitOptions {
@@ -149,6 +203,7 @@ impl InitOptions {
             candidates: 3,
             wide_segments_considered: i.wide_segments_considered as usize,
             max_tilt_rad: cfg.motion.max_tilt_deg.to_radians(),
+            height_above_floor_m: cfg.motion.height_above_floor_m,
         }
     }
 }
@@ -173,8 +228,21 @@ pub struct Candidate {
     /// Plain ξ over those inliers (rad²).
     pub xi_rad2: f64,
     /// Fraction of the segments of VIS(pose) long enough to be seen with an edge within the
-    /// inlier angle.
+    /// inlier angle, each in proportion to how much of it edges cover (up to half of it).
     pub explained: f64,
+    /// Fraction of the frame's longest edges (by angle) that a segment of VIS(pose) explains
+    /// within the inlier angle: the other way round. Texture and clutter make edges the model
+    /// cannot explain at any pose, but a wrong pose leaves the building's own lines
+    /// unexplained too.
+    pub support: f64,
+}
+
+impl Candidate {
+    /// How well the pose and the frame explain each other, both ways (higher is better): the
+    /// search's ranking.
+    pub fn merit(&self) -> f64 {
+        self.explained * self.support
+    }
 }
 
 /// What one [`Initialiser::run`] did.
@@ -235,6 +303,24 @@ fn keep_best(pool: &mut Vec<(f64, Pose)>, entry: (f64, Pose)) {
     }
 }
 
+/// Keeps `entry` (score, position; highest score best) among the best [`GRID_KEEP`] that are at
+/// least [`SAME_POSITION_M`] apart: a better neighbour replaces a worse one.
+fn keep_best_apart(best: &mut Vec<(f64, Point3<f64>)>, entry: (f64, Point3<f64>)) {
+    if let Some(k) = best.iter().position(|b| (b.1 - entry.1).norm() < SAME_POSITION_M) {
+        if entry.0 > best[k].0 {
+            best[k] = entry;
+        }
+        return;
+    }
+    if best.len() < GRID_KEEP {
+        best.push(entry);
+    } else if let Some(w) = best.iter_mut().min_by(|a, b| a.0.total_cmp(&b.0)) {
+        if entry.0 > w.0 {
+            *w = entry;
+        }
+    }
+}
+
 /// The search's buffers, sized once.
 pub struct Initialiser<'m> {
     model: &'m Model,
@@ -259,6 +345,21 @@ pub struct Initialiser<'m> {
     /// Translation by voting under the candidates' rotations (module `vote`), and whether
     /// their quarter-turn twins about the vertical are voted too.
     vote: TranslationVote,
+    /// The frame's longest edges, for the vote.
+    vote_edges: Vec<Edge>,
+    /// Rotation hypotheses from vanishing directions (module `vanishing`).
+    vanishing: VanishingDirections,
+    /// The floors, and the height of the floor beneath each node (NaN: none).
+    floors: Floors,
+    node_floor: Vec<f64>,
+    /// The grid search's best positions under one rotation (score, position).
+    grid_best: Vec<(f64, Point3<f64>)>,
+    /// Scratch of [`Self::edge_support`]: (length, edge index), and the predicted segments.
+    support_order: Vec<(f64, u32)>,
+    support_pred: Vec<Predicted>,
+    /// This frame's rotations from vanishing directions.
+    vanishing_rot: [UnitQuaternion<f64>; MAX_ROTATIONS],
+    vanishing_count: usize,
     yaw_twins: bool,
     /// A rotation the rig cannot have turned further from than the angle (rad): samples beyond
     /// it are dropped before they take a place in the pool.
@@ -292,6 +393,7 @@ impl<'m> Initialiser<'m> {
         let workers = std::thread::available_parallelism()
             .map_or(1, |n| n.get())
             .clamp(1, MAX_WORKERS);
+        let floors = Floors::new(model);
         Initialiser {
             model,
             table,
@@ -308,8 +410,19 @@ impl<'m> Initialiser<'m> {
             pool: Vec::with_capacity(POOL),
             corr: Vec::with_capacity(max_set),
             alphas: Vec::with_capacity(max_set),
-            candidates: Vec::with_capacity(POLISHED + VOTED_ROTATIONS * PEAKS),
+            candidates: Vec::with_capacity(POLISHED + VOTED_ROTATIONS * PEAKS + MAX_ROTATIONS * GRID_KEEP),
             vote: TranslationVote::new(model.segments.len()),
+            vote_edges: Vec::with_capacity(VOTE_EDGES),
+            vanishing: VanishingDirections::new(model, max_edges),
+            node_floor: (0..table.node_count() as u32)
+                .map(|n| floors.below(&table.node_position(n)).unwrap_or(f64::NAN))
+                .collect(),
+            floors,
+            grid_best: Vec::with_capacity(GRID_KEEP),
+            support_order: Vec::with_capacity(max_edges),
+            support_pred: Vec::with_capacity(max_set),
+            vanishing_rot: [UnitQuaternion::identity(); MAX_ROTATIONS],
+            vanishing_count: 0,
             yaw_twins: true,
             rotation_prior: None,
         }
@@ -343,13 +456,23 @@ impl<'m> Initialiser<'m> {
         self.rotation_prior = prior;
     }
 
+    /// The rotation hypotheses the vanishing directions of `edges` give (module `vanishing`), for
+    /// diagnosis; the search computes its own.
+    pub fn vanishing_rotations(&mut self, edges: &[Edge]) -> Vec<UnitQuaternion<f64>> {
+        let mut out = [UnitQuaternion::identity(); MAX_ROTATIONS];
+        let n = self.vanishing.rotations(edges, self.opts.max_tilt_rad, &mut out);
+        out[..n].to_vec()
+    }
+
     /// Changes the search's time budget (a volume, or the whole model).
     pub fn set_time_budget(&mut self, budget: Duration) {
         self.opts.time_budget = budget;
     }
 
-    /// INIT-SEGMENT-EDGE over the cells meeting `volume`, then the polish of the best samples.
-    /// Returns the distinct candidates, best first (empty if nothing was found).
+    /// The grid search under the rotations of the vanishing directions, INIT-SEGMENT-EDGE over
+    /// the cells meeting `volume`, the polish of the best samples, and the translation vote.
+    /// Returns the distinct candidates, best [`Candidate::merit`] first (empty if nothing was
+    /// found).
     pub fn run(&mut self, edges: &[Edge], volume: &SearchVolume, rng: &mut SmallRng) -> (&[Candidate], InitReport) {
         let started = Instant::now();
         let mut report = InitReport::default();
@@ -358,6 +481,18 @@ impl<'m> Initialiser<'m> {
         self.prepare_edges(edges);
         self.select_cells(volume);
         report.cells_in_volume = self.cells.len();
+        let mut rotations = [UnitQuaternion::identity(); MAX_ROTATIONS];
+        let found = self.vanishing.rotations(edges, self.opts.max_tilt_rad, &mut rotations);
+        self.vanishing_count = 0;
+        for r in &rotations[..found] {
+            if self.rotation_prior.is_none_or(|(p, limit)| r.angle_to(&p) <= limit) {
+                self.vanishing_rot[self.vanishing_count] = *r;
+                self.vanishing_count += 1;
+            }
+        }
+        // The grid search under the vanishing directions first: on real photographs it finds
+        // what the triplets miss, and the triplets then have what is left of the time budget.
+        self.grid_search(edges, volume, started);
         if self.top.len() >= 3 {
             // A bounded volume is searched on this thread, nearest cell first, from `rng`. The
             // whole model (start-up without a hint: over a thousand cells) is dealt out to every
@@ -427,39 +562,48 @@ impl<'m> Initialiser<'m> {
                 break;
             }
             let start = self.pool[pi].1;
-            if self
-                .candidates
+            if self.pool[..pi]
                 .iter()
-                .any(|c| same_pose(&c.pose, &start, 2.0 * SAME_POSITION_M, 2.0 * SAME_ROTATION_RAD))
+                .any(|p| same_pose(&p.1, &start, 2.0 * SAME_POSITION_M, 2.0 * SAME_ROTATION_RAD))
             {
                 continue;
             }
             polished += 1;
             if let Some(c) = self.polish(&start, edges) {
-                if self
-                    .candidates
-                    .iter()
-                    .all(|o| !same_pose(&o.pose, &c.pose, SAME_POSITION_M, SAME_ROTATION_RAD))
-                {
-                    self.candidates.push(c);
-                }
+                self.offer(c);
             }
         }
-        self.candidates.sort_unstable_by(|a, b| a.score.total_cmp(&b.score));
+        self.candidates.sort_unstable_by(|a, b| b.merit().total_cmp(&a.merit()));
         if let Some(d) = volume.diameter_m {
             self.vote_translations(edges, &volume.centre, d, started);
         }
-        self.candidates.sort_unstable_by(|a, b| a.score.total_cmp(&b.score));
+        self.candidates.sort_unstable_by(|a, b| b.merit().total_cmp(&a.merit()));
         self.candidates.truncate(self.opts.candidates);
         report.elapsed = started.elapsed();
         (&self.candidates, report)
+    }
+
+    /// Adds a polished candidate, or replaces the one in its place (the same pose within
+    /// [`SAME_POSITION_M`] and [`SAME_ROTATION_RAD`]) if it fits the frame better (lower
+    /// truncated ξ): starts from different searches settle a few centimetres apart.
+    fn offer(&mut self, c: Candidate) {
+        let same = self
+            .candidates
+            .iter()
+            .position(|o| same_pose(&o.pose, &c.pose, SAME_POSITION_M, SAME_ROTATION_RAD));
+        match same {
+            Some(k) if c.score < self.candidates[k].score => self.candidates[k] = c,
+            Some(_) => {}
+            None if self.candidates.len() < self.candidates.capacity() => self.candidates.push(c),
+            None => {}
+        }
     }
 
     /// Module `vote`: under the rotations of the best candidates so far (and their quarter
     /// turns about the vertical when `yaw_twins`), the translations most edges agree on, each
     /// polished into a candidate. Within the time budget.
     fn vote_translations(&mut self, edges: &[Edge], centre: &Point3<f64>, diameter: f64, started: Instant) {
-        if self.candidates.is_empty() || self.cells.is_empty() {
+        if self.cells.is_empty() {
             return;
         }
         // The segments seen from the volume, and the span of heights of the node layers it
@@ -481,6 +625,10 @@ impl<'m> Initialiser<'m> {
         let grid = Grid::new(&Point3::new(centre.x, centre.y, mid_z), diameter);
         let mut rotations = [UnitQuaternion::identity(); VOTED_ROTATIONS];
         let mut n_rot = 0;
+        for r in &self.vanishing_rot[..self.vanishing_count] {
+            rotations[n_rot] = *r;
+            n_rot += 1;
+        }
         let turns: &[f64] = if self.yaw_twins { &[0.0, 0.5, 1.0, 1.5] } else { &[0.0] };
         for c in self.candidates.iter().take(VOTED_CANDIDATES) {
             for &t in turns {
@@ -496,7 +644,7 @@ impl<'m> Initialiser<'m> {
             if started.elapsed() >= self.opts.time_budget {
                 return;
             }
-            let found = self.vote.run(self.model, &self.top, r, &grid, &mut peaks);
+            let found = self.vote.run(self.model, &self.vote_edges, r, &grid, &mut peaks);
             for &(_, peak) in &peaks[..found] {
                 // The height: the best truncated ξ over a sweep of the layers' span (the polish
                 // alone settles on a wrong height from a start a few decimetres off), then the
@@ -507,24 +655,151 @@ impl<'m> Initialiser<'m> {
                 for k in 0..=steps {
                     let z = (z_lo + k as f64 * HEIGHT_STEP_M).min(z_hi);
                     start.translation.vector.z = z;
-                    let (score, _, _) = self.final_score(&start, edges);
+                    let (score, _, _, _) = self.final_score(&start, edges);
                     if score < best_z.0 {
                         best_z = (score, z);
                     }
                 }
                 start.translation.vector.z = best_z.1;
                 if let Some(c) = self.polish(&start, edges) {
-                    if self.candidates.len() < self.candidates.capacity()
-                        && self
-                            .candidates
-                            .iter()
-                            .all(|o| !same_pose(&o.pose, &c.pose, SAME_POSITION_M, SAME_ROTATION_RAD))
-                    {
-                        self.candidates.push(c);
-                    }
+                    self.offer(c);
                 }
             }
         }
+    }
+
+    /// Under each rotation of the vanishing directions, the positions of a grid over the cells
+    /// of the volume (plan and height steps of [`GRID_STEP_M`], heights within the band above
+    /// each cell's floor) scored by the share of the long segments of their visibility set that
+    /// the frame's longest edges cover within a coarse gate; the best few per rotation polished
+    /// into candidates. With the rotation known the translation is three numbers, few enough to
+    /// search outright, and the coverage score does not reward texture that happens to lie
+    /// along a predicted line. Within the time budget.
+    fn grid_search(&mut self, edges: &[Edge], volume: &SearchVolume, started: Instant) {
+        let h = &self.table.header;
+        let half = 0.5 * h.spacing_m;
+        let half_z = layer_half_height(&h.heights_m);
+        let steps = (h.spacing_m / GRID_STEP_M).round().max(1.0) as usize;
+        let step = h.spacing_m / steps as f64;
+        let [band_lo, band_hi] = self.opts.height_above_floor_m;
+        let gate = Gate {
+            cos_alpha: GRID_GATE_RAD.cos(),
+            min_overlap: 0.5,
+            hue: None,
+        };
+        let min_len = 3.0 * self.opts.min_length_rad;
+        for ri in 0..self.vanishing_count {
+            let rotation = self.vanishing_rot[ri];
+            self.grid_best.clear();
+            for ci in 0..self.cells.len() {
+                if started.elapsed() >= self.opts.time_budget {
+                    return;
+                }
+                let node = self.cells[ci].1;
+                let centre = self.table.node_position(node);
+                // Heights: the grid's layers within this node's slab, inside the band above
+                // its floor (or the known height when upright; the slab where there is no
+                // floor to stand on).
+                let floor = self.node_floor[node as usize];
+                let (z_lo, z_hi) = match self.opts.upright_height_m {
+                    Some(z) => (z, z),
+                    None if floor.is_finite() => (
+                        (floor + band_lo).max(centre.z - half_z),
+                        (floor + band_hi).min(centre.z + half_z),
+                    ),
+                    None if self.floors.any() => continue,
+                    None => (centre.z - half_z, centre.z + half_z),
+                };
+                if z_hi < z_lo {
+                    continue;
+                }
+                let set = self.table.node_set(node);
+                let mut z = z_lo;
+                while z <= z_hi + 1e-9 {
+                    for ix in 0..steps {
+                        for iy in 0..steps {
+                            let p = Point3::new(
+                                centre.x - half + (ix as f64 + 0.5) * step,
+                                centre.y - half + (iy as f64 + 0.5) * step,
+                                z,
+                            );
+                            if volume.diameter_m.is_some_and(|d| (p - volume.centre).norm() > 0.5 * d) {
+                                continue;
+                            }
+                            let pose = Pose::from_parts(Translation3::from(p.coords), rotation);
+                            if let Some(score) = self.coverage(&pose, set.segments, &gate, min_len) {
+                                keep_best_apart(&mut self.grid_best, (score, p));
+                            }
+                        }
+                    }
+                    z += GRID_STEP_M;
+                }
+            }
+            for k in 0..self.grid_best.len() {
+                let start = self.climb(
+                    &Pose::from_parts(Translation3::from(self.grid_best[k].1.coords), rotation),
+                    min_len,
+                );
+                if let Some(c) = self.polish(&start, edges) {
+                    self.offer(c);
+                }
+            }
+        }
+    }
+
+    /// Coordinate ascent of the coverage score from `start` in x, y and z, in the steps and
+    /// gates of [`CLIMB`].
+    fn climb(&self, start: &Pose, min_len: f64) -> Pose {
+        let mut pose = *start;
+        for (step, gate_rad) in CLIMB {
+            let gate = Gate {
+                cos_alpha: gate_rad.cos(),
+                min_overlap: 0.5,
+                hue: None,
+            };
+            let score = |p: &Pose| {
+                self.table
+                    .query(&Point3::from(p.translation.vector))
+                    .and_then(|set| self.coverage(p, set.segments, &gate, min_len))
+                    .unwrap_or(0.0)
+            };
+            let mut best = score(&pose);
+            for _ in 0..4 {
+                let mut moved = false;
+                for axis in 0..3 {
+                    for sign in [-1.0, 1.0] {
+                        let mut p = pose;
+                        p.translation.vector[axis] += sign * step;
+                        let s = score(&p);
+                        if s > best {
+                            (best, pose, moved) = (s, p, true);
+                        }
+                    }
+                }
+                if !moved {
+                    break;
+                }
+            }
+        }
+        pose
+    }
+
+    /// The share of `segments` at least `min_len` long at `pose` that the frame's longest edges
+    /// cover within `gate` (each up to [`FULL_COVER`]); `None` if fewer than six are that long.
+    fn coverage(&self, pose: &Pose, segments: &[u32], gate: &Gate, min_len: f64) -> Option<f64> {
+        let (mut explained, mut counted) = (0.0, 0usize);
+        for &s in segments {
+            let seg = &self.model.segments[s as usize];
+            let pred = Predicted::new(&[seg.a, seg.b], pose, &self.centres);
+            if pred.length_rad < min_len {
+                continue;
+            }
+            counted += 1;
+            if let (Some(_), cover) = best_edge_and_cover(&pred, &self.centres, &self.vote_edges, gate) {
+                explained += (cover / FULL_COVER).min(1.0);
+            }
+        }
+        (counted >= 6).then(|| explained / counted as f64)
     }
 
     /// ℰ: the strongest edges of sufficient length, their dihedral angles, masks and sorted pairs.
@@ -539,6 +814,15 @@ impl<'m> Initialiser<'m> {
         self.top.clear();
         for &(_, i) in self.edge_order.iter().take(self.opts.edges_considered) {
             self.top.push(edges[i as usize]);
+        }
+        // The vote's edges: the longest (reusing the order buffer, which is done with).
+        for entry in self.edge_order.iter_mut() {
+            entry.0 = edges[entry.1 as usize].length_rad as f32;
+        }
+        self.edge_order.sort_unstable_by(|a, b| b.0.total_cmp(&a.0));
+        self.vote_edges.clear();
+        for &(_, i) in self.edge_order.iter().take(VOTE_EDGES) {
+            self.vote_edges.push(edges[i as usize]);
         }
         let m = self.top.len();
         let mm = self.opts.edges_considered;
@@ -946,6 +1230,24 @@ impl<'m> Initialiser<'m> {
     /// Matches gathered at `start` with shrinking gates over the segments of VIS(T) and all of
     /// the frame's edges, refit each time, the ξ simplex last; scored by the truncated ξ.
     pub fn polish(&mut self, start: &Pose, edges: &[Edge]) -> Option<Candidate> {
+        let candidate = self.polish_unchecked(start, edges)?;
+        self.height_ok(&candidate.pose).then_some(candidate)
+    }
+
+    /// Whether `pose` stands within the height band above a floor of the model (always true for
+    /// a model without floors and when upright, whose height is given).
+    pub fn height_ok(&self, pose: &Pose) -> bool {
+        if self.opts.upright_height_m.is_some() || !self.floors.any() {
+            return true;
+        }
+        let p = Point3::from(pose.translation.vector);
+        let [lo, hi] = self.opts.height_above_floor_m;
+        self.floors
+            .below(&p)
+            .is_some_and(|f| p.z - f >= lo - HEIGHT_SLACK_M && p.z - f <= hi + HEIGHT_SLACK_M)
+    }
+
+    fn polish_unchecked(&mut self, start: &Pose, edges: &[Edge]) -> Option<Candidate> {
         let inlier = self.opts.inlier_alpha_rad;
         let mut pose = *start;
         for gate_rad in [4.0 * inlier, 2.0 * inlier, inlier] {
@@ -972,14 +1274,16 @@ impl<'m> Initialiser<'m> {
                 pose = p;
             }
         }
-        let (score, inliers, counted) = self.final_score(&pose, edges);
+        let (score, inliers, _, explained) = self.final_score(&pose, edges);
+        let support = self.edge_support(&pose, edges);
         let count = self.gather(&pose, edges, inlier);
         Some(Candidate {
             pose,
             score,
             inliers,
             xi_rad2: xi(&self.corr[..count], &pose),
-            explained: inliers as f64 / counted.max(1) as f64,
+            explained,
+            support,
         })
     }
 
@@ -1015,15 +1319,70 @@ impl<'m> Initialiser<'m> {
         self.final_score(pose, edges).0
     }
 
+    /// [`Candidate::support`] of any pose: the share of the [`EDGE_SUPPORT_EDGES`] longest of
+    /// `edges` (by angle, weighted by it) that a segment of VIS(pose) explains within the inlier
+    /// angle.
+    pub fn edge_support(&mut self, pose: &Pose, edges: &[Edge]) -> f64 {
+        let Some(set) = self.table.query(&Point3::from(pose.translation.vector)) else {
+            return 0.0;
+        };
+        self.support_order.clear();
+        for (i, e) in edges.iter().enumerate() {
+            if e.length_rad >= self.opts.min_length_rad && self.support_order.len() < self.support_order.capacity() {
+                self.support_order.push((e.length_rad, i as u32));
+            }
+        }
+        let n = self.support_order.len().min(EDGE_SUPPORT_EDGES);
+        if n == 0 {
+            return 0.0;
+        }
+        if n < self.support_order.len() {
+            self.support_order
+                .select_nth_unstable_by(n - 1, |a, b| b.0.total_cmp(&a.0));
+        }
+        // Each segment's plane in every sensor, once.
+        self.support_pred.clear();
+        for &k in set.segments {
+            let seg = &self.model.segments[k as usize];
+            if self.support_pred.len() < self.support_pred.capacity() {
+                self.support_pred
+                    .push(Predicted::new(&[seg.a, seg.b], pose, &self.centres));
+            }
+        }
+        let cos_gate = self.opts.inlier_alpha_rad.cos();
+        let (mut explained, mut total) = (0.0, 0.0);
+        for &(length, i) in &self.support_order[..n] {
+            let e = &edges[i as usize];
+            let s = e.sensor as usize;
+            if s >= self.centres.len() {
+                continue;
+            }
+            total += length;
+            let hit = self.support_pred.iter().any(|pred| {
+                let nrm = &pred.normals[s];
+                nrm.dot(&e.plane.normal).abs() >= cos_gate && overlap(pred, &self.centres[s], nrm, e) >= 0.5
+            });
+            if hit {
+                explained += length;
+            }
+        }
+        if total > 0.0 {
+            explained / total
+        } else {
+            0.0
+        }
+    }
+
     /// [`Candidate::explained`] of any pose.
     pub fn explained(&self, pose: &Pose, edges: &[Edge]) -> f64 {
-        let (_, inliers, counted) = self.final_score(pose, edges);
-        inliers as f64 / counted.max(1) as f64
+        self.final_score(pose, edges).3
     }
 
     /// (truncated ξ with the inlier cap over the segments of VIS(pose) long enough, inliers,
-    /// segments counted).
-    fn final_score(&self, pose: &Pose, edges: &[Edge]) -> (f64, usize, usize) {
+    /// segments counted, the share of them explained). A segment counts as explained, and at its
+    /// α rather than the cap, in proportion to how much of it the matching edges cover, up to
+    /// [`FULL_COVER`].
+    fn final_score(&self, pose: &Pose, edges: &[Edge]) -> (f64, usize, usize, f64) {
         let cap = self.opts.inlier_alpha_rad;
         let gate = Gate {
             cos_alpha: cap.cos(),
@@ -1031,9 +1390,10 @@ impl<'m> Initialiser<'m> {
             hue: None,
         };
         let Some(set) = self.table.query(&Point3::from(pose.translation.vector)) else {
-            return (f64::INFINITY, 0, 0);
+            return (f64::INFINITY, 0, 0, 0.0);
         };
         let (mut sum, mut counted, mut inliers) = (0.0, 0usize, 0usize);
+        let mut explained = 0.0;
         for &s in set.segments {
             let seg = &self.model.segments[s as usize];
             let pred = Predicted::new(&[seg.a, seg.b], pose, &self.centres);
@@ -1041,18 +1401,20 @@ impl<'m> Initialiser<'m> {
                 continue;
             }
             counted += 1;
-            match best_edge(&pred, &self.centres, edges, &gate) {
-                Some((_, a)) => {
-                    sum += a * a;
+            match best_edge_and_cover(&pred, &self.centres, edges, &gate) {
+                (Some((_, a)), cover) => {
+                    let w = (cover / FULL_COVER).min(1.0);
+                    sum += w * a * a + (1.0 - w) * cap * cap;
+                    explained += w;
                     inliers += 1;
                 }
-                None => sum += cap * cap,
+                (None, _) => sum += cap * cap,
             }
         }
         if counted == 0 {
-            (f64::INFINITY, 0, 0)
+            (f64::INFINITY, 0, 0, 0.0)
         } else {
-            (sum / counted as f64, inliers, counted)
+            (sum / counted as f64, inliers, counted, explained / counted as f64)
         }
     }
 

@@ -565,6 +565,7 @@ mod tests {
             inliers,
             xi_rad2: score,
             explained: 0.5,
+            support: 0.5,
         }
     }
 

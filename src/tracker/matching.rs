@@ -50,20 +50,7 @@ impl Predicted {
 /// the sensor centre `c` within the predicted plane (normal `n`). 0 when they do not overlap.
 #[inline]
 pub fn overlap(pred: &Predicted, c: &Point3<f64>, n: &Vector3<f64>, edge: &Edge) -> f64 {
-    let a = pred.ends_rig[0] - c.coords;
-    let b = pred.ends_rig[1] - c.coords;
-    let Some(u) = a.try_normalize(1e-12) else {
-        return 0.0;
-    };
-    let w = n.cross(&u);
-    let angle = |x: &Vector3<f64>| x.dot(&w).atan2(x.dot(&u));
-    let seg_hi = angle(&b);
-    let (s_lo, s_hi) = if seg_hi >= 0.0 { (0.0, seg_hi) } else { (seg_hi, 0.0) };
-    let e0 = angle(&edge.plane.ends[0]);
-    let e1 = angle(&edge.plane.ends[1]);
-    let (e_lo, e_hi) = if e0 <= e1 { (e0, e1) } else { (e1, e0) };
-    let common = s_hi.min(e_hi) - s_lo.max(e_lo);
-    let shorter = (s_hi - s_lo).min(e_hi - e_lo);
+    let (common, shorter, _) = shared_angle(pred, c, n, edge);
     if common <= 0.0 || shorter <= 0.0 {
         0.0
     } else {
@@ -126,6 +113,62 @@ pub fn best_edge(pred: &Predicted, centres: &[Point3<f64>], edges: &[Edge], gate
         best = Some((i, cos));
     }
     best.map(|(i, cos)| (i, cos.min(1.0).acos()))
+}
+
+/// [`best_edge`], and how much of the predicted segment the edges passing the gate cover: the
+/// sum over them of the angle they share with the segment (about their sensor's centre, in its
+/// predicted plane) over the segment's angle, at most 1. A segment explained by a whole edge
+/// covers 1; one that a short piece of texture happens to lie along covers little, however well
+/// that piece's plane agrees.
+pub fn best_edge_and_cover(
+    pred: &Predicted,
+    centres: &[Point3<f64>],
+    edges: &[Edge],
+    gate: &Gate,
+) -> (Option<(usize, f64)>, f64) {
+    let mut best: Option<(usize, f64)> = None;
+    let mut covered = 0.0;
+    for (i, e) in edges.iter().enumerate() {
+        let s = e.sensor as usize;
+        if s >= centres.len() {
+            continue;
+        }
+        let n = &pred.normals[s];
+        let cos = n.dot(&e.plane.normal).abs();
+        if cos < gate.cos_alpha {
+            continue;
+        }
+        let (common, shorter, seg) = shared_angle(pred, &centres[s], n, e);
+        if common <= 0.0 || shorter <= 0.0 || common / shorter < gate.min_overlap {
+            continue;
+        }
+        covered += common / seg;
+        if best.is_none_or(|(_, c)| cos > c) {
+            best = Some((i, cos));
+        }
+    }
+    (best.map(|(i, cos)| (i, cos.min(1.0).acos())), covered.min(1.0))
+}
+
+/// (angle shared by edge and segment, the shorter one's angle, the segment's angle) about `c`
+/// in the plane of normal `n`.
+#[inline]
+fn shared_angle(pred: &Predicted, c: &Point3<f64>, n: &Vector3<f64>, edge: &Edge) -> (f64, f64, f64) {
+    let a = pred.ends_rig[0] - c.coords;
+    let b = pred.ends_rig[1] - c.coords;
+    let Some(u) = a.try_normalize(1e-12) else {
+        return (0.0, 0.0, 0.0);
+    };
+    let w = n.cross(&u);
+    let angle = |x: &Vector3<f64>| x.dot(&w).atan2(x.dot(&u));
+    let seg_hi = angle(&b);
+    let (s_lo, s_hi) = if seg_hi >= 0.0 { (0.0, seg_hi) } else { (seg_hi, 0.0) };
+    let e0 = angle(&edge.plane.ends[0]);
+    let e1 = angle(&edge.plane.ends[1]);
+    let (e_lo, e_hi) = if e0 <= e1 { (e0, e1) } else { (e1, e0) };
+    let common = s_hi.min(e_hi) - s_lo.max(e_lo);
+    let shorter = (s_hi - s_lo).min(e_hi - e_lo);
+    (common, shorter, s_hi - s_lo)
 }
 
 /// The correspondence of an edge and a model segment.

@@ -23,9 +23,11 @@
 //! the tracking state (counted by a test). The initialisation's tables are also preallocated.
 
 pub mod correspondence;
+mod floor;
 pub mod init;
 mod maintenance;
 pub mod matching;
+mod vanishing;
 mod vote;
 
 pub use correspondence::{CorrespondenceState, CorrespondenceTable, HeldEdge, Track};
@@ -127,11 +129,26 @@ pub struct TrackerStats {
     pub second_opinions: u64,
 }
 
+/// The search's acceptance test: enough inliers, and the pose and the frame explaining each
+/// other well enough both ways (`accept_explained_fraction` of the segments it predicts,
+/// `accept_support_fraction` of the frame's longest edges).
+fn acceptable(cfg: &TrackerConfig, c: &Candidate) -> bool {
+    let i = &cfg.initialisation;
+    c.inliers >= cfg.maintenance.min_inliers as usize
+        && c.explained >= i.accept_explained_fraction
+        && c.support >= i.accept_support_fraction
+}
+
+/// Candidates this close to each other are one basin (m, rad): the margin of a clear winner
+/// is over the others.
+const BASIN_M: f64 = 0.6;
+const BASIN_RAD: f64 = 0.175;
+
 /// A candidate under confirmation.
 #[derive(Debug, Clone, Copy)]
 struct Confirming {
     pose: Pose,
-    score_sum: f64,
+    merit_sum: f64,
     frames: u32,
     alive: bool,
 }
@@ -224,7 +241,7 @@ impl<'m> Tracker<'m> {
             volume_level: 0,
             confirming: [Confirming {
                 pose: Pose::identity(),
-                score_sum: 0.0,
+                merit_sum: 0.0,
                 frames: 0,
                 alive: false,
             }; 4],
@@ -251,12 +268,13 @@ impl<'m> Tracker<'m> {
         self.tracks.tracks()
     }
 
-    /// The candidates being weighed while initialising: pose, mean score so far (truncated ξ,
-    /// rad²), frames scored, and whether it is still in the running.
+    /// The candidates being weighed while initialising: pose, mean merit so far
+    /// ([`Candidate::merit`], higher is better), frames scored, and whether it is still in the
+    /// running.
     pub fn candidates(&self) -> impl Iterator<Item = (Pose, f64, u32, bool)> + '_ {
         self.confirming[..self.confirm_count]
             .iter()
-            .map(|c| (c.pose, c.score_sum / c.frames.max(1) as f64, c.frames, c.alive))
+            .map(|c| (c.pose, c.merit_sum / c.frames.max(1) as f64, c.frames, c.alive))
     }
 
     /// The search's own refinement and score of any pose (`Initialiser::polish`): for
@@ -328,13 +346,24 @@ impl<'m> Tracker<'m> {
                 .set_yaw_twins(turn_limit.is_none_or(|(_, limit)| limit >= std::f64::consts::PI));
             self.init.set_rotation_prior(turn_limit);
             // A candidate must explain at least `accept_explained_fraction` of the segments it
-            // predicts; when none does, the next frame searches more broadly.
-            let max_score = self.max_accepted_score();
+            // predicts and `accept_support_fraction` of the frame's longest edges; when none
+            // does, the next frame searches more broadly.
             let (candidates, report) = self.init.run(edges, &volume, &mut self.rng);
-            let min = self.cfg.maintenance.min_inliers as usize;
             let plausible = |c: &Candidate| turn_limit.is_none_or(|(r, limit)| c.pose.rotation.angle_to(&r) <= limit);
+            // And it must be a clear winner: every other candidate of the search that is not in
+            // its basin (the same place turned, or a step away) explains at most
+            // `clear_winner_ratio` of what it explains. Repeated structure (the twin turned a
+            // half or quarter round, the next door along) is refused by evidence; "no pose yet"
+            // is better than a wrong one.
+            let ratio = self.cfg.initialisation.clear_winner_ratio;
+            let clear = |c: &Candidate| {
+                candidates
+                    .iter()
+                    .filter(|o| !init::same_pose(&o.pose, &c.pose, BASIN_M, BASIN_RAD))
+                    .all(|o| o.merit() <= ratio * c.merit())
+            };
             let accepted =
-                |c: &&Candidate| c.inliers >= min && c.score <= max_score && plausible(c) && c.explained >= floor;
+                |c: &&Candidate| acceptable(&self.cfg, c) && plausible(c) && c.explained >= floor && clear(c);
             // A failed search is repeated once more broadly on the same volume; if that fails
             // too, the volume doubles and the breadth is normal again (widening a large volume
             // only lets the time budget cover fewer cells).
@@ -347,7 +376,7 @@ impl<'m> Tracker<'m> {
             for c in candidates.iter().filter(accepted).take(self.confirming.len()) {
                 self.confirming[n] = Confirming {
                     pose: c.pose,
-                    score_sum: c.score,
+                    merit_sum: c.merit(),
                     frames: 1,
                     alive: true,
                 };
@@ -371,16 +400,15 @@ impl<'m> Tracker<'m> {
             // dropped, and when none is left the next frame searches afresh. (The wrong
             // commits in `lab`'s initialisation trials were candidates that barely passed on
             // the search frame and failed it on the next while the truth was never found.)
-            let max_score = self.max_accepted_score();
             for k in 0..self.confirm_count {
                 if !self.confirming[k].alive {
                     continue;
                 }
                 match self.init.polish(&self.confirming[k].pose, edges) {
-                    Some(c) if c.inliers >= self.cfg.maintenance.min_inliers as usize && c.score <= max_score => {
+                    Some(c) if acceptable(&self.cfg, &c) => {
                         let slot = &mut self.confirming[k];
                         slot.pose = c.pose;
-                        slot.score_sum += c.score;
+                        slot.merit_sum += c.merit();
                         slot.frames += 1;
                     }
                     _ => self.confirming[k].alive = false,
@@ -394,14 +422,16 @@ impl<'m> Tracker<'m> {
             .map(|c| c.frames)
             .max()
             .unwrap_or(0);
-        if alive == 0 {
+        let decided = alive == 1 || self.clear_winner();
+        if alive == 0 || (frames >= self.cfg.initialisation.confirm_frames && !decided) {
+            // Nothing left, or the frames did not tell the candidates apart: search afresh.
             self.confirm_count = 0;
-        } else if alive == 1 || frames >= self.cfg.initialisation.confirm_frames || self.clear_winner() {
+        } else if decided {
             let (k, winner) = self.confirming[..self.confirm_count]
                 .iter()
                 .enumerate()
                 .filter(|(_, c)| c.alive)
-                .min_by(|a, b| (a.1.score_sum / a.1.frames as f64).total_cmp(&(b.1.score_sum / b.1.frames as f64)))
+                .max_by(|a, b| (a.1.merit_sum / a.1.frames as f64).total_cmp(&(b.1.merit_sum / b.1.frames as f64)))
                 .map(|(k, c)| (k, *c))
                 .expect("one candidate is alive");
             let changed_mind = k != 0;
@@ -420,22 +450,14 @@ impl<'m> Tracker<'m> {
         result
     }
 
-    /// The worst truncated ξ a candidate may score and be accepted: explaining
-    /// `accept_explained_fraction` of the segments it predicts, it scores about
-    /// (1 − explained) × cap².
-    fn max_accepted_score(&self) -> f64 {
-        let cap2 = self.cfg.maintenance.inlier_angle_deg.to_radians().powi(2);
-        (1.0 - self.cfg.initialisation.accept_explained_fraction) * cap2
-    }
-
-    /// Whether the best candidate so far beats every other by the configured margin (mean score
-    /// below `clear_winner_ratio` × theirs): no further frames are needed to decide.
+    /// Whether the best candidate so far beats every other by the configured margin (the others'
+    /// mean merit at most `clear_winner_ratio` × its): no further frames are needed to decide.
     fn clear_winner(&self) -> bool {
         let live = || self.confirming[..self.confirm_count].iter().filter(|c| c.alive);
-        let mean = |c: &Confirming| c.score_sum / c.frames.max(1) as f64;
-        let best = live().map(mean).fold(f64::INFINITY, f64::min);
+        let mean = |c: &Confirming| c.merit_sum / c.frames.max(1) as f64;
+        let best = live().map(mean).fold(f64::NEG_INFINITY, f64::max);
         let ratio = self.cfg.initialisation.clear_winner_ratio;
-        live().filter(|c| mean(c) > best).all(|c| best < ratio * mean(c))
+        live().filter(|c| mean(c) < best).all(|c| mean(c) <= ratio * best)
     }
 
     /// The least fraction of VIS(T) a pose must explain: `min_explained_ratio` of the running

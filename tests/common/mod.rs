@@ -94,8 +94,24 @@ pub fn lab_recording(frames: usize) -> LabRecording {
 /// [`lab_recording`] rendered through another rig (`rig`: a path in the crate).
 #[cfg(feature = "desk")]
 pub fn lab_recording_with_rig(frames: usize, rig: &str) -> LabRecording {
+    lab_recording_with(
+        frames,
+        rig,
+        "default",
+        &omnitrack::desk::recording::RecordingOptions::default(),
+    )
+}
+
+/// [`lab_recording`] rendered through `rig` with other recording options (`label` names them).
+#[cfg(feature = "desk")]
+pub fn lab_recording_with(
+    frames: usize,
+    rig: &str,
+    label: &str,
+    options: &omnitrack::desk::recording::RecordingOptions,
+) -> LabRecording {
     use omnitrack::capture::{Pacing, ReplaySource};
-    use omnitrack::desk::recording::{cached_scenario, RecordingOptions};
+    use omnitrack::desk::recording::cached_scenario;
     use omnitrack::desk::scenario::{Scenario, ScenarioName};
     use omnitrack::visibility::build::{build_table, BuildOptions};
     let dir = tempfile::tempdir().unwrap();
@@ -105,9 +121,9 @@ pub fn lab_recording_with_rig(frames: usize, rig: &str) -> LabRecording {
         &Scenario::get(ScenarioName::Lab),
         frames,
         11,
-        "default",
+        label,
         &rig,
-        &RecordingOptions::default(),
+        options,
         |_, _| {},
     )
     .unwrap();
