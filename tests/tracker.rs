@@ -371,6 +371,59 @@ fn a_rotation_prior_and_a_tilt_limit_keep_the_search_to_plausible_rotations() {
     assert!(found.iter().all(|c| tilt(c) < 12.0), "{found:?}");
 }
 
+/// A recording as a monochrome camera delivers it: every pixel grey (R = G = B = its luma).
+struct Grey {
+    inner: ReplaySource,
+}
+
+impl FrameSource for Grey {
+    fn rig(&self) -> &Rig {
+        self.inner.rig()
+    }
+    fn next_frame(&mut self, out: &mut FrameSet) -> Result<bool, SourceError> {
+        let more = self.inner.next_frame(out)?;
+        for s in out.sensors_mut() {
+            for p in s.pixels_mut().chunks_exact_mut(3) {
+                let y = (0.299 * p[0] as f32 + 0.587 * p[1] as f32 + 0.114 * p[2] as f32).round() as u8;
+                p.fill(y);
+            }
+        }
+        Ok(more)
+    }
+    fn stats(&self) -> &SourceStats {
+        self.inner.stats()
+    }
+}
+
+/// A monochrome camera is a camera too: with every hue NaN (no colour to sign an edge by), the
+/// lab initialises from the 3 m volume within 10 cm and 1° and tracks every frame within the
+/// targets, as in colour.
+#[test]
+fn a_grey_recording_tracks_as_the_colour_one() {
+    let f = fixture();
+    let mut source = Grey {
+        inner: ReplaySource::open(&f.rec, Pacing::AsFastAsPossible).unwrap(),
+    };
+    let mut errs = Vec::new();
+    let stats = run_hinted(f, &mut source, &mut |r, _| {
+        if let Some(p) = &r.result.pose {
+            errs.push(errors(f, r.timestamp_ns, p));
+        }
+        Ok(())
+    });
+    assert_eq!(stats.losses, 0, "{stats:?}");
+    assert!(errs.len() >= FRAMES - 3, "{} frames with a pose", errs.len());
+    let (dp, dr) = errs[0];
+    assert!(dp < 0.10 && dr < 1.0, "first pose {:.1} cm, {dr:.2}°", dp * 100.0);
+    let rmse = (errs.iter().map(|e| e.0 * e.0).sum::<f64>() / errs.len() as f64).sqrt();
+    let cm: Vec<i64> = errs.iter().map(|e| (e.0 * 100.0).round() as i64).collect();
+    assert!(
+        rmse < 0.05,
+        "RMSE {:.1} cm; per frame (cm): {cm:?}; {stats:?}",
+        rmse * 100.0
+    );
+}
+
 /// Real rooms hold more than their model: with three times the furniture, shelves and posters,
 /// twice the people and five times the surface texture of the default render, no frame of the
 /// lab's first 30 is given a pose more than 30 cm or 3° off, from the 3 m volume: "no pose yet"

@@ -61,6 +61,10 @@ pub struct Edge {
     /// Sum of the edgels' gradient magnitudes / 64 ≈ contrast (grey levels) × length (edgels).
     pub strength: f32,
     pub hue: HueSignature,
+    /// Which side is brighter: +1 the left (as for [`HueSignature`]), −1 the right, 0 neither
+    /// clearly (fewer than three in four edgels agree). Unlike hue it exists on a grey image,
+    /// and like hue it survives a change of exposure.
+    pub polarity: i8,
     /// Edgels the plane was fitted to.
     pub edgels: u32,
     /// RMS angle (rad) of the edgels' rays off the fitted plane.

@@ -672,6 +672,11 @@ impl Workspace {
                     left_kept: lk,
                     right_kept: rk,
                 },
+                polarity: if 4 * c.bright_left.unsigned_abs() >= 2 * c.count {
+                    c.bright_left.signum() as i8
+                } else {
+                    0
+                },
                 edgels: c.count,
                 rms_rad: (lambda / c.m[6].max(1e-12)).max(0.0).sqrt() as f32,
             });

@@ -44,6 +44,8 @@ impl CorrespondenceState {
 pub struct HeldEdge {
     pub plane: EdgePlane,
     pub hue: HueSignature,
+    /// [`Edge::polarity`].
+    pub polarity: i8,
     pub sensor: u8,
 }
 
@@ -52,8 +54,18 @@ impl From<&Edge> for HeldEdge {
         HeldEdge {
             plane: e.plane,
             hue: e.hue,
+            polarity: e.polarity,
             sensor: e.sensor,
         }
+    }
+}
+
+impl HeldEdge {
+    /// The plane normal turned towards the brighter side (`None` if neither side is clearly
+    /// brighter): it does not depend on the order of the edge's ends, which may change from
+    /// frame to frame.
+    pub fn bright_normal(&self) -> Option<nalgebra::Vector3<f64>> {
+        (self.polarity != 0).then(|| self.plane.normal.into_inner() * f64::from(self.polarity))
     }
 }
 

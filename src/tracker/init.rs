@@ -686,6 +686,7 @@ impl<'m> Initialiser<'m> {
             cos_alpha: GRID_GATE_RAD.cos(),
             min_overlap: 0.5,
             hue: None,
+            polarity: None,
         };
         let min_len = 3.0 * self.opts.min_length_rad;
         for ri in 0..self.vanishing_count {
@@ -756,6 +757,7 @@ impl<'m> Initialiser<'m> {
                 cos_alpha: gate_rad.cos(),
                 min_overlap: 0.5,
                 hue: None,
+                polarity: None,
             };
             let score = |p: &Pose| {
                 self.table
@@ -1205,6 +1207,7 @@ impl<'m> Initialiser<'m> {
             cos_alpha: cap.cos(),
             min_overlap: 0.5,
             hue: None,
+            polarity: None,
         };
         let mut sum = 0.0;
         let mut counted = 0usize;
@@ -1294,6 +1297,7 @@ impl<'m> Initialiser<'m> {
             cos_alpha: gate_rad.cos(),
             min_overlap: 0.5,
             hue: None,
+            polarity: None,
         };
         let Some(set) = self.table.query(&Point3::from(pose.translation.vector)) else {
             return 0;
@@ -1388,6 +1392,7 @@ impl<'m> Initialiser<'m> {
             cos_alpha: cap.cos(),
             min_overlap: 0.5,
             hue: None,
+            polarity: None,
         };
         let Some(set) = self.table.query(&Point3::from(pose.translation.vector)) else {
             return (f64::INFINITY, 0, 0, 0.0);

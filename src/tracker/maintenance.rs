@@ -254,6 +254,7 @@ impl Tracker<'_> {
                 cos_alpha: gate_cos,
                 min_overlap: 0.5,
                 hue: Some((held.hue, hue_gate)),
+                polarity: held.bright_normal(),
             };
             if let Some((e, a)) = best_edge(&pred, &self.centres, edges, &gate) {
                 self.matched[i] = Some((e as u32, a));
@@ -333,6 +334,7 @@ impl Tracker<'_> {
                 cos_alpha: cos,
                 min_overlap: 0.5,
                 hue: Some((held.hue, m.hue_gate as f32)),
+                polarity: held.bright_normal(),
             };
             if best_edge(&pred, &self.centres, edges, &gate).is_some() {
                 n += 1;
@@ -446,6 +448,7 @@ impl Tracker<'_> {
                     cos_alpha: tight,
                     min_overlap: 0.5,
                     hue: t.edge.map(|h| (h.hue, hue_gate)),
+                    polarity: t.edge.and_then(|h| h.bright_normal()),
                 };
                 best_edge(&pred, &self.centres, edges, &gate)
             } else {

@@ -77,6 +77,16 @@ pub fn hue_distance(a: &HueSignature, b: &HueSignature) -> f32 {
     straight.min(swapped)
 }
 
+/// Whether two signatures have a side with a meaningful hue on both (in either pairing of
+/// sides), so that [`hue_distance`] says something.
+pub fn hue_comparable(a: &HueSignature, b: &HueSignature) -> bool {
+    let both = |x: f32, y: f32| !x.is_nan() && !y.is_nan();
+    both(a.left_mean, b.left_mean)
+        || both(a.right_mean, b.right_mean)
+        || both(a.left_mean, b.right_mean)
+        || both(a.right_mean, b.left_mean)
+}
+
 /// What to demand of a match.
 #[derive(Debug, Clone, Copy)]
 pub struct Gate {
@@ -86,6 +96,10 @@ pub struct Gate {
     pub min_overlap: f64,
     /// Largest [`hue_distance`] to the given signature, if any.
     pub hue: Option<(HueSignature, f32)>,
+    /// The held edge's normal turned towards its brighter side ([`super::HeldEdge::bright_normal`]):
+    /// where hue cannot compare the two edges (a grey image, grey surfaces), the brighter side
+    /// must stay the same.
+    pub polarity: Option<Vector3<f64>>,
 }
 
 /// The edge (index into `edges`) with the smallest α to the predicted segment that passes the
@@ -105,6 +119,13 @@ pub fn best_edge(pred: &Predicted, centres: &[Point3<f64>], edges: &[Edge], gate
         if let Some((sig, max)) = &gate.hue {
             if hue_distance(sig, &e.hue) > *max {
                 continue;
+            }
+            if let Some(bright) = &gate.polarity {
+                if !hue_comparable(sig, &e.hue)
+                    && (e.polarity == 0 || bright.dot(&e.plane.normal) * f64::from(e.polarity) < 0.0)
+                {
+                    continue;
+                }
             }
         }
         if overlap(pred, &centres[s], n, e) < gate.min_overlap {
@@ -227,6 +248,7 @@ mod tests {
             strength: 1.0,
             hue: sig(0.1, 0.5),
             edgels: 10,
+            polarity: 0,
             rms_rad: 0.0,
         };
         let pred = Predicted::new(&seg, &pose, &centres);
@@ -234,6 +256,7 @@ mod tests {
             cos_alpha: 10f64.to_radians().cos(),
             min_overlap: 0.5,
             hue: Some((sig(0.12, 0.5), 0.03)),
+            polarity: None,
         };
         let (i, alpha) = best_edge(&pred, &centres, &[edge], &gate).unwrap();
         assert_eq!(i, 0);

@@ -518,6 +518,7 @@ impl<'m> Tracker<'m> {
             cos_alpha: self.cfg.maintenance.inlier_angle_deg.to_radians().cos(),
             min_overlap: 0.5,
             hue: None,
+            polarity: None,
         };
         let min_len = self.cfg.edges.min_edge_length_deg.to_radians();
         self.tracks.clear();

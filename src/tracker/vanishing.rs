@@ -340,6 +340,7 @@ mod tests {
                         right_kept: 0.0,
                     },
                     edgels: 10,
+                    polarity: 0,
                     rms_rad: 0.0,
                 }
             })

@@ -312,6 +312,7 @@ mod tests {
                         right_kept: 0.0,
                     },
                     edgels: 100,
+                    polarity: 0,
                     rms_rad: 0.0,
                 }
             })
