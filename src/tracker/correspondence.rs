@@ -264,6 +264,7 @@ mod tests {
                 left_kept: 1.0,
                 right_kept: 1.0,
             },
+            polarity: 1,
             sensor: 0,
         }
     }
