@@ -352,8 +352,8 @@ pub struct Initialiser<'m> {
     /// The floors, and the height of the floor beneath each node (NaN: none).
     floors: Floors,
     node_floor: Vec<f64>,
-    /// The grid search's best positions under one rotation (score, position).
-    grid_best: Vec<(f64, Point3<f64>)>,
+    /// The grid search's best positions under each rotation (score, position).
+    grid_best: [Vec<(f64, Point3<f64>)>; MAX_ROTATIONS],
     /// Scratch of [`Self::edge_support`]: (length, edge index), and the predicted segments.
     support_order: Vec<(f64, u32)>,
     support_pred: Vec<Predicted>,
@@ -418,7 +418,7 @@ impl<'m> Initialiser<'m> {
                 .map(|n| floors.below(&table.node_position(n)).unwrap_or(f64::NAN))
                 .collect(),
             floors,
-            grid_best: Vec::with_capacity(GRID_KEEP),
+            grid_best: std::array::from_fn(|_| Vec::with_capacity(GRID_KEEP)),
             support_order: Vec::with_capacity(max_edges),
             support_pred: Vec::with_capacity(max_set),
             vanishing_rot: [UnitQuaternion::identity(); MAX_ROTATIONS],
@@ -689,56 +689,65 @@ impl<'m> Initialiser<'m> {
             polarity: None,
         };
         let min_len = 3.0 * self.opts.min_length_rad;
-        for ri in 0..self.vanishing_count {
-            let rotation = self.vanishing_rot[ri];
-            self.grid_best.clear();
-            for ci in 0..self.cells.len() {
-                if started.elapsed() >= self.opts.time_budget {
-                    return;
-                }
-                let node = self.cells[ci].1;
-                let centre = self.table.node_position(node);
-                // Heights: the grid's layers within this node's slab, inside the band above
-                // its floor (or the known height when upright; the slab where there is no
-                // floor to stand on).
-                let floor = self.node_floor[node as usize];
-                let (z_lo, z_hi) = match self.opts.upright_height_m {
-                    Some(z) => (z, z),
-                    None if floor.is_finite() => (
-                        (floor + band_lo).max(centre.z - half_z),
-                        (floor + band_hi).min(centre.z + half_z),
-                    ),
-                    None if self.floors.any() => continue,
-                    None => (centre.z - half_z, centre.z + half_z),
-                };
-                if z_hi < z_lo {
-                    continue;
-                }
-                let set = self.table.node_set(node);
-                let mut z = z_lo;
-                while z <= z_hi + 1e-9 {
-                    for ix in 0..steps {
-                        for iy in 0..steps {
-                            let p = Point3::new(
-                                centre.x - half + (ix as f64 + 0.5) * step,
-                                centre.y - half + (iy as f64 + 0.5) * step,
-                                z,
-                            );
-                            if volume.diameter_m.is_some_and(|d| (p - volume.centre).norm() > 0.5 * d) {
-                                continue;
-                            }
-                            let pose = Pose::from_parts(Translation3::from(p.coords), rotation);
-                            if let Some(score) = self.coverage(&pose, set.segments, &gate, min_len) {
-                                keep_best_apart(&mut self.grid_best, (score, p));
+        for best in &mut self.grid_best {
+            best.clear();
+        }
+        // Cells nearest first, every rotation at each: the time budget cuts the far cells of all
+        // rotations alike, never a whole rotation.
+        'cells: for ci in 0..self.cells.len() {
+            if started.elapsed() >= self.opts.time_budget {
+                break;
+            }
+            let node = self.cells[ci].1;
+            let centre = self.table.node_position(node);
+            // Heights: the grid's layers within this node's slab, inside the band above its
+            // floor (or the known height when upright; the slab where there is no floor to
+            // stand on).
+            let floor = self.node_floor[node as usize];
+            let (z_lo, z_hi) = match self.opts.upright_height_m {
+                Some(z) => (z, z),
+                None if floor.is_finite() => (
+                    (floor + band_lo).max(centre.z - half_z),
+                    (floor + band_hi).min(centre.z + half_z),
+                ),
+                None if self.floors.any() => continue,
+                None => (centre.z - half_z, centre.z + half_z),
+            };
+            if z_hi < z_lo {
+                continue;
+            }
+            let set = self.table.node_set(node);
+            let mut z = z_lo;
+            while z <= z_hi + 1e-9 {
+                for ix in 0..steps {
+                    for iy in 0..steps {
+                        let p = Point3::new(
+                            centre.x - half + (ix as f64 + 0.5) * step,
+                            centre.y - half + (iy as f64 + 0.5) * step,
+                            z,
+                        );
+                        if volume.diameter_m.is_some_and(|d| (p - volume.centre).norm() > 0.5 * d) {
+                            continue;
+                        }
+                        for ri in 0..self.vanishing_count {
+                            let pose = Pose::from_parts(Translation3::from(p.coords), self.vanishing_rot[ri]);
+                            if let Some(score) = self.coarse_merit(&pose, set.segments, &gate, min_len) {
+                                keep_best_apart(&mut self.grid_best[ri], (score, p));
                             }
                         }
+                        if started.elapsed() >= self.opts.time_budget {
+                            break 'cells;
+                        }
                     }
-                    z += GRID_STEP_M;
                 }
+                z += GRID_STEP_M;
             }
-            for k in 0..self.grid_best.len() {
+        }
+        for ri in 0..self.vanishing_count {
+            let rotation = self.vanishing_rot[ri];
+            for k in 0..self.grid_best[ri].len() {
                 let start = self.climb(
-                    &Pose::from_parts(Translation3::from(self.grid_best[k].1.coords), rotation),
+                    &Pose::from_parts(Translation3::from(self.grid_best[ri][k].1.coords), rotation),
                     min_len,
                 );
                 if let Some(c) = self.polish(&start, edges) {
@@ -748,9 +757,10 @@ impl<'m> Initialiser<'m> {
         }
     }
 
-    /// Coordinate ascent of the coverage score from `start` in x, y and z, in the steps and
-    /// gates of [`CLIMB`].
-    fn climb(&self, start: &Pose, min_len: f64) -> Pose {
+    /// Coordinate ascent of the coarse merit ([`Self::coarse_merit`]) from `start` in x, y and
+    /// z, in the steps and gates of [`CLIMB`].
+    fn climb(&mut self, start: &Pose, min_len: f64) -> Pose {
+        let table = self.table;
         let mut pose = *start;
         for (step, gate_rad) in CLIMB {
             let gate = Gate {
@@ -759,20 +769,20 @@ impl<'m> Initialiser<'m> {
                 hue: None,
                 polarity: None,
             };
-            let score = |p: &Pose| {
-                self.table
+            let score = |me: &mut Self, p: &Pose| {
+                table
                     .query(&Point3::from(p.translation.vector))
-                    .and_then(|set| self.coverage(p, set.segments, &gate, min_len))
+                    .and_then(|set| me.coarse_merit(p, set.segments, &gate, min_len))
                     .unwrap_or(0.0)
             };
-            let mut best = score(&pose);
+            let mut best = score(self, &pose);
             for _ in 0..4 {
                 let mut moved = false;
                 for axis in 0..3 {
                     for sign in [-1.0, 1.0] {
                         let mut p = pose;
                         p.translation.vector[axis] += sign * step;
-                        let s = score(&p);
+                        let s = score(self, &p);
                         if s > best {
                             (best, pose, moved) = (s, p, true);
                         }
@@ -786,10 +796,13 @@ impl<'m> Initialiser<'m> {
         pose
     }
 
-    /// The share of `segments` at least `min_len` long at `pose` that the frame's longest edges
-    /// cover within `gate` (each up to [`FULL_COVER`]); `None` if fewer than six are that long.
-    fn coverage(&self, pose: &Pose, segments: &[u32], gate: &Gate, min_len: f64) -> Option<f64> {
+    /// [`Candidate::merit`] at a coarse gate, for the grid: of `segments`, those at least
+    /// `min_len` long at `pose`, the share the frame's longest edges cover within `gate` (each up
+    /// to [`FULL_COVER`]), times the share (by angle) of the [`EDGE_SUPPORT_EDGES`] longest edges
+    /// that one of them explains within `gate`. `None` if fewer than six segments are that long.
+    fn coarse_merit(&mut self, pose: &Pose, segments: &[u32], gate: &Gate, min_len: f64) -> Option<f64> {
         let (mut explained, mut counted) = (0.0, 0usize);
+        self.support_pred.clear();
         for &s in segments {
             let seg = &self.model.segments[s as usize];
             let pred = Predicted::new(&[seg.a, seg.b], pose, &self.centres);
@@ -800,8 +813,30 @@ impl<'m> Initialiser<'m> {
             if let (Some(_), cover) = best_edge_and_cover(&pred, &self.centres, &self.vote_edges, gate) {
                 explained += (cover / FULL_COVER).min(1.0);
             }
+            if self.support_pred.len() < self.support_pred.capacity() {
+                self.support_pred.push(pred);
+            }
         }
-        (counted >= 6).then(|| explained / counted as f64)
+        if counted < 6 {
+            return None;
+        }
+        let (mut supported, mut total) = (0.0, 0.0);
+        for e in self.vote_edges.iter().take(EDGE_SUPPORT_EDGES) {
+            let s = e.sensor as usize;
+            if s >= self.centres.len() {
+                continue;
+            }
+            total += e.length_rad;
+            let hit = self.support_pred.iter().any(|pred| {
+                let nrm = &pred.normals[s];
+                nrm.dot(&e.plane.normal).abs() >= gate.cos_alpha && overlap(pred, &self.centres[s], nrm, e) >= 0.5
+            });
+            if hit {
+                supported += e.length_rad;
+            }
+        }
+        let support = if total > 0.0 { supported / total } else { 0.0 };
+        Some(explained / counted as f64 * support)
     }
 
     /// ℰ: the strongest edges of sufficient length, their dihedral angles, masks and sorted pairs.
