@@ -442,12 +442,14 @@ mod bench {
                 if let Some(TrackerEvent::Searched(rep)) = r.result.event {
                     if verbose {
                         eprintln!(
-                            "  search: {}/{} cells, {} triplet matches, {} samples, {:.0} ms{}",
+                            "  search: {}/{} cells, {} triplet matches, {} samples, {:.0} ms (grid under {} rotations {:.0} ms){}",
                             rep.cells_searched,
                             rep.cells_in_volume,
                             rep.triplet_matches,
                             rep.samples,
                             rep.elapsed.as_secs_f64() * 1e3,
+                            rep.rotations,
+                            rep.grid_elapsed.as_secs_f64() * 1e3,
                             if rep.timed_out { " (timed out)" } else { "" }
                         );
                     }

@@ -136,6 +136,10 @@ const GRID_STEP_M: f64 = 0.25;
 /// texture.
 const EDGE_SUPPORT_EDGES: usize = 64;
 const GRID_KEEP: usize = 8;
+/// The longest segments of a node's visibility set (as seen from the node) the grid scores by.
+const GRID_SEGMENTS: usize = 48;
+/// Grid positions scoring below this share of the best are not polished.
+const GRID_WORTH: f64 = 0.5;
 const GRID_GATE_RAD: f64 = 6.0 * std::f64::consts::PI / 180.0;
 /// The grid's best positions climb the coverage score in steps of these sizes (m) and gates
 /// (rad) before the polish: the true position's peak is narrower than the grid.
@@ -256,6 +260,10 @@ pub struct InitReport {
     pub timed_out: bool,
     /// Samples dropped because the rig would be tilted further than `max_tilt_rad` allows.
     pub tilted: u64,
+    /// Of `elapsed`, the grid search under the vanishing directions' rotations (with its
+    /// climbs and polishes), and how many rotations it had.
+    pub grid_elapsed: Duration,
+    pub rotations: usize,
 }
 
 /// Most threads the whole-model search uses.
@@ -357,6 +365,9 @@ pub struct Initialiser<'m> {
     /// Scratch of [`Self::edge_support`]: (length, edge index), and the predicted segments.
     support_order: Vec<(f64, u32)>,
     support_pred: Vec<Predicted>,
+    /// The grid's per-node segments: (angle from the node, index), and the longest kept.
+    grid_order: Vec<(f64, u32)>,
+    grid_segs: Vec<u32>,
     /// This frame's rotations from vanishing directions.
     vanishing_rot: [UnitQuaternion<f64>; MAX_ROTATIONS],
     vanishing_count: usize,
@@ -421,6 +432,8 @@ impl<'m> Initialiser<'m> {
             grid_best: std::array::from_fn(|_| Vec::with_capacity(GRID_KEEP)),
             support_order: Vec::with_capacity(max_edges),
             support_pred: Vec::with_capacity(max_set),
+            grid_order: Vec::with_capacity(max_set),
+            grid_segs: Vec::with_capacity(GRID_SEGMENTS),
             vanishing_rot: [UnitQuaternion::identity(); MAX_ROTATIONS],
             vanishing_count: 0,
             yaw_twins: true,
@@ -493,6 +506,8 @@ impl<'m> Initialiser<'m> {
         // The grid search under the vanishing directions first: on real photographs it finds
         // what the triplets miss, and the triplets then have what is left of the time budget.
         self.grid_search(edges, volume, started);
+        report.grid_elapsed = started.elapsed();
+        report.rotations = self.vanishing_count;
         if self.top.len() >= 3 {
             // A bounded volume is searched on this thread, nearest cell first, from `rng`. The
             // whole model (start-up without a hint: over a thousand cells) is dealt out to every
@@ -716,7 +731,28 @@ impl<'m> Initialiser<'m> {
             if z_hi < z_lo {
                 continue;
             }
+            // The node's longest segments as seen from it: a bounded cost per position, and the
+            // lines that decide where the rig is.
             let set = self.table.node_set(node);
+            self.grid_order.clear();
+            for &k in set.segments {
+                let seg = &self.model.segments[k as usize];
+                let (a, b) = (seg.a - centre, seg.b - centre);
+                if self.grid_order.len() < self.grid_order.capacity() {
+                    self.grid_order.push((a.cross(&b).norm().atan2(a.dot(&b)), k));
+                }
+            }
+            let keep = self.grid_order.len().min(GRID_SEGMENTS);
+            if keep > 0 && keep < self.grid_order.len() {
+                self.grid_order
+                    .select_nth_unstable_by(keep - 1, |x, y| y.0.total_cmp(&x.0));
+            }
+            self.grid_segs.clear();
+            for i in 0..keep {
+                let k = self.grid_order[i].1;
+                self.grid_segs.push(k);
+            }
+            let segs = std::mem::take(&mut self.grid_segs);
             let mut z = z_lo;
             while z <= z_hi + 1e-9 {
                 for ix in 0..steps {
@@ -731,21 +767,32 @@ impl<'m> Initialiser<'m> {
                         }
                         for ri in 0..self.vanishing_count {
                             let pose = Pose::from_parts(Translation3::from(p.coords), self.vanishing_rot[ri]);
-                            if let Some(score) = self.coarse_merit(&pose, set.segments, &gate, min_len) {
+                            if let Some(score) = self.coarse_merit(&pose, &segs, &gate, min_len) {
                                 keep_best_apart(&mut self.grid_best[ri], (score, p));
                             }
                         }
                         if started.elapsed() >= self.opts.time_budget {
+                            self.grid_segs = segs;
                             break 'cells;
                         }
                     }
                 }
                 z += GRID_STEP_M;
             }
+            self.grid_segs = segs;
         }
+        // Positions far below the best of any rotation are not worth a climb and a polish.
+        let top = self.grid_best[..self.vanishing_count]
+            .iter()
+            .flatten()
+            .map(|b| b.0)
+            .fold(0.0, f64::max);
         for ri in 0..self.vanishing_count {
             let rotation = self.vanishing_rot[ri];
             for k in 0..self.grid_best[ri].len() {
+                if self.grid_best[ri][k].0 < GRID_WORTH * top {
+                    continue;
+                }
                 let start = self.climb(
                     &Pose::from_parts(Translation3::from(self.grid_best[ri][k].1.coords), rotation),
                     min_len,

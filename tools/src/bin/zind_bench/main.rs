@@ -504,9 +504,11 @@ fn diagnose(
         let candidates = candidates.to_vec();
         let _ = write!(
             line,
-            "  | search {} cells {:.0} ms:",
+            "  | search {} cells {:.0} ms (grid under {} rotations {:.0} ms):",
             report.cells_searched,
-            ms(report.elapsed)
+            ms(report.elapsed),
+            report.rotations,
+            ms(report.grid_elapsed)
         );
         for (k, c) in candidates.iter().enumerate() {
             let (dp, dr) = err(&c.pose);
