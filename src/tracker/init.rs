@@ -685,11 +685,10 @@ impl<'m> Initialiser<'m> {
 
     /// Under each rotation of the vanishing directions, the positions of a grid over the cells
     /// of the volume (plan and height steps of [`GRID_STEP_M`], heights within the band above
-    /// each cell's floor) scored by the share of the long segments of their visibility set that
-    /// the frame's longest edges cover within a coarse gate; the best few per rotation polished
-    /// into candidates. With the rotation known the translation is three numbers, few enough to
-    /// search outright, and the coverage score does not reward texture that happens to lie
-    /// along a predicted line. Within the time budget.
+    /// each cell's floor) scored by [`Self::coarse_merit`] over the cell's
+    /// [`GRID_SEGMENTS`] longest segments; the best few per rotation (within [`GRID_WORTH`] of
+    /// the best of all) climbed and polished into candidates. With the rotation known the
+    /// translation is three numbers, few enough to search outright. Within the time budget.
     fn grid_search(&mut self, edges: &[Edge], volume: &SearchVolume, started: Instant) {
         let h = &self.table.header;
         let half = 0.5 * h.spacing_m;
@@ -867,22 +866,7 @@ impl<'m> Initialiser<'m> {
         if counted < 6 {
             return None;
         }
-        let (mut supported, mut total) = (0.0, 0.0);
-        for e in self.vote_edges.iter().take(EDGE_SUPPORT_EDGES) {
-            let s = e.sensor as usize;
-            if s >= self.centres.len() {
-                continue;
-            }
-            total += e.length_rad;
-            let hit = self.support_pred.iter().any(|pred| {
-                let nrm = &pred.normals[s];
-                nrm.dot(&e.plane.normal).abs() >= gate.cos_alpha && overlap(pred, &self.centres[s], nrm, e) >= 0.5
-            });
-            if hit {
-                supported += e.length_rad;
-            }
-        }
-        let support = if total > 0.0 { supported / total } else { 0.0 };
+        let support = self.predicted_support(self.vote_edges.iter().take(EDGE_SUPPORT_EDGES), gate.cos_alpha);
         Some(explained / counted as f64 * support)
     }
 
@@ -1435,21 +1419,26 @@ impl<'m> Initialiser<'m> {
                     .push(Predicted::new(&[seg.a, seg.b], pose, &self.centres));
             }
         }
-        let cos_gate = self.opts.inlier_alpha_rad.cos();
+        let longest = self.support_order[..n].iter().map(|&(_, i)| &edges[i as usize]);
+        self.predicted_support(longest, self.opts.inlier_alpha_rad.cos())
+    }
+
+    /// The share (by angle) of `edges` that one of `self.support_pred` explains: plane within
+    /// the gate (cos) and overlapping.
+    fn predicted_support<'e>(&self, edges: impl Iterator<Item = &'e Edge>, cos_gate: f64) -> f64 {
         let (mut explained, mut total) = (0.0, 0.0);
-        for &(length, i) in &self.support_order[..n] {
-            let e = &edges[i as usize];
+        for e in edges {
             let s = e.sensor as usize;
             if s >= self.centres.len() {
                 continue;
             }
-            total += length;
+            total += e.length_rad;
             let hit = self.support_pred.iter().any(|pred| {
                 let nrm = &pred.normals[s];
                 nrm.dot(&e.plane.normal).abs() >= cos_gate && overlap(pred, &self.centres[s], nrm, e) >= 0.5
             });
             if hit {
-                explained += length;
+                explained += e.length_rad;
             }
         }
         if total > 0.0 {

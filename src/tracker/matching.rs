@@ -102,6 +102,26 @@ pub struct Gate {
     pub polarity: Option<Vector3<f64>>,
 }
 
+impl Gate {
+    /// Whether `e` passes the hue gate and, where hue cannot compare the two edges, the
+    /// polarity gate.
+    #[inline]
+    fn signature_matches(&self, e: &Edge) -> bool {
+        let Some((sig, max)) = &self.hue else {
+            return true;
+        };
+        if hue_distance(sig, &e.hue) > *max {
+            return false;
+        }
+        match &self.polarity {
+            Some(bright) if !hue_comparable(sig, &e.hue) => {
+                e.polarity != 0 && bright.dot(&e.plane.normal) * f64::from(e.polarity) >= 0.0
+            }
+            _ => true,
+        }
+    }
+}
+
 /// The edge (index into `edges`) with the smallest α to the predicted segment that passes the
 /// gate, with its α (rad).
 pub fn best_edge(pred: &Predicted, centres: &[Point3<f64>], edges: &[Edge], gate: &Gate) -> Option<(usize, f64)> {
@@ -116,17 +136,8 @@ pub fn best_edge(pred: &Predicted, centres: &[Point3<f64>], edges: &[Edge], gate
         if cos < gate.cos_alpha || best.is_some_and(|(_, c)| cos <= c) {
             continue;
         }
-        if let Some((sig, max)) = &gate.hue {
-            if hue_distance(sig, &e.hue) > *max {
-                continue;
-            }
-            if let Some(bright) = &gate.polarity {
-                if !hue_comparable(sig, &e.hue)
-                    && (e.polarity == 0 || bright.dot(&e.plane.normal) * f64::from(e.polarity) < 0.0)
-                {
-                    continue;
-                }
-            }
+        if !gate.signature_matches(e) {
+            continue;
         }
         if overlap(pred, &centres[s], n, e) < gate.min_overlap {
             continue;
@@ -156,7 +167,7 @@ pub fn best_edge_and_cover(
         }
         let n = &pred.normals[s];
         let cos = n.dot(&e.plane.normal).abs();
-        if cos < gate.cos_alpha {
+        if cos < gate.cos_alpha || !gate.signature_matches(e) {
             continue;
         }
         let (common, shorter, seg) = shared_angle(pred, &centres[s], n, e);
