@@ -147,6 +147,15 @@ struct Outcome {
 
 fn run(cli: &Cli) -> Result<(), String> {
     let rows = cli.rows.iter().map(|r| Row::parse(r)).collect::<Result<Vec<_>, _>>()?;
+    if !(cli.hint_offset_m.is_finite() && cli.hint_offset_m >= 0.0) {
+        return Err(format!(
+            "--hint-offset-m: {} is not a distance (finite, 0 or more)",
+            cli.hint_offset_m
+        ));
+    }
+    if cli.frames == 0 {
+        return Err("--frames: a recording needs at least one frame".into());
+    }
     let json_path = cli.tour.join("zind_data.json");
     let json = std::fs::read_to_string(&json_path).map_err(|e| format!("{}: {e}", json_path.display()))?;
     let tour = tour::parse(&json, cli.floor.as_deref()).map_err(|e| format!("{}: {e}", json_path.display()))?;
