@@ -214,6 +214,11 @@ fn bvh_matches_brute_force() {
         let t_max = if i % 7 == 0 { 3.0 } else { f32::INFINITY };
         let a = bvh.closest(&ray, 1e-4, t_max);
         let b = brute_force_closest(&tris, &ray, 1e-4, t_max);
+        assert_eq!(
+            bvh.occluded(&ray, 1e-4, t_max),
+            b.is_some(),
+            "ray {i}: the occlusion query"
+        );
         match (a, b) {
             (None, None) => {}
             (Some((ia, ta)), Some((ib, tb))) => {

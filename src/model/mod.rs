@@ -6,9 +6,14 @@
 //! A triangulation diagonal or a seam between coplanar faces is not a segment; collinear pieces
 //! of one straight boundary are one segment; an edge shared by several faces appears once and
 //! lists them all.
+//!
+//! Also the geometry every layer above casts rays into: [`bvh`] (a bounding-volume hierarchy
+//! over triangles) and [`triangulate`] (faces into triangles).
 
+pub mod bvh;
 mod obj;
 mod segments;
+pub mod triangulate;
 
 use nalgebra::{Point3, Unit, Vector3};
 use std::path::Path;

@@ -34,8 +34,8 @@
 
 use super::{segment_vertex_ids, RawTable, TableHeader, VisibilityTable, FORMAT_VERSION, NO_NODE};
 use crate::config::VisibilityConfig;
-use crate::desk::render::bvh::{Ray, Triangle, TriangleBvh};
-use crate::desk::render::triangulate_polygon;
+use crate::model::bvh::{Ray, Triangle, TriangleBvh};
+use crate::model::triangulate::triangulate_polygon;
 use crate::model::Model;
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;

@@ -33,7 +33,11 @@
 //! body: per lookup cell its serving node, per node its set index, per segment its end-point
 //! vertex ids, and the deduplicated sets as delta-coded sorted id lists (vertex lists are
 //! derived on load). Loading against a different model is an error that says so.
+//!
+//! **At the pose** ([`at_pose`], beyond the paper): the node's set refined by ray casting from
+//! the position itself, for scoring where the nearest node stands in another room.
 
+pub mod at_pose;
 #[cfg(feature = "desk")]
 pub mod build;
 

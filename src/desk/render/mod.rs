@@ -8,18 +8,16 @@
 //! with no ray are black. With `Appearance::pixel_samples` > 1 a grid of rays covers each
 //! pixel's area and is averaged, as a real pixel integrates light (no aliased edges). Rays are
 //! cast into a [`Scene`]: the model's faces ear-clipped into triangles in a binned-SAH
-//! [`bvh::Bvh`], plus clutter and people that exist only in the images (never in the model). Rows are rendered in parallel (rayon). Output is a pure function of
+//! [`crate::model::bvh::Bvh`], plus clutter and people that exist only in the images (never in the model). Rows are rendered in parallel (rayon). Output is a pure function of
 //! model, rig, appearance (with its seed), keep-out points and frame: byte-identical on rerun.
 
 pub mod appearance;
-pub mod bvh;
 pub mod scene;
-pub mod triangulate;
 
+pub use crate::model::bvh::{brute_force_closest, model_triangles, Aabb, Bvh, Ray, Triangle, TriangleBvh};
+pub use crate::model::triangulate::{ear_clip, triangulate_polygon};
 pub use appearance::Appearance;
-pub use bvh::{brute_force_closest, Aabb, Bvh, Ray, Triangle, TriangleBvh};
 pub use scene::{Person, Scene, Surface, SurfaceKind};
-pub use triangulate::{ear_clip, triangulate_polygon};
 
 use crate::geometry::Pose;
 use crate::model::Model;
@@ -331,21 +329,4 @@ impl Renderer {
         }
         base.map(|c| c * brightness)
     }
-}
-
-/// All triangles of a model as the renderer builds them (ear-clipped faces, degenerate ones
-/// dropped), with the index of the face each came from.
-pub fn model_triangles(model: &Model) -> Vec<(Triangle, u32)> {
-    let mut out = Vec::new();
-    for (fi, face) in model.faces.iter().enumerate() {
-        let corners: Vec<Point3<f64>> = face.vertices.iter().map(|&v| model.vertices[v as usize]).collect();
-        for t in triangulate_polygon(&corners, &face.normal) {
-            let p = |i: usize| [corners[i].x as f32, corners[i].y as f32, corners[i].z as f32];
-            let tri = Triangle::new(p(t[0]), p(t[1]), p(t[2]));
-            if tri.area2() > 1e-10 {
-                out.push((tri, fi as u32));
-            }
-        }
-    }
-    out
 }

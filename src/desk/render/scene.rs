@@ -6,7 +6,7 @@
 //! surface table its hits index, the people and the lights.
 
 use super::appearance::{hsv, Appearance, Rng};
-use super::bvh::{Aabb, Bvh, Ray, Triangle, TriangleBvh};
+use crate::model::bvh::{Aabb, Bvh, Ray, Triangle, TriangleBvh};
 use crate::model::Model;
 use nalgebra::{Point3, Vector3};
 use std::collections::HashMap;

@@ -507,6 +507,7 @@ fn diagnose(
         None => line.push_str("  polished: none"),
     }
     let mut rank = None;
+    let mut rival = None;
     if let Some(volume) = hint {
         let mut rng = SmallRng::seed_from_u64(seed);
         let (candidates, report) = init.run(&edges, &volume, &mut rng);
@@ -519,10 +520,19 @@ fn diagnose(
             report.rotations,
             ms(report.grid_elapsed)
         );
+        let _ = write!(
+            line,
+            " grid merit: truth {:.3}",
+            init.grid_merit(truth).unwrap_or(f64::NAN)
+        );
         for (k, c) in candidates.iter().enumerate() {
             let (dp, dr) = err(&c.pose);
+            let _ = write!(line, " ({:.3})", init.grid_merit(&c.pose).unwrap_or(f64::NAN));
             if dp <= 0.1 && dr <= 2.0 && rank.is_none() {
                 rank = Some(k);
+            }
+            if k == 0 && (dp > 0.1 || dr > 2.0) {
+                rival = Some(c.pose);
             }
             let _ = write!(
                 line,
@@ -532,6 +542,25 @@ fn diagnose(
         }
     }
     println!("{line}");
+    // A picture of the best candidate when it is not the truth: what the wrong pose aligns with.
+    if let Some(c) = rival {
+        let images: Vec<_> = (0..rig.sensors.len())
+            .map(|s| image::open(dir.join(image_path(rig.sensors[s].id, 0))).map(|i| i.to_rgb8()))
+            .collect::<Result<_, _>>()
+            .map_err(|e| format!("{}: {e}", dir.display()))?;
+        let options = OmniOptions {
+            title: format!(
+                "{id}: the search's best candidate, {:.2} m and {:.1}° from the truth",
+                err(&c).0,
+                err(&c).1
+            ),
+            segments: table
+                .query(&Point3::from(c.translation.vector))
+                .map(|set| set.segments.iter().map(|&i| i as usize).collect()),
+            ..OmniOptions::default()
+        };
+        omni_view(&dir.join("rival.jpg"), &rig, &images, model, &c, &options).map_err(|e| e.to_string())?;
+    }
     Ok(rank)
 }
 

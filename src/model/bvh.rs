@@ -236,6 +236,54 @@ impl Bvh {
         bvh
     }
 
+    /// Whether `test(slot)` holds for any primitive whose box the ray meets before `t_max`: an
+    /// occlusion query, which stops at the first hit instead of looking for the closest.
+    #[inline]
+    pub fn any(&self, ray: &Ray, t_max: f32, mut test: impl FnMut(u32) -> bool) -> bool {
+        if self.nodes.is_empty() || self.nodes[0].bounds.hit(ray, t_max).is_none() {
+            return false;
+        }
+        let mut stack = [0u32; 128];
+        let mut sp = 0usize;
+        let mut node = 0usize;
+        loop {
+            let n = &self.nodes[node];
+            if n.count > 0 {
+                if (n.first..n.first + n.count).any(&mut test) {
+                    return true;
+                }
+            } else {
+                let (l, r) = (n.first as usize, n.first as usize + 1);
+                let hl = self.nodes[l].bounds.hit(ray, t_max).is_some();
+                let hr = self.nodes[r].bounds.hit(ray, t_max).is_some();
+                match (hl, hr) {
+                    (true, true) => {
+                        if sp < stack.len() {
+                            stack[sp] = r as u32;
+                            sp += 1;
+                        }
+                        node = l;
+                        continue;
+                    }
+                    (true, false) => {
+                        node = l;
+                        continue;
+                    }
+                    (false, true) => {
+                        node = r;
+                        continue;
+                    }
+                    (false, false) => {}
+                }
+            }
+            if sp == 0 {
+                return false;
+            }
+            sp -= 1;
+            node = stack[sp] as usize;
+        }
+    }
+
     /// Closest hit before `t_max`: `test(slot, t_best)` returns the primitive's hit distance if
     /// it is hit before `t_best`. Returns (slot, t).
     #[inline]
@@ -415,6 +463,14 @@ impl TriangleBvh {
         }
     }
 
+    /// Whether any triangle is hit in `(t_min, t_max)`.
+    #[inline]
+    pub fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool {
+        self.bvh.any(ray, t_max, |slot| {
+            self.triangles[slot as usize].intersect(ray, t_min, t_max).is_some()
+        })
+    }
+
     /// Closest hit in `(t_min, t_max)`: (payload, t).
     #[inline]
     pub fn closest(&self, ray: &Ray, t_min: f32, t_max: f32) -> Option<(u32, f32)> {
@@ -424,4 +480,21 @@ impl TriangleBvh {
             })
             .map(|(slot, t)| (self.payload[slot as usize], t))
     }
+}
+
+/// All triangles of a model as the renderer builds them (ear-clipped faces, degenerate ones
+/// dropped), with the index of the face each came from.
+pub fn model_triangles(model: &super::Model) -> Vec<(Triangle, u32)> {
+    let mut out = Vec::new();
+    for (fi, face) in model.faces.iter().enumerate() {
+        let corners: Vec<nalgebra::Point3<f64>> = face.vertices.iter().map(|&v| model.vertices[v as usize]).collect();
+        for t in super::triangulate::triangulate_polygon(&corners, &face.normal) {
+            let p = |i: usize| [corners[i].x as f32, corners[i].y as f32, corners[i].z as f32];
+            let tri = Triangle::new(p(t[0]), p(t[1]), p(t[2]));
+            if tri.area2() > 1e-10 {
+                out.push((tri, fi as u32));
+            }
+        }
+    }
+    out
 }
