@@ -531,13 +531,16 @@ fn diagnose(
             if dp <= 0.1 && dr <= 2.0 && rank.is_none() {
                 rank = Some(k);
             }
-            if k == 0 && (dp > 0.1 || dr > 2.0) {
+            if rival.is_none() && (dp > 0.3 || dr > 5.0) {
                 rival = Some(c.pose);
             }
             let _ = write!(
                 line,
-                " [{dp:.2} m {dr:.1}° z {:.2} expl {:.2} sup {:.2}]",
-                c.pose.translation.vector.z, c.explained, c.support
+                " [{dp:.2} m {dr:.1}° z {:.2} expl {:.2} sup {:.2} soft {:.2}]",
+                c.pose.translation.vector.z,
+                c.explained,
+                c.support,
+                1.0 - c.score / cap2
             );
         }
     }
@@ -550,7 +553,7 @@ fn diagnose(
             .map_err(|e| format!("{}: {e}", dir.display()))?;
         let options = OmniOptions {
             title: format!(
-                "{id}: the search's best candidate, {:.2} m and {:.1}° from the truth",
+                "{id}: the search's best wrong candidate, {:.2} m and {:.1}° from the truth",
                 err(&c).0,
                 err(&c).1
             ),
