@@ -88,7 +88,9 @@ struct Cli {
     verbose: bool,
     /// Instead of the table: per panorama, what the initialisation sees at the true pose (the
     /// share of VIS(T) explained, the polished truth's score against the acceptance limit) and
-    /// the search's candidates from the first hint radius.
+    /// the search's candidates from the first hint radius, each with the grid's coarse merit
+    /// (the truth's too) and the soft share explained (1 − truncated ξ / cap²); the best wrong
+    /// candidate drawn over the images in RIG/PANO/rival.jpg.
     #[arg(long)]
     diagnose: bool,
 }
