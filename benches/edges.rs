@@ -368,7 +368,8 @@ mod bench {
 
     /// `EdgeParams::default()`, with overrides from EDGES_THRESHOLD, EDGES_SPLIT_DEG,
     /// EDGES_MERGE_DEG, EDGES_GAP_DEG, EDGES_SMOOTH (0 none, 1 binomial², 2 along the edge),
-    /// EDGES_MIN_CHAIN, EDGES_TWO_LINE (`two_line_excess`; for tuning sweeps). EDGES_MISSES=1
+    /// EDGES_MIN_CHAIN, EDGES_TWO_LINE (`two_line_excess`), EDGES_GAP_EVIDENCE
+    /// (`merge_gap_evidence`), EDGES_MIN_SUPPORT (`merge_min_support`; for tuning sweeps). EDGES_MISSES=1
     /// prints every missed segment to stderr (frame, pixel ends, the nearest edge; with
     /// `--half-resolution` the edge's pixel ends are binned pixels, the truth's full ones).
     fn params() -> EdgeParams {
@@ -399,6 +400,12 @@ mod bench {
         }
         if let Some(v) = get("EDGES_TWO_LINE") {
             p.two_line_excess = v;
+        }
+        if let Some(v) = get("EDGES_GAP_EVIDENCE") {
+            p.merge_gap_evidence = v;
+        }
+        if let Some(v) = get("EDGES_MIN_SUPPORT") {
+            p.merge_min_support = v;
         }
         p
     }

@@ -14,9 +14,9 @@
 //! - `--passes N` (default 5): timed passes over all images, after one warm-up pass.
 //! - `--max-edges N`, `--min-length-deg D`: override `[edges]` of the shipped tracker config
 //!   (defaults: those of `EdgeConfig::default()`, which firmware_config/tracker.toml ships).
-//! - `--threshold G`, `--merge-deg A`, `--gap-deg A`, `--min-support F`, `--two-line X`:
-//!   override `EdgeParams` (`gradient_threshold`, `merge_angle_rad`, `merge_gap_rad`,
-//!   `merge_min_support`, `two_line_excess`), for sweeps.
+//! - `--threshold G`, `--merge-deg A`, `--gap-deg A`, `--min-support F`, `--gap-evidence F`,
+//!   `--two-line X`: override `EdgeParams` (`gradient_threshold`, `merge_angle_rad`,
+//!   `merge_gap_rad`, `merge_min_support`, `merge_gap_evidence`, `two_line_excess`), for sweeps.
 //!
 //! Besides the times it prints the mean phase times and counters per image
 //! (`EdgeDetector::sensor_stats`: pixel pass, chains, merging and selection).
@@ -38,7 +38,7 @@ mod bench {
 
     const USAGE: &str = "usage: cargo bench --bench edges_real -- --images DIR --out DIR \
 [--intrinsics fx,fy,cx,cy] [--passes N] [--max-edges N] [--min-length-deg D] [--threshold G] \
-[--merge-deg A] [--gap-deg A] [--min-support F] [--two-line X]";
+[--merge-deg A] [--gap-deg A] [--min-support F] [--gap-evidence F] [--two-line X]";
 
     fn fail(msg: &str) -> ! {
         eprintln!("edges_real bench: {msg}");
@@ -164,6 +164,9 @@ intrinsics = [{fx:?}, {fy:?}, {cx:?}, {cy:?}]\nrotation_wxyz = [1.0, 0.0, 0.0, 0
         if let Some(x) = number("--min-support") {
             params.merge_min_support = x;
         }
+        if let Some(x) = number("--gap-evidence") {
+            params.merge_gap_evidence = x;
+        }
         if let Some(x) = number("--two-line") {
             params.two_line_excess = x;
         }
@@ -190,7 +193,7 @@ intrinsics = [{fx:?}, {fy:?}, {cx:?}, {cy:?}]\nrotation_wxyz = [1.0, 0.0, 0.0, 0
         // Sums over the timed detections: pixel, chain, merge ns; edgels, chains, candidates,
         // candidates dropped, merged, capped.
         let mut phase = [0f64; 3];
-        let mut counts = [0f64; 6];
+        let mut counts = [0f64; 7];
         for pass in 0..passes {
             for (name, si) in &images {
                 let det = detectors
@@ -212,6 +215,7 @@ intrinsics = [{fx:?}, {fy:?}, {cx:?}, {cy:?}]\nrotation_wxyz = [1.0, 0.0, 0.0, 0
                     st.candidates_dropped,
                     st.merged,
                     st.capped,
+                    st.merges_refused,
                 ]) {
                     *c += v as f64;
                 }
@@ -238,7 +242,8 @@ p50 {:.3} ms, p99 {:.3} ms, max {:.3} ms per image, {:.1} edges per image \
         let runs = ms.len() as f64;
         println!(
             "mean per image: pixel pass {:.0} µs, chains (link, fit, hue) {:.0} µs, merge and select {:.0} µs; \
-{:.0} edgels, {:.0} chains, {:.0} candidates ({:.0} dropped: buffer full), {:.0} merges, {:.0} capped",
+{:.0} edgels, {:.0} chains, {:.0} candidates ({:.0} dropped: buffer full), {:.0} merges \
+({:.0} refused for want of the line across the gap), {:.0} capped",
             phase[0] / runs / 1e3,
             phase[1] / runs / 1e3,
             phase[2] / runs / 1e3,
@@ -247,6 +252,7 @@ p50 {:.3} ms, p99 {:.3} ms, max {:.3} ms per image, {:.1} edges per image \
             counts[2] / runs,
             counts[3] / runs,
             counts[4] / runs,
+            counts[6] / runs,
             counts[5] / runs
         );
         println!("CSV per image and timing.csv: {}", out_dir.display());

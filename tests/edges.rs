@@ -1,5 +1,6 @@
 //! Edge + hue extraction: exact planes of known great circles, one edge for a strongly curved
 //! fisheye line, two edges for two lines end to end a pixel and a half apart (two-line test),
+//! a gap bridged only where the image shows the line (`merge_gap_evidence`),
 //! hue strips (wrap-around at red, unsaturated pixels left out), blank images, the CSV, and zero
 //! heap allocations per frame after warm-up (counting allocator).
 
@@ -245,6 +246,58 @@ fn two_lines_a_pixel_and_a_half_apart_end_to_end_are_two_edges() {
     let edges = det.detect_sensor(&img).to_vec();
     let err = worst(&edges);
     assert!(err > 0.1, "{err:.4}°: the lines should blend without the two-line test");
+}
+
+/// One straight line drawn in two stretches with a gap of about 7° between them: across plain
+/// wall (both sides one colour) the two pieces stay apart when `merge_gap_evidence` asks the
+/// image to show the line across the gap, and merge when it does not; across a faint stretch of
+/// the same line (7 grey levels, under the edgel threshold) they merge either way.
+#[test]
+fn a_gap_merges_only_where_the_image_shows_the_line() {
+    let _g = serial();
+    let rig = rig();
+    let k = 0;
+    let s = &rig.sensors[k];
+    let n = Vector3::new(1.0, 0.02, 0.1).normalize();
+    let in_gap = |r: &Vector3<f64>| (r.y / r.z).abs() < 0.06;
+    let draw = |faint: bool| {
+        render(&rig, k, &[n], |r| {
+            let left = n.dot(r) > 0.0;
+            match (in_gap(r), faint, left) {
+                (false, _, true) => [190.0, 150.0, 80.0],
+                (false, _, false) => [60.0, 80.0, 130.0],
+                (true, false, _) => [125.0, 115.0, 105.0],
+                (true, true, true) => [128.0, 118.0, 108.0],
+                (true, true, false) => [121.0, 111.0, 101.0],
+            }
+        })
+    };
+    let n_rig = s.t_rig_sensor.rotation * n;
+    let longest = |img: &SensorImage, evidence: f64| {
+        let params = EdgeParams {
+            merge_gap_evidence: evidence,
+            ..EdgeParams::default()
+        };
+        let mut det = EdgeDetector::with_params(&rig, &EdgeConfig::default(), params);
+        let edges = det.detect_sensor(img).to_vec();
+        edges
+            .iter()
+            .filter(|e| angle_deg(&e.plane.normal, &n_rig) < 0.5)
+            .map(|e| e.length_rad.to_degrees())
+            .fold(0.0f64, f64::max)
+    };
+    let plain = draw(false);
+    let (apart, merged) = (longest(&plain, 0.9), longest(&plain, 0.0));
+    assert!(
+        merged > apart + 5.0,
+        "across plain wall: {apart:.1}° with the check, {merged:.1}° without"
+    );
+    let faint = draw(true);
+    let shown = longest(&faint, 0.9);
+    assert!(
+        shown > merged - 1.0,
+        "across a faint line: {shown:.1}° with the check, {merged:.1}° merged over plain wall"
+    );
 }
 
 /// Colour of a hue in [0,1) at full saturation and value 200.

@@ -16,6 +16,10 @@ use std::time::Instant;
 /// Longest chain traced in one go (a longer one is cut; the rest is traced as another chain).
 const MAX_CHAIN: usize = 4096;
 
+/// A gradient counts as across a line when its component along the line is at most this share
+/// of it (sin 10°: the gradient within 10° of the line's normal, as along a real line; texture beside a gap points every way).
+const GAP_ACROSS_COS: f64 = 0.174;
+
 /// Neighbour steps (du, dv) in angular order, 45° apart.
 const DIRS: [(isize, isize); 8] = [(1, 0), (1, 1), (0, 1), (-1, 1), (-1, 0), (-1, -1), (0, -1), (1, -1)];
 
@@ -93,6 +97,8 @@ pub struct SensorStats {
     /// Candidates dropped because the candidate buffer was full of stronger ones.
     pub candidates_dropped: u32,
     pub merged: u32,
+    /// Merges refused because the image does not show the line across the gap.
+    pub merges_refused: u32,
     /// Edges dropped by the cap on edges per sensor.
     pub capped: u32,
     /// Time (ns) in the pixel pass (gradients and non-maximum suppression), in linking and
@@ -592,6 +598,7 @@ impl Workspace {
         let tol = self.params.split_tolerance_rad.sin();
         let two_line = self.params.two_line_excess;
         let min_support = self.params.merge_min_support;
+        let min_evidence = self.params.merge_gap_evidence;
         for pass in 0..3 {
             let mut merged_any = false;
             for i in 0..self.cands.len() {
@@ -609,6 +616,10 @@ impl Workspace {
                         continue;
                     }
                     if let Some(m) = try_merge(ci, cj, gap_max, tol, two_line, min_support) {
+                        if min_evidence > 0.0 && self.gap_evidence(&m, ci, cj, min_evidence) < min_evidence {
+                            self.stats.merges_refused += 1;
+                            continue;
+                        }
                         self.cands[i] = m;
                         self.cands[j].alive = false;
                         self.stats.merged += 1;
@@ -625,6 +636,85 @@ impl Workspace {
             }
         }
         self.cands.retain(|c| c.alive);
+    }
+
+    /// The share of the gap between the pieces `ci` and `cj` of the merged edge `m` along which
+    /// the image shows the line: sampled every ~3 px (at most 48 times) along the merged plane's great circle,
+    /// a sample shows it when a pixel within one of it has a gradient of at least half the
+    /// edgel threshold pointing across the line (within [`GAP_ACROSS_COS`]). A line broken by
+    /// noise, aliasing or a weak stretch keeps its gradient across the gap; collinear pieces
+    /// far apart (the tops of a row of windows, texture) have plain wall between them. 1 where
+    /// the pieces touch or overlap.
+    fn gap_evidence(&self, m: &Candidate, ci: &Candidate, cj: &Candidate, needed: f64) -> f64 {
+        let n = m.n;
+        let e1 = m.r1;
+        let ang = |r: &Vector3<f64>| angle_in_plane(&n, &e1, r);
+        let (i0, i1) = (ang(&ci.r1).min(ang(&ci.r2)), ang(&ci.r1).max(ang(&ci.r2)));
+        let (j0, j1) = (ang(&cj.r1).min(ang(&cj.r2)), ang(&cj.r1).max(ang(&cj.r2)));
+        let (g0, g1) = if j0 >= i1 {
+            (i1, j0)
+        } else if i0 >= j1 {
+            (j1, i0)
+        } else {
+            return 1.0;
+        };
+        let e2 = n.cross(&e1);
+        let ray = |a: f64| e1 * a.cos() + e2 * a.sin();
+        let (Some(p0), Some(p1)) = (self.lens.project(&ray(g0)), self.lens.project(&ray(g1))) else {
+            return 0.0;
+        };
+        let chord = p1 - p0;
+        let length = chord.norm();
+        if length < 3.0 {
+            return 1.0;
+        }
+        let along = chord / length;
+        let samples = ((length / 3.0).ceil() as usize).clamp(2, 48);
+        let threshold = i32::from(self.params.gradient_threshold) / 2;
+        // Stop as soon as `needed` is out of reach: most merges tried are refused.
+        let allowed_misses = ((1.0 - needed) * samples as f64).floor() as usize;
+        let (mut shown, mut missed) = (0, 0);
+        // Every fourth sample first: a gap of plain wall shows itself after a few samples.
+        for k in (0..4).flat_map(|phase| (phase..samples).step_by(4)) {
+            let a = g0 + (g1 - g0) * (k as f64 + 0.5) / samples as f64;
+            let Some(p) = self.lens.project(&ray(a)) else {
+                missed += 1;
+                if missed > allowed_misses {
+                    return 0.0;
+                }
+                continue;
+            };
+            let (x, y) = (p.x.round() as isize, p.y.round() as isize);
+            let mut hit = false;
+            'near: for dy in -1..=1 {
+                for dx in -1..=1 {
+                    let (u, v) = (x + dx, y + dy);
+                    if u < 0 || v < 0 || u >= self.w as isize || v >= self.h as isize {
+                        continue;
+                    }
+                    let i = v as usize * self.w + u as usize;
+                    if i32::from(self.mag[i]) < threshold {
+                        continue;
+                    }
+                    let (gx, gy) = (f64::from(self.gx[i]), f64::from(self.gy[i]));
+                    let g = (gx * gx + gy * gy).sqrt();
+                    // The gradient points across the line: little of it along the chord.
+                    if g > 0.0 && (gx * along.x + gy * along.y).abs() <= GAP_ACROSS_COS * g {
+                        hit = true;
+                        break 'near;
+                    }
+                }
+            }
+            if hit {
+                shown += 1;
+            } else {
+                missed += 1;
+                if missed > allowed_misses {
+                    return 0.0;
+                }
+            }
+        }
+        shown as f64 / samples as f64
     }
 
     /// Keeps the strongest `max_edges` candidates and turns them into edges (rig frame).
