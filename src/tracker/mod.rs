@@ -144,6 +144,10 @@ fn acceptable(cfg: &TrackerConfig, c: &Candidate) -> bool {
 const BASIN_M: f64 = 0.6;
 const BASIN_RAD: f64 = 0.175;
 
+/// A committed pose may lie this far outside the search volume (m): the truth at the volume's
+/// edge polishes a few centimetres either way.
+const VOLUME_SLACK_M: f64 = 0.1;
+
 /// A candidate under confirmation.
 #[derive(Debug, Clone, Copy)]
 struct Confirming {
@@ -362,8 +366,16 @@ impl<'m> Tracker<'m> {
                     .filter(|o| !init::same_pose(&o.pose, &c.pose, BASIN_M, BASIN_RAD))
                     .all(|o| o.merit() <= ratio * c.merit())
             };
-            let accepted =
-                |c: &&Candidate| acceptable(&self.cfg, c) && plausible(c) && c.explained >= floor && clear(c);
+            // And it must lie in the volume searched (the polish may carry a start beyond it): a
+            // hint says where the rig is. Candidates outside still count as rivals above.
+            let inside = |c: &Candidate| {
+                volume.diameter_m.is_none_or(|d| {
+                    (c.pose.translation.vector - volume.centre.coords).norm() <= 0.5 * d + VOLUME_SLACK_M
+                })
+            };
+            let accepted = |c: &&Candidate| {
+                acceptable(&self.cfg, c) && plausible(c) && c.explained >= floor && inside(c) && clear(c)
+            };
             // A failed search is repeated once more broadly on the same volume; if that fails
             // too, the volume doubles and the breadth is normal again (widening a large volume
             // only lets the time budget cover fewer cells).
