@@ -295,6 +295,33 @@ fn a_frame_that_shows_too_little_commits_nothing_and_the_next_frames_find_the_tr
     assert!(dp < 0.10 && dr < 1.0, "committed {:.1} cm, {dr:.2}°", dp * 100.0);
 }
 
+/// A hint says where the rig is: with the truth 0.4 m outside a 2 m volume, the polish carries
+/// starts at the volume's edge onto the truth (without the rule, the first frame commits it,
+/// 1.4 m from the centre); the searches commit nothing, or only a pose inside the volume.
+#[test]
+fn a_search_commits_no_pose_outside_the_volume_it_searched() {
+    let f = fixture();
+    let (mut source, rig, cfg, mut frame, mut detector) = replay(f);
+    let p = f.truth[0].pose.translation.vector + Vector3::new(1.4, 0.0, 0.0);
+    let volume = SearchVolume {
+        centre: Point3::from(p),
+        diameter_m: Some(2.0),
+    };
+    let mut tracker = Tracker::new(&rig, &f.model, &f.table, &cfg, Some(volume), 1);
+    let mut searched = 0;
+    for _ in 0..6 {
+        assert!(source.next_frame(&mut frame).unwrap());
+        let r = tracker.process(detector.detect(&frame), frame.timestamp_ns().unwrap());
+        searched += usize::from(matches!(r.event, Some(TrackerEvent::Searched(_))));
+        if let Some(pose) = r.pose {
+            let off = (pose.translation.vector - p).norm();
+            assert!(off <= 1.1, "committed {off:.2} m from the centre of a 2 m volume");
+            break;
+        }
+    }
+    assert!(searched >= 1);
+}
+
 /// A search told where the rotation is (after a bad frame: the last good one and the turn the
 /// rig can have made since) keeps to it: with the prior on the truth it still finds the truth,
 /// with the prior on the truth's half-turn twin nothing near the truth comes out, although the
