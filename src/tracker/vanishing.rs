@@ -17,9 +17,13 @@
 //!
 //! How:
 //! 1. The vertical: each pair of the longest edges proposes the vector at right angles to both
-//!    normals; the proposal within `max_tilt` of the rig's up axis that the most edge length
-//!    agrees with (normal within [`AGREE_RAD`] of a right angle) wins, refined as the least
-//!    eigenvector of the agreeing normals' scatter.
+//!    normals; proposals too tilted to be the vertical are vanishing directions of other lines,
+//!    and the best few of them propose the vertical at right angles to two of them (where the
+//!    longest edges are all horizontal). Of the proposals within `max_tilt` of the rig's up
+//!    axis, the one that explains the most edge length as a Manhattan frame wins — the edges
+//!    along it (normal within [`AGREE_RAD`] of a right angle) plus, levelled by it, the edges
+//!    along the strongest horizontal direction and the one at right angles to it — refined as
+//!    the least eigenvector of the agreeing normals' scatter.
 //! 2. The horizontals: every other edge, if its line is horizontal, runs along n × up; the
 //!    azimuths of those directions about the vertical (modulo π), weighted by edge length,
 //!    peak at the frame's horizontal vanishing directions.
@@ -39,6 +43,10 @@ use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 const AGREE_RAD: f64 = 1.5 * std::f64::consts::PI / 180.0;
 /// Edges at least this close to the vertical direction count as vertical, not horizontal (rad).
 const VERTICAL_RAD: f64 = 5.0 * std::f64::consts::PI / 180.0;
+/// Directions too tilted for the vertical kept to propose it at right angles to two of them.
+const HORIZONTAL_PROPOSALS: usize = 8;
+/// A horizontal direction gathers the edges within this many azimuth bins of it (± 2°).
+const MANHATTAN_BINS: usize = 2;
 /// The longest edges whose pairs propose the vertical.
 const PROPOSERS: usize = 32;
 /// Azimuth histogram: one bin per degree over [0, π).
@@ -172,7 +180,9 @@ impl VanishingDirections {
         self.longest.select_nth_unstable_by(k - 1, |a, b| b.0.total_cmp(&a.0));
         let sin_agree = AGREE_RAD.sin();
         let min_up = max_tilt.min(std::f64::consts::FRAC_PI_2).cos();
-        let support = |v: &Vector3<f64>| -> f64 {
+        let mut hist = std::mem::take(&mut self.hist);
+        let mut support = |v: &Vector3<f64>| manhattan_support(edges, v, sin_agree, &mut hist);
+        let along = |v: &Vector3<f64>| -> f64 {
             edges
                 .iter()
                 .filter(|e| e.plane.normal.dot(v).abs() < sin_agree)
@@ -180,10 +190,48 @@ impl VanishingDirections {
                 .sum()
         };
         let mut best: Option<(f64, Vector3<f64>)> = None;
+        // Directions too tilted to be the vertical are the frame's other vanishing directions:
+        // the best few are kept, and the vertical is also proposed at right angles to two of
+        // them. Where the longest edges are all horizontal (a garage door's panels, a corridor's
+        // floor and ceiling lines) no pair of them proposes the vertical directly.
+        let mut others = [(0.0f64, Vector3::zeros()); HORIZONTAL_PROPOSALS];
         for i in 0..k {
             for j in i + 1..k {
                 let (a, b) = (&edges[self.longest[i].1 as usize], &edges[self.longest[j].1 as usize]);
                 let Some(mut v) = a.plane.normal.cross(&b.plane.normal).try_normalize(1e-6) else {
+                    continue;
+                };
+                if v.z < 0.0 {
+                    v = -v;
+                }
+                if v.z < min_up {
+                    let s = along(&v);
+                    if let Some(slot) = others
+                        .iter_mut()
+                        .find(|o| o.0 > 0.0 && o.1.dot(&v).abs() > SAME_RAD.cos())
+                    {
+                        if s > slot.0 {
+                            *slot = (s, v);
+                        }
+                    } else if let Some(slot) = others.iter_mut().min_by(|x, y| x.0.total_cmp(&y.0)) {
+                        if s > slot.0 {
+                            *slot = (s, v);
+                        }
+                    }
+                    continue;
+                }
+                let s = support(&v);
+                if best.is_none_or(|(bs, _)| s > bs) {
+                    best = Some((s, v));
+                }
+            }
+        }
+        for i in 0..others.len() {
+            for j in i + 1..others.len() {
+                if others[i].0 <= 0.0 || others[j].0 <= 0.0 {
+                    continue;
+                }
+                let Some(mut v) = others[i].1.cross(&others[j].1).try_normalize(1e-6) else {
                     continue;
                 };
                 if v.z < 0.0 {
@@ -198,6 +246,7 @@ impl VanishingDirections {
                 }
             }
         }
+        self.hist = hist;
         let (_, v) = best?;
         // Refine: the direction at right angles to the agreeing normals in the least squares.
         let mut scatter = Matrix3::zeros();
@@ -215,6 +264,44 @@ impl VanishingDirections {
         }
         (refined.z >= min_up).then_some(refined).or(Some(v))
     }
+}
+
+/// How much edge length a building whose vertical is `v` would explain: the edges along `v`,
+/// plus, of the others taken as horizontal lines, those along the strongest horizontal
+/// direction and the one at right angles to it (within [`MANHATTAN_BINS`] bins). The vertical
+/// alone is not enough: in a room of few, short vertical edges (a garage: one door, long
+/// horizontal panels) a direction tilted far from it can lie on more edge planes by chance, and
+/// then the horizontal lines, levelled by it, no longer share directions. `hist` is scratch of
+/// [`BINS`] bins.
+fn manhattan_support(edges: &[Edge], v: &Vector3<f64>, sin_agree: f64, hist: &mut [f64]) -> f64 {
+    hist.iter_mut().for_each(|h| *h = 0.0);
+    let a = v
+        .cross(&Vector3::x())
+        .try_normalize(1e-6)
+        .unwrap_or_else(|| v.cross(&Vector3::y()).normalize());
+    let b = v.cross(&a);
+    let mut vertical = 0.0;
+    for e in edges {
+        let n = e.plane.normal.into_inner();
+        if n.dot(v).abs() < sin_agree {
+            vertical += e.length_rad;
+            continue;
+        }
+        let d = n.cross(v);
+        if d.norm() < 1e-9 {
+            continue;
+        }
+        hist[azimuth_bin(d.dot(&b).atan2(d.dot(&a)))] += e.length_rad;
+    }
+    let window = |centre: usize| -> f64 {
+        (0..2 * MANHATTAN_BINS + 1)
+            .map(|k| hist[(centre + BINS + k - MANHATTAN_BINS) % BINS])
+            .sum()
+    };
+    let best = (0..BINS / 2)
+        .map(|c| window(c) + window(c + BINS / 2))
+        .fold(0.0, f64::max);
+    vertical + best
 }
 
 fn azimuth_bin(azimuth: f64) -> usize {
@@ -369,6 +456,32 @@ mod tests {
             let up = r * (truth.rotation.inverse() * Vector3::z());
             assert!(up.z > (0.5f64).to_radians().cos(), "{up:?}");
         }
+    }
+
+    /// A frame without one vertical edge (a garage: long horizontal panels, short or no
+    /// corners): no pair of its edges proposes the vertical, which comes from two of its
+    /// horizontal vanishing directions instead.
+    #[test]
+    fn a_frame_of_horizontal_lines_alone_still_gets_its_vertical() {
+        let model = room();
+        let truth = Pose::from_parts(
+            Translation3::new(2.0, 2.5, 1.5),
+            UnitQuaternion::from_euler_angles(0.06, 0.04, 0.7),
+        );
+        let up_rig = truth.rotation.inverse() * Vector3::z();
+        let edges: Vec<Edge> = edges_seen(&model, &truth)
+            .into_iter()
+            .filter(|e| e.plane.normal.dot(&up_rig).abs() > 0.2)
+            .collect();
+        assert!(edges.len() >= 6, "{} horizontal edges", edges.len());
+        let mut vd = VanishingDirections::new(&model, edges.len());
+        let mut out = [UnitQuaternion::identity(); MAX_ROTATIONS];
+        let n = vd.rotations(&edges, 60f64.to_radians(), &mut out);
+        let best = out[..n]
+            .iter()
+            .map(|r| r.angle_to(&truth.rotation).to_degrees())
+            .fold(f64::INFINITY, f64::min);
+        assert!(best < 0.5, "nearest of {n} rotations {best}° off");
     }
 
     #[test]

@@ -490,9 +490,14 @@ fn diagnose(
         .iter()
         .map(|r| r.angle_to(&truth.rotation).to_degrees())
         .fold(f64::INFINITY, f64::min);
+    // How far the frame's vertical (the rotations share it) is from the truth's.
+    let up_error = init.vanishing_rotations(&edges).first().map_or(f64::NAN, |r| {
+        let up = |q: &nalgebra::UnitQuaternion<f64>| q.inverse() * Vector3::z();
+        up(r).angle(&up(&truth.rotation)).to_degrees()
+    });
     let polished = init.polish(truth, &edges);
     let mut line = format!(
-        "{id:<8} edges {:>4} vanishing {vanishing:.1}°  truth: explained {:.2} score/limit {:.2}",
+        "{id:<8} edges {:>4} vanishing {vanishing:.1}° (vertical {up_error:.1}°)  truth: explained {:.2} score/limit {:.2}",
         edges.len(),
         at_truth,
         init.score(truth, &edges) / limit
