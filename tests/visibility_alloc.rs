@@ -9,8 +9,8 @@ mod common;
 #[global_allocator]
 static ALLOCATOR: common::Counting = common::Counting;
 
-#[test]
-fn query_allocates_nothing() {
+/// The example office plan extruded, and its table at a coarse cube map.
+fn office() -> (omnitrack::Model, omnitrack::visibility::VisibilityTable) {
     let obj =
         omnitrack::desk::floorplan::extrude(include_str!("../tools/plans/example_office.geojson"), "plan").unwrap();
     let model = omnitrack::Model::from_obj_str(&obj, "office.obj").unwrap();
@@ -19,6 +19,12 @@ fn query_allocates_nothing() {
         ..BuildOptions::default()
     };
     let table = build_table(&model, "office.obj", &opts);
+    (model, table)
+}
+
+#[test]
+fn query_allocates_nothing() {
+    let (_model, table) = office();
     common::assert_counter_works();
     let mut seen = 0usize;
     let ((), allocated) = common::allocations_in(|| {
@@ -38,14 +44,7 @@ fn query_allocates_nothing() {
 #[test]
 fn visibility_at_the_pose_allocates_nothing() {
     use omnitrack::visibility::at_pose::PoseVisibility;
-    let obj =
-        omnitrack::desk::floorplan::extrude(include_str!("../tools/plans/example_office.geojson"), "plan").unwrap();
-    let model = omnitrack::Model::from_obj_str(&obj, "office.obj").unwrap();
-    let opts = BuildOptions {
-        cube_map_resolution: 64,
-        ..BuildOptions::default()
-    };
-    let table = build_table(&model, "office.obj", &opts);
+    let (model, table) = office();
     let mut at_pose = PoseVisibility::new(&model);
     common::assert_counter_works();
     let mut seen = 0usize;

@@ -9,7 +9,7 @@ use super::{Edge, EdgeParams, HueSignature};
 use crate::capture::SensorImage;
 use crate::geometry::{EdgePlane, Lens};
 use crate::rig::Sensor;
-use nalgebra::{Matrix3, Point2, Point3, Unit, UnitQuaternion, Vector3};
+use nalgebra::{Matrix3, Point2, Point3, Unit, UnitQuaternion, Vector2, Vector3};
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -17,7 +17,8 @@ use std::time::Instant;
 const MAX_CHAIN: usize = 4096;
 
 /// A gradient counts as across a line when its component along the line is at most this share
-/// of it (sin 10°: the gradient within 10° of the line's normal, as along a real line; texture beside a gap points every way).
+/// of it (sin 10°: within 10° of the line's normal, as along a real line; texture beside a gap
+/// points every way).
 const GAP_ACROSS_COS: f64 = 0.174;
 
 /// Neighbour steps (du, dv) in angular order, 45° apart.
@@ -639,9 +640,9 @@ impl Workspace {
     }
 
     /// The share of the gap between the pieces `ci` and `cj` of the merged edge `m` along which
-    /// the image shows the line: sampled every ~3 px (at most 48 times) along the merged plane's great circle,
-    /// a sample shows it when a pixel within one of it has a gradient of at least half the
-    /// edgel threshold pointing across the line (within [`GAP_ACROSS_COS`]). A line broken by
+    /// the image shows the line: sampled every ~3 px (at most 48 times) along the merged plane's
+    /// great circle, a sample shows it when a pixel within one of it has a gradient of at least
+    /// half the edgel threshold pointing across the line (within [`GAP_ACROSS_COS`]). A line broken by
     /// noise, aliasing or a weak stretch keeps its gradient across the gap; collinear pieces
     /// far apart (the tops of a row of windows, texture) have plain wall between them. 1 where
     /// the pieces touch or overlap.
@@ -677,35 +678,11 @@ impl Workspace {
         // Every fourth sample first: a gap of plain wall shows itself after a few samples.
         for k in (0..4).flat_map(|phase| (phase..samples).step_by(4)) {
             let a = g0 + (g1 - g0) * (k as f64 + 0.5) / samples as f64;
-            let Some(p) = self.lens.project(&ray(a)) else {
-                missed += 1;
-                if missed > allowed_misses {
-                    return 0.0;
-                }
-                continue;
-            };
-            let (x, y) = (p.x.round() as isize, p.y.round() as isize);
-            let mut hit = false;
-            'near: for dy in -1..=1 {
-                for dx in -1..=1 {
-                    let (u, v) = (x + dx, y + dy);
-                    if u < 0 || v < 0 || u >= self.w as isize || v >= self.h as isize {
-                        continue;
-                    }
-                    let i = v as usize * self.w + u as usize;
-                    if i32::from(self.mag[i]) < threshold {
-                        continue;
-                    }
-                    let (gx, gy) = (f64::from(self.gx[i]), f64::from(self.gy[i]));
-                    let g = (gx * gx + gy * gy).sqrt();
-                    // The gradient points across the line: little of it along the chord.
-                    if g > 0.0 && (gx * along.x + gy * along.y).abs() <= GAP_ACROSS_COS * g {
-                        hit = true;
-                        break 'near;
-                    }
-                }
-            }
-            if hit {
+            let shows = self
+                .lens
+                .project(&ray(a))
+                .is_some_and(|p| self.gradient_across(&p, &along, threshold));
+            if shows {
                 shown += 1;
             } else {
                 missed += 1;
@@ -715,6 +692,30 @@ impl Workspace {
             }
         }
         shown as f64 / samples as f64
+    }
+
+    /// Whether a pixel within one of `p` has an L1 gradient of at least `threshold` pointing
+    /// across the unit image direction `along` (within [`GAP_ACROSS_COS`]).
+    fn gradient_across(&self, p: &Point2<f64>, along: &Vector2<f64>, threshold: i32) -> bool {
+        let (x, y) = (p.x.round() as isize, p.y.round() as isize);
+        for dy in -1..=1 {
+            for dx in -1..=1 {
+                let (u, v) = (x + dx, y + dy);
+                if u < 0 || v < 0 || u >= self.w as isize || v >= self.h as isize {
+                    continue;
+                }
+                let i = v as usize * self.w + u as usize;
+                if i32::from(self.mag[i]) < threshold {
+                    continue;
+                }
+                let (gx, gy) = (f64::from(self.gx[i]), f64::from(self.gy[i]));
+                let g = (gx * gx + gy * gy).sqrt();
+                if g > 0.0 && (gx * along.x + gy * along.y).abs() <= GAP_ACROSS_COS * g {
+                    return true;
+                }
+            }
+        }
+        false
     }
 
     /// Keeps the strongest `max_edges` candidates and turns them into edges (rig frame).

@@ -38,7 +38,7 @@
 //! **Scoring (deviation).** ξ over a three-line sample is ~0 for many wrong samples, so samples
 //! are compared by the truncated ξ over all of the cell's segments (each segment's best edge α,
 //! capped), the consensus score of the maintenance sampler. The best samples are then polished:
-//! matches gathered at the pose with shrinking gates (model segments of VIS(T), all edges), refit,
+//! matches gathered at the pose with shrinking gates (model segments in sight, all edges), refit,
 //! and ranked by the truncated ξ with the inlier cap.
 //!
 //! **Translation by voting** (module `vote`; beyond the paper). The triplet sampling finds
@@ -146,7 +146,8 @@ const GRID_STEP_M: f64 = 0.25;
 /// texture.
 const EDGE_SUPPORT_EDGES: usize = 64;
 const GRID_KEEP: usize = 8;
-/// The longest segments of a node's visibility set (as seen from the node) the grid scores by.
+/// The longest segments in sight from a grid position (module `visibility::at_pose`) that the
+/// grid scores it by.
 const GRID_SEGMENTS: usize = 48;
 /// Grid positions scoring below this share of the best are not polished.
 const GRID_WORTH: f64 = 0.5;
@@ -241,11 +242,12 @@ pub struct Candidate {
     pub inliers: usize,
     /// Plain ξ over those inliers (rad²).
     pub xi_rad2: f64,
-    /// Fraction of the segments of VIS(pose) long enough to be seen with an edge within the
-    /// inlier angle, each in proportion to how much of it edges cover (up to half of it).
+    /// Fraction of the segments in sight from the pose (each weighted by the share of it in
+    /// sight) long enough to be seen with an edge within the inlier angle, each in proportion to
+    /// how much of its part in sight edges cover (up to half of it).
     pub explained: f64,
-    /// Fraction of the frame's longest edges (by angle) that a segment of VIS(pose) explains
-    /// within the inlier angle: the other way round. Texture and clutter make edges the model
+    /// Fraction of the frame's longest edges (by angle) that a segment in sight from the pose
+    /// explains within the inlier angle: the other way round. Texture and clutter make edges the model
     /// cannot explain at any pose, but a wrong pose leaves the building's own lines
     /// unexplained too.
     pub support: f64,
@@ -378,7 +380,8 @@ pub struct Initialiser<'m> {
     /// Scratch of [`Self::edge_support`]: (length, edge index), and the predicted segments.
     support_order: Vec<(f64, u32)>,
     support_pred: Vec<Predicted>,
-    /// The grid's per-node segments: (angle from the node, index), and the longest kept.
+    /// The segments in sight from a grid position: (angle they span in sight, index), and the
+    /// longest kept.
     grid_order: Vec<(f64, u32)>,
     grid_segs: Vec<u32>,
     /// This frame's rotations from vanishing directions.
@@ -695,10 +698,10 @@ impl<'m> Initialiser<'m> {
         }
     }
 
-    /// Under each rotation of the vanishing directions, the positions of a grid over the cells
-    /// of the volume (plan and height steps of [`GRID_STEP_M`], heights within the band above
-    /// each cell's floor) scored by [`Self::coarse_merit`] over the cell's
-    /// [`GRID_SEGMENTS`] longest segments; the best few per rotation (within [`GRID_WORTH`] of
+    /// Under each rotation of the vanishing directions, the positions of a grid over the plan
+    /// cells of the volume (plan and height steps of [`GRID_STEP_M`], heights within the band
+    /// above the floor beneath) scored by [`Self::coarse_merit`] over the [`GRID_SEGMENTS`]
+    /// longest segments in sight from each; the best few per rotation (within [`GRID_WORTH`] of
     /// the best of all) climbed and polished into candidates. With the rotation known the
     /// translation is three numbers, few enough to search outright. Within the time budget.
     fn grid_search(&mut self, edges: &[Edge], volume: &SearchVolume, started: Instant) {
@@ -713,12 +716,7 @@ impl<'m> Initialiser<'m> {
             (Some(lo), Some(hi)) => (h.origin[2] + lo - half_z, h.origin[2] + hi + half_z),
             _ => (h.origin[2], h.origin[2]),
         };
-        let gate = Gate {
-            cos_alpha: GRID_GATE_RAD.cos(),
-            min_overlap: 0.5,
-            hue: None,
-            polarity: None,
-        };
+        let gate = Gate::geometric(GRID_GATE_RAD);
         let min_len = 3.0 * self.opts.min_length_rad;
         for best in &mut self.grid_best {
             best.clear();
@@ -817,12 +815,7 @@ impl<'m> Initialiser<'m> {
         self.longest_in_sight(&Point3::from(start.translation.vector), usize::MAX);
         let segs = std::mem::take(&mut self.grid_segs);
         for (step, gate_rad) in CLIMB {
-            let gate = Gate {
-                cos_alpha: gate_rad.cos(),
-                min_overlap: 0.5,
-                hue: None,
-                polarity: None,
-            };
+            let gate = Gate::geometric(gate_rad);
             let score = |me: &mut Self, p: &Pose| me.coarse_merit(p, &segs, &gate, min_len).unwrap_or(0.0);
             let mut best = score(self, &pose);
             for _ in 0..4 {
@@ -849,12 +842,7 @@ impl<'m> Initialiser<'m> {
     /// The grid's coarse merit of `pose` against the edges of the last [`Self::run`] (for
     /// diagnosis: how a pose the grid never kept would have fared).
     pub fn grid_merit(&mut self, pose: &Pose) -> Option<f64> {
-        let gate = Gate {
-            cos_alpha: GRID_GATE_RAD.cos(),
-            min_overlap: 0.5,
-            hue: None,
-            polarity: None,
-        };
+        let gate = Gate::geometric(GRID_GATE_RAD);
         self.longest_in_sight(&Point3::from(pose.translation.vector), GRID_SEGMENTS);
         let segs = std::mem::take(&mut self.grid_segs);
         let merit = self.coarse_merit(pose, &segs, &gate, 3.0 * self.opts.min_length_rad);
@@ -958,7 +946,6 @@ impl<'m> Initialiser<'m> {
         self.pairs.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
     }
 
-    /// The nodes whose cells meet the volume, nearest first (one layer when upright).
     /// The table grid's plan cells (valid node or not) that meet the volume's plan disc,
     /// nearest its centre first: (distance, cell centre at the volume's height).
     fn select_plan_cells(&mut self, volume: &SearchVolume) {
@@ -984,6 +971,7 @@ impl<'m> Initialiser<'m> {
         self.plan_cells.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
     }
 
+    /// The nodes whose cells meet the volume, nearest first (one layer when upright).
     fn select_cells(&mut self, volume: &SearchVolume) {
         self.cells.clear();
         let h = &self.table.header;
@@ -1338,12 +1326,7 @@ impl<'m> Initialiser<'m> {
     /// loose cap: the sample's pose is not refined yet).
     fn loose_score(&self, w: &CellScratch, pose: &Pose) -> f64 {
         let cap = (4.0 * self.opts.inlier_alpha_rad).min(0.2);
-        let gate = Gate {
-            cos_alpha: cap.cos(),
-            min_overlap: 0.5,
-            hue: None,
-            polarity: None,
-        };
+        let gate = Gate::geometric(cap);
         let mut sum = 0.0;
         let mut counted = 0usize;
         for &s in &w.segs {
@@ -1365,7 +1348,7 @@ impl<'m> Initialiser<'m> {
         }
     }
 
-    /// Matches gathered at `start` with shrinking gates over the segments of VIS(T) and all of
+    /// Matches gathered at `start` with shrinking gates over the segments in sight and all of
     /// the frame's edges, refit each time, the ξ simplex last; scored by the truncated ξ.
     pub fn polish(&mut self, start: &Pose, edges: &[Edge]) -> Option<Candidate> {
         let candidate = self.polish_unchecked(start, edges)?;
@@ -1425,15 +1408,11 @@ impl<'m> Initialiser<'m> {
         })
     }
 
-    /// `self.corr` ← for each segment of VIS(pose) long enough, its best edge within `gate_rad`.
+    /// `self.corr` ← for each segment in sight from the pose and long enough, its best edge within
+    /// `gate_rad`.
     fn gather(&mut self, pose: &Pose, edges: &[Edge], gate_rad: f64) -> usize {
         self.corr.clear();
-        let gate = Gate {
-            cos_alpha: gate_rad.cos(),
-            min_overlap: 0.5,
-            hue: None,
-            polarity: None,
-        };
+        let gate = Gate::geometric(gate_rad);
         let seen = self
             .at_pose
             .at(self.model, self.table, &Point3::from(pose.translation.vector));
@@ -1453,14 +1432,14 @@ impl<'m> Initialiser<'m> {
         self.corr.len()
     }
 
-    /// [`Candidate::score`] of any pose (truncated ξ over the segments of VIS(pose)).
+    /// [`Candidate::score`] of any pose (truncated ξ over the segments in sight from the pose).
     pub fn score(&mut self, pose: &Pose, edges: &[Edge]) -> f64 {
         self.final_score(pose, edges).0
     }
 
     /// [`Candidate::support`] of any pose: the share of the [`EDGE_SUPPORT_EDGES`] longest of
-    /// `edges` (by angle, weighted by it) that a segment of VIS(pose) explains within the inlier
-    /// angle.
+    /// `edges` (by angle, weighted by it) that a segment in sight from the pose explains within
+    /// the inlier angle.
     pub fn edge_support(&mut self, pose: &Pose, edges: &[Edge]) -> f64 {
         self.support_order.clear();
         for (i, e) in edges.iter().enumerate() {
@@ -1522,18 +1501,13 @@ impl<'m> Initialiser<'m> {
         self.final_score(pose, edges).3
     }
 
-    /// (truncated ξ with the inlier cap over the segments of VIS(pose) long enough, inliers,
-    /// segments counted, the share of them explained). A segment counts as explained, and at its
+    /// (truncated ξ with the inlier cap over the segments in sight from the pose and long enough,
+    /// inliers, segments counted, the share of them explained). A segment counts as explained, and at its
     /// α rather than the cap, in proportion to how much of it the matching edges cover, up to
     /// [`FULL_COVER`].
     fn final_score(&mut self, pose: &Pose, edges: &[Edge]) -> (f64, usize, usize, f64) {
         let cap = self.opts.inlier_alpha_rad;
-        let gate = Gate {
-            cos_alpha: cap.cos(),
-            min_overlap: 0.5,
-            hue: None,
-            polarity: None,
-        };
+        let gate = Gate::geometric(cap);
         let seen = self
             .at_pose
             .at(self.model, self.table, &Point3::from(pose.translation.vector));

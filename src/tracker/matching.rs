@@ -103,6 +103,17 @@ pub struct Gate {
 }
 
 impl Gate {
+    /// A gate on geometry alone: the planes within `angle_rad`, overlapping by half, no hue or
+    /// polarity test.
+    pub fn geometric(angle_rad: f64) -> Gate {
+        Gate {
+            cos_alpha: angle_rad.cos(),
+            min_overlap: 0.5,
+            hue: None,
+            polarity: None,
+        }
+    }
+
     /// Whether `e` passes the hue gate and, where hue cannot compare the two edges, the
     /// polarity gate.
     #[inline]

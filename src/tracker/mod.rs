@@ -526,12 +526,7 @@ impl<'m> Tracker<'m> {
         self.last_good = Some(*pose);
         self.last_good_time = timestamp_ns;
         self.volume_level = 0;
-        let gate = Gate {
-            cos_alpha: self.cfg.maintenance.inlier_angle_deg.to_radians().cos(),
-            min_overlap: 0.5,
-            hue: None,
-            polarity: None,
-        };
+        let gate = Gate::geometric(self.cfg.maintenance.inlier_angle_deg.to_radians());
         let min_len = self.cfg.edges.min_edge_length_deg.to_radians();
         self.tracks.clear();
         let (mut eligible, mut seen) = (0u32, 0u32);

@@ -268,11 +268,11 @@ impl VanishingDirections {
 
 /// How much edge length a building whose vertical is `v` would explain: the edges along `v`,
 /// plus, of the others taken as horizontal lines, those along the strongest horizontal
-/// direction and the one at right angles to it (within [`MANHATTAN_BINS`] bins). The vertical
-/// alone is not enough: in a room of few, short vertical edges (a garage: one door, long
-/// horizontal panels) a direction tilted far from it can lie on more edge planes by chance, and
-/// then the horizontal lines, levelled by it, no longer share directions. `hist` is scratch of
-/// [`BINS`] bins.
+/// direction and the one at right angles to it (within [`MANHATTAN_BINS`] bins). The edges
+/// along the vertical alone are not enough: in a room of few, short vertical edges (a garage:
+/// one door, long horizontal panels) a direction 56° off lay on more edge length than the true
+/// vertical, which has its evidence in the horizontal lines it levels into two directions.
+/// `hist` is scratch of [`BINS`] bins.
 fn manhattan_support(edges: &[Edge], v: &Vector3<f64>, sin_agree: f64, hist: &mut [f64]) -> f64 {
     hist.iter_mut().for_each(|h| *h = 0.0);
     let a = v

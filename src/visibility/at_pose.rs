@@ -152,30 +152,17 @@ mod tests {
             v += 4;
         };
         for (x0, x1) in [(0.0, 4.0), (4.0, 8.0)] {
-            quad(
-                &mut obj,
+            // Floor, ceiling, the walls at y = 0 and y = 3, at x = x0 and x = x1.
+            for q in [
                 [[x0, 0.0, 0.0], [x1, 0.0, 0.0], [x1, 3.0, 0.0], [x0, 3.0, 0.0]],
-            );
-            quad(
-                &mut obj,
                 [[x0, 0.0, 2.5], [x0, 3.0, 2.5], [x1, 3.0, 2.5], [x1, 0.0, 2.5]],
-            );
-            quad(
-                &mut obj,
                 [[x0, 0.0, 0.0], [x0, 0.0, 2.5], [x1, 0.0, 2.5], [x1, 0.0, 0.0]],
-            );
-            quad(
-                &mut obj,
                 [[x0, 3.0, 0.0], [x1, 3.0, 0.0], [x1, 3.0, 2.5], [x0, 3.0, 2.5]],
-            );
-            quad(
-                &mut obj,
                 [[x0, 0.0, 0.0], [x0, 3.0, 0.0], [x0, 3.0, 2.5], [x0, 0.0, 2.5]],
-            );
-            quad(
-                &mut obj,
                 [[x1, 0.0, 0.0], [x1, 0.0, 2.5], [x1, 3.0, 2.5], [x1, 3.0, 0.0]],
-            );
+            ] {
+                quad(&mut obj, q);
+            }
         }
         Model::from_obj_str(&obj, "two_rooms.obj").expect("a valid model")
     }
@@ -183,11 +170,7 @@ mod tests {
     #[test]
     fn segments_behind_a_wall_are_hidden_and_those_around_are_whole() {
         let model = two_rooms();
-        let tris = model_triangles(&model);
-        let bvh = TriangleBvh::build(
-            &tris.iter().map(|t| t.0).collect::<Vec<_>>(),
-            &tris.iter().map(|t| t.1).collect::<Vec<_>>(),
-        );
+        let bvh = PoseVisibility::new(&model).bvh;
         let at = Point3::new(2.0, 1.5, 1.5);
         for seg in &model.segments {
             let mid = seg.a + (seg.b - seg.a) * 0.5;
@@ -211,11 +194,7 @@ mod tests {
         let obj = "v 0 0 0\nv 8 0 0\nv 8 -1 0\nv 0 -1 0\nf 1 2 3 4\n\
                    v 4 0.5 0\nv 4 3 0\nv 4 3 2.5\nv 4 0.5 2.5\nf 5 6 7 8\n";
         let model = Model::from_obj_str(obj, "screen.obj").expect("a valid model");
-        let tris = model_triangles(&model);
-        let bvh = TriangleBvh::build(
-            &tris.iter().map(|t| t.0).collect::<Vec<_>>(),
-            &tris.iter().map(|t| t.1).collect::<Vec<_>>(),
-        );
+        let bvh = PoseVisibility::new(&model).bvh;
         let at = Point3::new(2.0, 1.5, 1.5);
         // The line y = 0, z = 0 from x = 0 to 8: points beyond the screen's shadow are hidden.
         let f = in_sight(&bvh, &at, &Point3::new(0.0, 0.0, 0.0), &Point3::new(8.0, 0.0, 0.0));

@@ -8,8 +8,9 @@
 //! with no ray are black. With `Appearance::pixel_samples` > 1 a grid of rays covers each
 //! pixel's area and is averaged, as a real pixel integrates light (no aliased edges). Rays are
 //! cast into a [`Scene`]: the model's faces ear-clipped into triangles in a binned-SAH
-//! [`crate::model::bvh::Bvh`], plus clutter and people that exist only in the images (never in the model). Rows are rendered in parallel (rayon). Output is a pure function of
-//! model, rig, appearance (with its seed), keep-out points and frame: byte-identical on rerun.
+//! [`crate::model::bvh::Bvh`], plus clutter and people that exist only in the images (never in
+//! the model). Rows are rendered in parallel (rayon). Output is a pure function of model, rig,
+//! appearance (with its seed), keep-out points and frame: byte-identical on rerun.
 
 pub mod appearance;
 pub mod scene;

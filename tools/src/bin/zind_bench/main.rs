@@ -39,6 +39,7 @@ use omnitrack::geometry::Pose;
 use omnitrack::runtime::{load_or_build_table, track, RunOptions};
 use omnitrack::tracker::SearchVolume;
 use omnitrack::trajectory::{to_tum_string, Stamped};
+use omnitrack::visibility::at_pose::PoseVisibility;
 use omnitrack::visibility::VisibilityTable;
 use omnitrack::{Model, Rig};
 use rand::rngs::SmallRng;
@@ -388,20 +389,27 @@ fn make_recording(
     write(&index, csv.as_bytes())?;
     write(&dir.join("groundtruth.tum"), to_tum_string(&truth_track).as_bytes())?;
     let overlay = dir.join("overlay.jpg");
-    // The visibility set at the pose stands in for occlusion, as in the demo's pictures.
+    // The segments in sight from the pose, as the initialisation predicts them.
     let options = OmniOptions {
         title: format!(
             "{} {} ({}): the model at the annotated pose",
             rig.name, pano.id, pano.label
         ),
-        segments: table
-            .query(&Point3::from(truth.translation.vector))
-            .map(|set| set.segments.iter().map(|&i| i as usize).collect()),
+        segments: Some(in_sight(model, table, &truth)),
         ..OmniOptions::default()
     };
     omni_view(&overlay, rig, &images, model, &truth, &options).map_err(|e| e.to_string())?;
     write(&marker, b"")?;
     Ok(())
+}
+
+/// The model segments in sight from `pose` (ray cast, `visibility::at_pose`), for overlays.
+fn in_sight(model: &Model, table: &VisibilityTable, pose: &Pose) -> Vec<usize> {
+    PoseVisibility::new(model)
+        .at(model, table, &Point3::from(pose.translation.vector))
+        .iter()
+        .map(|s| s.segment as usize)
+        .collect()
 }
 
 /// Tracks one recording from `hint` and measures the outcome against `truth`.
@@ -552,7 +560,7 @@ fn diagnose(
         }
     }
     println!("{line}");
-    // A picture of the best candidate when it is not the truth: what the wrong pose aligns with.
+    // A picture of the best wrong candidate (over 0.3 m or 5° off): what it aligns with.
     if let Some(c) = rival {
         let images: Vec<_> = (0..rig.sensors.len())
             .map(|s| image::open(dir.join(image_path(rig.sensors[s].id, 0))).map(|i| i.to_rgb8()))
@@ -564,9 +572,7 @@ fn diagnose(
                 err(&c).0,
                 err(&c).1
             ),
-            segments: table
-                .query(&Point3::from(c.translation.vector))
-                .map(|set| set.segments.iter().map(|&i| i as usize).collect()),
+            segments: Some(in_sight(model, table, &c)),
             ..OmniOptions::default()
         };
         omni_view(&dir.join("rival.jpg"), &rig, &images, model, &c, &options).map_err(|e| e.to_string())?;
