@@ -6,6 +6,10 @@
 //! The TOML is walked by hand rather than through serde derive so that each message can say which
 //! sensor (by id) a bad key belongs to, which serde's path-less errors cannot.
 
+pub mod view;
+
+pub use view::ViewMap;
+
 use crate::geometry::{pose_from_parts, rotation_to_wxyz, Kb4, Lens, Pinhole, Pose};
 use nalgebra::{Point2, Point3, Unit, Vector3};
 use std::fmt::Write as _;

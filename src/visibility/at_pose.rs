@@ -31,6 +31,7 @@ use nalgebra::Point3;
 
 /// Points sampled along each segment.
 pub const SAMPLES: usize = 8;
+const _: () = assert!(SAMPLES <= 8, "a SeenSegment mask holds one bit per sample");
 /// A ray to a sampled point may meet faces this close before the point without hiding it (m):
 /// the point lies on the border of the faces that make the segment.
 const END_SLACK_M: f64 = 0.02;
@@ -44,6 +45,15 @@ pub struct SeenSegment {
     pub segment: u32,
     /// Share of the segment in sight, in (0, 1].
     pub fraction: f32,
+    /// Which of the [`SAMPLES`] points along it ([`sample_point`]) are in sight: bit k for
+    /// point k.
+    pub mask: u8,
+}
+
+/// The `k`-th of the [`SAMPLES`] points sampled along the segment a–b (k < [`SAMPLES`]).
+#[inline]
+pub fn sample_point(a: &Point3<f64>, b: &Point3<f64>, k: usize) -> Point3<f64> {
+    a + (b - a) * ((k as f64 + 0.5) / SAMPLES as f64)
 }
 
 /// Exact visibility of the model's segments from any position, by ray casting.
@@ -99,9 +109,13 @@ impl PoseVisibility {
                         }
                         *mark = self.query;
                         let seg = &model.segments[s as usize];
-                        let fraction = in_sight(&self.bvh, at, &seg.a, &seg.b);
-                        if fraction > 0.0 {
-                            self.seen.push(SeenSegment { segment: s, fraction });
+                        let mask = in_sight(&self.bvh, at, &seg.a, &seg.b);
+                        if mask != 0 {
+                            self.seen.push(SeenSegment {
+                                segment: s,
+                                fraction: mask.count_ones() as f32 / SAMPLES as f32,
+                                mask,
+                            });
                         }
                     }
                 }
@@ -111,27 +125,27 @@ impl PoseVisibility {
     }
 }
 
-/// Share of the segment a–b whose sampled points the ray from `at` reaches unobstructed.
-fn in_sight(bvh: &TriangleBvh, at: &Point3<f64>, a: &Point3<f64>, b: &Point3<f64>) -> f32 {
+/// Which sampled points of the segment a–b the ray from `at` reaches unobstructed (bit k for
+/// [`sample_point`] k).
+fn in_sight(bvh: &TriangleBvh, at: &Point3<f64>, a: &Point3<f64>, b: &Point3<f64>) -> u8 {
     let origin = [at.x as f32, at.y as f32, at.z as f32];
-    let mut clear = 0;
+    let mut clear = 0u8;
     for k in 0..SAMPLES {
-        let t = (k as f64 + 0.5) / SAMPLES as f64;
-        let p = a + (b - a) * t;
+        let p = sample_point(a, b, k);
         let d = p - at;
         let dist = d.norm();
         if dist <= END_SLACK_M {
-            clear += 1;
+            clear |= 1 << k;
             continue;
         }
         // Unit direction: `t` of the ray is in metres.
         let u = d / dist;
         let ray = Ray::new(origin, [u.x as f32, u.y as f32, u.z as f32]);
         if !bvh.occluded(&ray, START_SLACK_M, (dist - END_SLACK_M) as f32) {
-            clear += 1;
+            clear |= 1 << k;
         }
     }
-    clear as f32 / SAMPLES as f32
+    clear
 }
 
 #[cfg(test)]
@@ -174,7 +188,7 @@ mod tests {
         let at = Point3::new(2.0, 1.5, 1.5);
         for seg in &model.segments {
             let mid = seg.a + (seg.b - seg.a) * 0.5;
-            let f = in_sight(&bvh, &at, &seg.a, &seg.b);
+            let f = in_sight(&bvh, &at, &seg.a, &seg.b).count_ones() as f32 / SAMPLES as f32;
             let (lo, hi) = (seg.a.x.min(seg.b.x), seg.a.x.max(seg.b.x));
             if lo >= 4.0 - 1e-9 && hi > 4.0 + 1e-9 {
                 assert_eq!(f, 0.0, "a segment of the other room at {mid:?}");
@@ -197,7 +211,10 @@ mod tests {
         let bvh = PoseVisibility::new(&model).bvh;
         let at = Point3::new(2.0, 1.5, 1.5);
         // The line y = 0, z = 0 from x = 0 to 8: points beyond the screen's shadow are hidden.
-        let f = in_sight(&bvh, &at, &Point3::new(0.0, 0.0, 0.0), &Point3::new(8.0, 0.0, 0.0));
+        let mask = in_sight(&bvh, &at, &Point3::new(0.0, 0.0, 0.0), &Point3::new(8.0, 0.0, 0.0));
+        let f = mask.count_ones() as f32 / SAMPLES as f32;
         assert!(f > 0.3 && f < 0.8, "in sight {f}");
+        // The points in sight are the near end's, in order from x = 0.
+        assert_eq!(mask, ((1u32 << mask.count_ones()) - 1) as u8, "mask {mask:08b}");
     }
 }
