@@ -102,9 +102,9 @@ use crate::config::TrackerConfig;
 use crate::edges::Edge;
 use crate::geometry::{xi, Correspondence, Pose};
 use crate::model::Model;
-use crate::rig::Rig;
+use crate::rig::{Rig, ViewMap};
 use crate::solver::{minimise_xi, minimise_xi_upright, r_and_t_refine, refine_upright, SimplexOptions, SolverOptions};
-use crate::visibility::at_pose::PoseVisibility;
+use crate::visibility::at_pose::{sample_point, PoseVisibility, SAMPLES};
 use crate::visibility::VisibilityTable;
 use nalgebra::{Matrix2, Matrix3, Point3, Translation3, UnitQuaternion, Vector2, Vector3};
 use rand::rngs::SmallRng;
@@ -377,6 +377,8 @@ pub struct Initialiser<'m> {
     grid_best: [Vec<(f64, Point3<f64>)>; MAX_ROTATIONS],
     /// VIS(T) refined at the candidate's own position: what polishing and scoring predict.
     at_pose: PoseVisibility,
+    /// The directions the rig's sensors image.
+    view: ViewMap,
     /// Scratch of [`Self::edge_support`]: (length, edge index), and the predicted segments.
     support_order: Vec<(f64, u32)>,
     support_pred: Vec<Predicted>,
@@ -445,6 +447,7 @@ impl<'m> Initialiser<'m> {
             floors,
             grid_best: std::array::from_fn(|_| Vec::with_capacity(GRID_KEEP)),
             at_pose: PoseVisibility::new(model),
+            view: ViewMap::new(rig),
             support_order: Vec::with_capacity(max_edges),
             support_pred: Vec::with_capacity(max_set),
             grid_order: Vec::with_capacity(max_set),
@@ -1496,6 +1499,28 @@ impl<'m> Initialiser<'m> {
         }
     }
 
+    /// How many model segments the rig images long enough to detect from `pose`: in sight
+    /// (`at_pose`), on some sensor's image ([`ViewMap`]) for at least one of their sampled
+    /// points, and at least the shortest edge long. What a frame there can match at best.
+    ///
+    /// Scores do not count this way (yet): judging candidates by the segments in view alone
+    /// made a one-pinhole rig commit wrong poses on real photographs (README, "What limits it").
+    pub fn segments_in_view(&mut self, pose: &Pose) -> usize {
+        let seen = self
+            .at_pose
+            .at(self.model, self.table, &Point3::from(pose.translation.vector));
+        let mut n = 0;
+        for s in seen {
+            let seg = &self.model.segments[s.segment as usize];
+            if in_view(&self.view, pose, &seg.a, &seg.b, s.mask) > 0.0
+                && Predicted::new(&[seg.a, seg.b], pose, &self.centres).length_rad >= self.opts.min_length_rad
+            {
+                n += 1;
+            }
+        }
+        n
+    }
+
     /// [`Candidate::explained`] of any pose.
     pub fn explained(&mut self, pose: &Pose, edges: &[Edge]) -> f64 {
         self.final_score(pose, edges).3
@@ -1605,6 +1630,18 @@ fn weighted_index(weights: &[f64], total: f64, rng: &mut SmallRng) -> usize {
         x -= w;
     }
     weights.len() - 1
+}
+
+/// Share of the segment a–b in view from `pose`: of its [`SAMPLES`] sampled points, those in
+/// sight (bit k of `mask`, as `at_pose` gives it) that some sensor of the rig images.
+fn in_view(view: &ViewMap, pose: &Pose, a: &Point3<f64>, b: &Point3<f64>, mask: u8) -> f64 {
+    let mut n = 0;
+    for k in 0..SAMPLES {
+        if mask & (1 << k) != 0 && view.sees(&pose.inverse_transform_point(&sample_point(a, b, k)).coords) {
+            n += 1;
+        }
+    }
+    n as f64 / SAMPLES as f64
 }
 
 /// Wahba's problem for R (rig → world) with R (sign·u_k) ≈ v_k: the rotation and its residual.
@@ -1729,6 +1766,38 @@ mod tests {
         let d = 30f64.to_radians() as f32;
         assert!(jaccard(d, r(29.0, 31.0), tol) > jaccard(d, r(10.0, 50.0), tol));
         assert_eq!(jaccard(d, r(40.0, 50.0), tol), 0.0);
+    }
+
+    #[test]
+    fn a_segment_is_in_view_for_the_share_a_sensor_images() {
+        // One pinhole looking along rig x, 2 × atan(320 / 686) ≈ 50° wide.
+        let rig = Rig::from_toml_str(
+            "name = \"one\"\n[[sensors]]\nid = 0\nresolution = [640, 480]\nmodel = \"pinhole\"\n\
+             intrinsics = [686.0, 686.0, 319.5, 239.5]\nrotation_wxyz = [0.5, -0.5, 0.5, -0.5]\n\
+             translation_m = [0.0, 0.0, 0.0]\n",
+            "one.toml",
+        )
+        .unwrap();
+        let view = ViewMap::new(&rig);
+        let at = Pose::identity();
+        // A horizontal line 3 m ahead from y = −6 to 6: its sampled points at y = ±0.75 lie within
+        // ±14° of the axis, those at ±2.25 (37°) and beyond outside.
+        let (a, b) = (Point3::new(3.0, -6.0, 0.0), Point3::new(3.0, 6.0, 0.0));
+        assert_eq!(in_view(&view, &at, &a, &b, 0xff), 2.0 / 8.0);
+        // Hidden points do not count, whatever the sensor would see.
+        assert_eq!(in_view(&view, &at, &a, &b, 0b1110_0111), 0.0);
+        // Turned half round, the rig sees none of it; a quarter round to the left, none either.
+        let turned = |deg: f64| {
+            Pose::from_parts(
+                Translation3::identity(),
+                UnitQuaternion::from_euler_angles(0.0, 0.0, deg.to_radians()),
+            )
+        };
+        assert_eq!(in_view(&view, &turned(180.0), &a, &b, 0xff), 0.0);
+        assert_eq!(in_view(&view, &turned(90.0), &a, &b, 0xff), 0.0);
+        // Turned 45° to the left (a view from 20° to 70°), the points at y = 2.25, 3.75 and 5.25
+        // (37°, 51°, 60°) are on the image and the one at 0.75 (14°) is not.
+        assert_eq!(in_view(&view, &turned(45.0), &a, &b, 0xff), 3.0 / 8.0);
     }
 
     #[test]

@@ -287,6 +287,13 @@ impl<'m> Tracker<'m> {
         self.init.polish(pose, edges)
     }
 
+    /// How many model segments the rig would see long enough to detect from `pose`
+    /// (`Initialiser::segments_in_view`): for benchmarks, e.g. whether a frame can be
+    /// initialised at all.
+    pub fn segments_in_view(&mut self, pose: &Pose) -> usize {
+        self.init.segments_in_view(pose)
+    }
+
     /// The current pose estimate (meaningful when tracking).
     pub fn pose(&self) -> &Pose {
         &self.pose
