@@ -1,7 +1,9 @@
 //! VIS(T) refined at the pose itself (beyond the paper).
 //!
 //! In: a position T, the [`Model`], its [`VisibilityTable`]. Out: the segments seen from T, each
-//! with the fraction of it in sight ([`PoseVisibility::at`]).
+//! with the fraction of it in sight and which of its sampled points are ([`PoseVisibility::at`],
+//! [`sample_point`]): a caller that knows the rig's rotation can keep the points its sensors
+//! image (`crate::rig::ViewMap`).
 //!
 //! **Why.** Koch & Teller serve every position from the set of the node nearest it, rendered at
 //! the node (§4.3). With nodes a metre apart that set is seen from up to 0.7 m away, and where
