@@ -46,6 +46,16 @@ mod bench {
         sorted[((sorted.len() - 1) as f64 * q).round() as usize]
     }
 
+    /// The largest standard deviation of a pose covariance's position (`block` 0, m) or rotation
+    /// (`block` 3, rad) block.
+    fn largest_sigma(cov: &nalgebra::Matrix6<f64>, block: usize) -> f64 {
+        cov.fixed_view::<3, 3>(block, block)
+            .symmetric_eigenvalues()
+            .max()
+            .max(0.0)
+            .sqrt()
+    }
+
     struct Args {
         scenarios: Vec<ScenarioName>,
         frames: Option<usize>,
@@ -318,8 +328,8 @@ mod bench {
                             dr,
                             r.explained,
                             r.inliers,
-                            r.covariance.fixed_view::<3, 3>(0, 0).symmetric_eigenvalues().max().max(0.0).sqrt() * 100.0,
-                            r.covariance.fixed_view::<3, 3>(3, 3).symmetric_eigenvalues().max().max(0.0).sqrt().to_degrees(),
+                            largest_sigma(&r.covariance, 0) * 100.0,
+                            largest_sigma(&r.covariance, 3).to_degrees(),
                         );
                     }
                     committed = Some(k);
@@ -512,8 +522,7 @@ mod bench {
                             Some((dp, dr)) => format!("{:6.1} cm {:5.2}°", dp * 100.0, dr),
                             None => "      --         ".into(),
                         },
-                        // The covariance's largest position standard deviation.
-                        r2.covariance.fixed_view::<3, 3>(0, 0).symmetric_eigenvalues().max().max(0.0).sqrt() * 100.0,
+                        largest_sigma(&r2.covariance, 0) * 100.0,
                         r2.explained,
                         r2.inliers,
                         r2.states,

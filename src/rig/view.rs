@@ -43,10 +43,11 @@ impl ViewMap {
                     let u = (col as f64 + 0.5) / n as f64 * 2.0 - 1.0;
                     let v = (row as f64 + 0.5) / n as f64 * 2.0 - 1.0;
                     let d = face_direction(face, u, v);
-                    let sees = rig.sensors.iter().any(|s| {
-                        let in_sensor = s.t_rig_sensor.rotation.inverse_transform_vector(&d);
-                        s.lens.project(&in_sensor).is_some_and(|px| s.contains(&px))
-                    });
+                    // The direction from each sensor's own centre.
+                    let sees = rig
+                        .sensors
+                        .iter()
+                        .any(|s| s.project_from_rig(&(s.centre() + d)).is_some());
                     // A cell's solid angle on the cube face at (u, v): dA / r³.
                     let w = (1.0 + u * u + v * v).powf(-1.5);
                     total_weight += w;

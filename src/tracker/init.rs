@@ -1504,7 +1504,8 @@ impl<'m> Initialiser<'m> {
     /// points, and at least the shortest edge long. What a frame there can match at best.
     ///
     /// Scores do not count this way (yet): judging candidates by the segments in view alone
-    /// made a one-pinhole rig commit wrong poses on real photographs (README, "What limits it").
+    /// made a one-pinhole rig commit wrong poses on real photographs (README, "Real photographs",
+    /// "Not there yet").
     pub fn segments_in_view(&mut self, pose: &Pose) -> usize {
         let seen = self
             .at_pose
