@@ -546,3 +546,63 @@ fn a_rig_of_four_landscape_pinhole_sensors_tracks_as_the_shipped_one() {
 fn a_rig_of_two_fisheye_lenses_seeing_past_90_degrees_tracks_as_the_shipped_one() {
     tracks_through("tools/rigs/dual_fisheye.toml", 2);
 }
+
+#[test]
+fn the_true_pose_draws_fewer_lines_across_plain_surfaces_than_a_wrong_one() {
+    use nalgebra::{Translation3, UnitQuaternion};
+    use omnitrack::tracker::{InitOptions, Initialiser};
+    let f = fixture();
+    let (mut source, rig, cfg, mut frame, mut detector) = replay(f);
+    let max_edges = rig.sensors.len() * cfg.edges.max_edges_per_sensor as usize;
+    let mut init = Initialiser::new(
+        &rig,
+        &f.model,
+        &f.table,
+        InitOptions::from_config(&cfg),
+        cfg.solver_options(),
+        max_edges,
+    );
+    assert!(source.next_frame(&mut frame).unwrap());
+    let ts = frame.timestamp_ns().unwrap();
+    let edges = detector.detect(&frame).to_vec();
+    let truth = f
+        .truth
+        .iter()
+        .find(|s| s.timestamp_ns.abs_diff(ts) < 1_000_000)
+        .unwrap()
+        .pose;
+    let at_truth = init.blank_share(&truth, &edges);
+    // A quarter turn where the rig stands, and the truth 0.6 m aside: the building's lines are
+    // drawn where the images show plain wall, floor and ceiling.
+    let turned = omnitrack::Pose::from_parts(
+        truth.translation,
+        UnitQuaternion::from_axis_angle(&Vector3::z_axis(), std::f64::consts::FRAC_PI_2) * truth.rotation,
+    );
+    let aside = omnitrack::Pose::from_parts(
+        Translation3::from(truth.translation.vector + Vector3::new(0.6, 0.0, 0.0)),
+        truth.rotation,
+    );
+    let (b_turned, b_aside) = (init.blank_share(&turned, &edges), init.blank_share(&aside, &edges));
+    // Measured: 0.007 at the truth, 0.32 turned, 0.14 aside.
+    assert!(at_truth < 0.05, "blank share at the truth {at_truth:.2}");
+    assert!(
+        b_turned > at_truth + 0.15 && b_aside > at_truth + 0.07,
+        "truth {at_truth:.2}, turned {b_turned:.2}, aside {b_aside:.2}"
+    );
+    // And the candidates' merit carries it: the truth polished keeps a small blank share.
+    let c = init.polish(&truth, &edges).expect("the truth polishes");
+    assert!((c.blank - init.blank_share(&c.pose, &edges)).abs() < 1e-12);
+    assert!(c.merit() <= c.explained * c.support);
+    // Radius 0 turns it off.
+    let mut off = cfg.clone();
+    off.initialisation.blank_radius_deg = 0.0;
+    let mut init0 = Initialiser::new(
+        &rig,
+        &f.model,
+        &f.table,
+        InitOptions::from_config(&off),
+        off.solver_options(),
+        max_edges,
+    );
+    assert_eq!(init0.blank_share(&turned, &edges), 0.0);
+}

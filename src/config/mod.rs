@@ -37,8 +37,12 @@ pub struct InitialisationConfig {
     pub whole_model_time_budget_ms: f64,
     pub clear_winner_ratio: f64,
     pub accept_explained_fraction: f64,
-    /// A candidate must also explain this share of the frame's longest edges.
+    /// A candidate must also explain this share of the frame's edges (by angle).
     pub accept_support_fraction: f64,
+    /// A sampled point of a predicted segment with no edge of any direction this near (deg) is
+    /// *blank*: the model draws a line across a plain surface of the image there. 0 turns the
+    /// blank share off.
+    pub blank_radius_deg: f64,
     pub wide_edges_considered: u32,
     pub wide_segments_considered: u32,
     pub wide_samples_per_cell: u32,
@@ -177,7 +181,8 @@ impl Default for InitialisationConfig {
             whole_model_time_budget_ms: 10000.0,
             clear_winner_ratio: 0.8,
             accept_explained_fraction: 0.4,
-            accept_support_fraction: 0.4,
+            accept_support_fraction: 0.15,
+            blank_radius_deg: 2.0,
             wide_edges_considered: 64,
             wide_segments_considered: 60,
             wide_samples_per_cell: 300,
@@ -394,6 +399,12 @@ impl TrackerConfig {
             return Err(format!(
                 "key 'initialisation.accept_support_fraction': must lie in [0, 1), found {}",
                 i.accept_support_fraction
+            ));
+        }
+        if !(i.blank_radius_deg >= 0.0 && i.blank_radius_deg <= 10.0) {
+            return Err(format!(
+                "key 'initialisation.blank_radius_deg': must lie in [0, 10] degrees, found {}",
+                i.blank_radius_deg
             ));
         }
         at_least(

@@ -563,6 +563,7 @@ mod tests {
 
     fn cand(x: f64, score: f64, inliers: usize) -> Candidate {
         Candidate {
+            blank: 0.0,
             pose: Pose::from_parts(Translation3::new(x, 0.0, 0.0), UnitQuaternion::identity()),
             score,
             inliers,

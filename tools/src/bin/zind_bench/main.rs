@@ -515,8 +515,8 @@ fn diagnose(
             let (dp, dr) = err(&c.pose);
             let _ = write!(
                 line,
-                "  polished: {dp:.3} m {dr:.2}° explained {:.2} support {:.2}",
-                c.explained, c.support
+                "  polished: {dp:.3} m {dr:.2}° explained {:.2} support {:.2} blank {:.2}",
+                c.explained, c.support, c.blank
             );
         }
         None => line.push_str("  polished: none"),
@@ -551,10 +551,11 @@ fn diagnose(
             }
             let _ = write!(
                 line,
-                " [{dp:.2} m {dr:.1}° z {:.2} expl {:.2} sup {:.2} soft {:.2}]",
+                " [{dp:.2} m {dr:.1}° z {:.2} expl {:.2} sup {:.2} blank {:.2} soft {:.2}]",
                 c.pose.translation.vector.z,
                 c.explained,
                 c.support,
+                c.blank,
                 1.0 - c.score / cap2
             );
         }
