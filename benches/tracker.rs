@@ -11,7 +11,10 @@
 //! 1: the same recording tracked by another draw), `--verbose` (one line
 //! per frame), `--upright` (KT §5.4 mode for the rolling scenarios), `--no-hint` (search the
 //! whole model instead of a 3 m volume around the first ground-truth pose), `--config tracker.toml`,
-//! `--rig RIG.toml` (render and track with another rig: `tools/rigs/` has examples).
+//! `--rig RIG.toml` (render and track with another rig: `tools/rigs/` has examples),
+//! `--appearance realistic` (render with `Appearance::realistic()`: floorboards, trims, built-ins,
+//! closed doors, walls a few cm off the model, blur and JPEG — the world of the real photos,
+//! issue 19; cached apart from the default renders).
 //!
 //! It first reproduces Koch–Teller Figure 15 as a table (`--no-figure15` skips it).
 //!
@@ -69,6 +72,7 @@ mod bench {
         figure15: bool,
         init_trials: usize,
         tracker_seed: u64,
+        realistic: bool,
     }
 
     fn args() -> Args {
@@ -85,6 +89,7 @@ mod bench {
             figure15: true,
             init_trials: 0,
             tracker_seed: 1,
+            realistic: false,
         };
         let mut it = std::env::args().skip(1);
         while let Some(x) = it.next() {
@@ -101,6 +106,11 @@ mod bench {
                 "--config" => a.config = it.next().map(PathBuf::from),
                 "--rig" => a.rig = Some(it.next().map(PathBuf::from).expect("--rig RIG.toml")),
                 "--no-figure15" => a.figure15 = false,
+                "--appearance" => match it.next().as_deref() {
+                    Some("realistic") => a.realistic = true,
+                    Some("default") => a.realistic = false,
+                    other => panic!("--appearance default|realistic, not {other:?}"),
+                },
                 "--tracker-seed" => a.tracker_seed = it.next().and_then(|s| s.parse().ok()).expect("--tracker-seed S"),
                 "--init-trials" => a.init_trials = it.next().and_then(|s| s.parse().ok()).expect("--init-trials N"),
                 _ => {}
@@ -389,10 +399,19 @@ mod bench {
             }
         };
         // Recordings of other rigs are cached apart from the shipped rig's.
-        let label = match &a.rig {
+        let mut label = match &a.rig {
             None => "default".to_string(),
             Some(_) => format!("rig-{}", rig.name),
         };
+        let mut options = RecordingOptions::default();
+        if a.realistic {
+            label = if a.rig.is_some() {
+                format!("{label}-realistic")
+            } else {
+                "realistic".to_string()
+            };
+            options.appearance = omnitrack::desk::render::Appearance::realistic();
+        }
         println!(
             "| scenario | frames | tracked | re-inits (relocalised) | ATE pos RMSE / max (cm) | ATE rot RMSE / max (°) | init (ms) | frame p50 / p99 / max (ms) | frames/s |"
         );
@@ -410,7 +429,7 @@ mod bench {
                 a.seed,
                 &label,
                 &rig,
-                &RecordingOptions::default(),
+                &options,
                 |d, t| eprint!("\rrendering {name}: {d}/{t}"),
             )
             .unwrap();
@@ -461,6 +480,9 @@ mod bench {
             let mut rot_err = Vec::new();
             let mut latency = Vec::new();
             let mut busy = Duration::ZERO;
+            // Commits (initial or after a loss), those > 30 cm or 3° off the truth, and frames
+            // whose pose is that far off: a tracker may say "no pose", not give a wrong one.
+            let (mut commits, mut wrong_commits, mut wrong_frames) = (0usize, 0usize, 0usize);
             let verbose = a.verbose;
             let stats = track(&mut source, &model, &table, &cfg, &opts, &mut |r, tracker| {
                 busy += r.frame_time;
@@ -512,6 +534,12 @@ mod bench {
                     }
                     _ => None,
                 };
+                let wrong = err.is_some_and(|(dp, dr)| dp > 0.3 || dr > 3.0);
+                wrong_frames += usize::from(wrong);
+                if let Some(TrackerEvent::Committed { .. }) = r.result.event {
+                    commits += 1;
+                    wrong_commits += usize::from(wrong);
+                }
                 if verbose {
                     let r2 = &r.result;
                     eprintln!(
@@ -590,6 +618,9 @@ mod bench {
             eprintln!(
                 "{name}: {} solves far from the prediction replaced by a second opinion",
                 stats.second_opinions
+            );
+            eprintln!(
+                "{name}: {commits} commits, {wrong_commits} wrong (> 30 cm or 3° off the truth); {wrong_frames} frames with a pose that far off"
             );
         }
     }

@@ -262,7 +262,10 @@ impl Renderer {
                 }
             }
         });
-        let image = RgbImage::from_raw(w as u32, h as u32, buf).expect("buffer sized to the image");
+        let mut image = RgbImage::from_raw(w as u32, h as u32, buf).expect("buffer sized to the image");
+        if self.appearance.blur_px > 0.0 {
+            image = gaussian_blur(&image, self.appearance.blur_px);
+        }
         if self.appearance.jpeg_quality > 0 {
             jpeg_round_trip(&image, self.appearance.jpeg_quality)
         } else {
@@ -463,4 +466,42 @@ fn pattern_factor(pattern: &Pattern, p: [f32; 3], n: [f32; 3], foot: f32, seed: 
             shade * (1.0 - 0.7 * line_cover(b, PITCH, 0.003, foot))
         }
     }
+}
+
+/// `image` blurred by a Gaussian of standard deviation `sigma_px` (separable, kernel to 3σ,
+/// edges clamped).
+pub fn gaussian_blur(image: &RgbImage, sigma_px: f64) -> RgbImage {
+    let r = (3.0 * sigma_px).ceil().max(1.0) as i64;
+    let kernel: Vec<f32> = (-r..=r)
+        .map(|i| (-(i * i) as f64 / (2.0 * sigma_px * sigma_px)).exp() as f32)
+        .collect();
+    let sum: f32 = kernel.iter().sum();
+    let kernel: Vec<f32> = kernel.iter().map(|k| k / sum).collect();
+    let (w, h) = (image.width() as i64, image.height() as i64);
+    let src: Vec<f32> = image.as_raw().iter().map(|&b| f32::from(b)).collect();
+    let pass = |src: &[f32], horizontal: bool| -> Vec<f32> {
+        let mut out = vec![0.0f32; src.len()];
+        out.par_chunks_mut((w * 3) as usize).enumerate().for_each(|(y, row)| {
+            for x in 0..w {
+                let mut acc = [0.0f32; 3];
+                for (k, wgt) in kernel.iter().enumerate() {
+                    let d = k as i64 - r;
+                    let (sx, sy) = if horizontal {
+                        ((x + d).clamp(0, w - 1), y as i64)
+                    } else {
+                        (x, (y as i64 + d).clamp(0, h - 1))
+                    };
+                    let i = ((sy * w + sx) * 3) as usize;
+                    for c in 0..3 {
+                        acc[c] += wgt * src[i + c];
+                    }
+                }
+                row[(x * 3) as usize..(x * 3 + 3) as usize].copy_from_slice(&acc);
+            }
+        });
+        out
+    };
+    let blurred = pass(&pass(&src, true), false);
+    let bytes = blurred.iter().map(|v| v.round().clamp(0.0, 255.0) as u8).collect();
+    RgbImage::from_raw(w as u32, h as u32, bytes).expect("same size")
 }

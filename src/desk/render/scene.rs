@@ -285,7 +285,19 @@ fn surface_colour(kind: SurfaceKind, index: usize, appearance: &Appearance) -> [
         SurfaceKind::WindowReveal => (0.65, 0.70 + 0.25 * var),
         _ => (0.45, 0.50 + 0.40 * var),
     };
-    hsv(hue, (s * appearance.colour).clamp(0.0, 1.0), v)
+    let own = hsv(hue, (s * appearance.colour).clamp(0.0, 1.0), v);
+    let p = appearance.paint.clamp(0.0, 1.0) as f32;
+    if p == 0.0 {
+        return own;
+    }
+    let sat = appearance.colour.clamp(0.0, 1.0);
+    let paint = match kind {
+        SurfaceKind::Wall | SurfaceKind::DoorReveal | SurfaceKind::WindowReveal => hsv(0.11, 0.10 * sat, 0.86),
+        SurfaceKind::Ceiling => hsv(0.11, 0.04 * sat, 0.93),
+        SurfaceKind::Floor => hsv(0.07, 0.50 * sat, 0.50),
+        _ => own,
+    };
+    [0, 1, 2].map(|k| (1.0 - p) * own[k] + p * paint[k])
 }
 
 fn add(a: [f64; 3], b: [f64; 3], s: f64) -> [f64; 3] {
@@ -355,6 +367,17 @@ fn floor_pattern(axis: [f32; 2], index: usize, appearance: &Appearance) -> Patte
     } else {
         Pattern::Boards { axis: along, contrast }
     }
+}
+
+/// A furnishing colour muted by `Appearance::paint`: real furniture is mostly wood, grey and
+/// beige, not the saturated hues that tell synthetic boxes apart.
+fn muted(colour: [f32; 3], appearance: &Appearance) -> [f32; 3] {
+    let p = 0.7 * appearance.paint.clamp(0.0, 1.0) as f32;
+    if p == 0.0 {
+        return colour;
+    }
+    let grey = 0.3 * colour[0] + 0.59 * colour[1] + 0.11 * colour[2];
+    colour.map(|c| (1.0 - p) * c + p * grey)
 }
 
 /// The building's main horizontal direction: that of its longest horizontal segment.
@@ -513,7 +536,7 @@ impl Scene {
             );
             surfaces.push(Surface {
                 kind: SurfaceKind::Furniture,
-                colour,
+                colour: muted(colour, appearance),
                 pattern: grain,
             });
             let before = triangles.len();
@@ -617,7 +640,7 @@ impl Scene {
             );
             surfaces.push(Surface {
                 kind: SurfaceKind::Shelf,
-                colour,
+                colour: muted(colour, appearance),
                 pattern: grain,
             });
             let before = triangles.len();
