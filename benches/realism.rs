@@ -48,43 +48,8 @@ mod bench {
         sorted[((sorted.len() - 1) as f64 * q).round() as usize]
     }
 
-    /// A named appearance, with `+field=value` overrides (`realistic+paint=1+clutter=2`), for
-    /// calibrating the preset.
     fn appearance(spec: &str) -> Appearance {
-        let mut parts = spec.split('+');
-        let mut a = match parts.next().unwrap_or_default() {
-            "default" => Appearance::default(),
-            "realistic" => Appearance::realistic(),
-            "plain" => Appearance::plain(),
-            _ => fail(&format!(
-                "--appearance {spec}: default, realistic or plain, then +field=value"
-            )),
-        };
-        for part in parts {
-            let (field, v) = part
-                .split_once('=')
-                .unwrap_or_else(|| fail(&format!("{part}: field=value")));
-            let x: f64 = v.parse().unwrap_or_else(|_| fail(&format!("{part}: not a number")));
-            match field {
-                "texture" => a.texture = x,
-                "clutter" => a.clutter = x,
-                "people" => a.people = x,
-                "paint" => a.paint = x,
-                "floor_pattern" => a.floor_pattern = x,
-                "clutter_texture" => a.clutter_texture = x,
-                "trims" => a.trims = x,
-                "built_ins" => a.built_ins = x,
-                "closed_doors" => a.closed_doors = x,
-                "blinds" => a.blinds = x,
-                "wall_offset_m" => a.wall_offset_m = x,
-                "jpeg_quality" => a.jpeg_quality = x as u8,
-                "lens_falloff" => a.lens_falloff = x,
-                "noise" => a.noise = x,
-                "blur_px" => a.blur_px = x,
-                _ => fail(&format!("{field}: not a level this bench sets")),
-            }
-        }
-        a
+        Appearance::from_spec(spec).unwrap_or_else(|e| fail(&format!("--appearance {e}")))
     }
 
     /// Angle of `r` along the plane with unit normal `n`, from `e1` (in the plane).

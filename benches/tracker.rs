@@ -14,7 +14,8 @@
 //! `--rig RIG.toml` (render and track with another rig: `tools/rigs/` has examples),
 //! `--appearance realistic` (render with `Appearance::realistic()`: floorboards, trims, built-ins,
 //! closed doors, walls a few cm off the model, blur and JPEG — the world of the real photos,
-//! issue 19; cached apart from the default renders).
+//! issue 19; cached apart from the default renders; any `Appearance::from_spec` spec works, e.g.
+//! `realistic+blur_px=0` to see what one effect does).
 //!
 //! It first reproduces Koch–Teller Figure 15 as a table (`--no-figure15` skips it).
 //!
@@ -72,7 +73,7 @@ mod bench {
         figure15: bool,
         init_trials: usize,
         tracker_seed: u64,
-        realistic: bool,
+        appearance: Option<String>,
     }
 
     fn args() -> Args {
@@ -89,7 +90,7 @@ mod bench {
             figure15: true,
             init_trials: 0,
             tracker_seed: 1,
-            realistic: false,
+            appearance: None,
         };
         let mut it = std::env::args().skip(1);
         while let Some(x) = it.next() {
@@ -106,11 +107,10 @@ mod bench {
                 "--config" => a.config = it.next().map(PathBuf::from),
                 "--rig" => a.rig = Some(it.next().map(PathBuf::from).expect("--rig RIG.toml")),
                 "--no-figure15" => a.figure15 = false,
-                "--appearance" => match it.next().as_deref() {
-                    Some("realistic") => a.realistic = true,
-                    Some("default") => a.realistic = false,
-                    other => panic!("--appearance default|realistic, not {other:?}"),
-                },
+                "--appearance" => {
+                    let spec = it.next().expect("--appearance SPEC");
+                    a.appearance = (spec != "default").then_some(spec);
+                }
                 "--tracker-seed" => a.tracker_seed = it.next().and_then(|s| s.parse().ok()).expect("--tracker-seed S"),
                 "--init-trials" => a.init_trials = it.next().and_then(|s| s.parse().ok()).expect("--init-trials N"),
                 _ => {}
@@ -404,13 +404,17 @@ mod bench {
             Some(_) => format!("rig-{}", rig.name),
         };
         let mut options = RecordingOptions::default();
-        if a.realistic {
+        if let Some(spec) = &a.appearance {
+            options.appearance = omnitrack::desk::render::Appearance::from_spec(spec).unwrap_or_else(|e| {
+                eprintln!("--appearance {e}");
+                std::process::exit(2);
+            });
+            // The spec names the recording: `realistic` for the preset the README quotes.
             label = if a.rig.is_some() {
-                format!("{label}-realistic")
+                format!("{label}-{spec}")
             } else {
-                "realistic".to_string()
+                spec.clone()
             };
-            options.appearance = omnitrack::desk::render::Appearance::realistic();
         }
         println!(
             "| scenario | frames | tracked | re-inits (relocalised) | ATE pos RMSE / max (cm) | ATE rot RMSE / max (°) | init (ms) | frame p50 / p99 / max (ms) | frames/s |"
@@ -483,6 +487,7 @@ mod bench {
             // Commits (initial or after a loss), those > 30 cm or 3° off the truth, and frames
             // whose pose is that far off: a tracker may say "no pose", not give a wrong one.
             let (mut commits, mut wrong_commits, mut wrong_frames) = (0usize, 0usize, 0usize);
+            let (mut relocs, mut wrong_relocs) = (0usize, 0usize);
             let verbose = a.verbose;
             let stats = track(&mut source, &model, &table, &cfg, &opts, &mut |r, tracker| {
                 busy += r.frame_time;
@@ -536,9 +541,16 @@ mod bench {
                 };
                 let wrong = err.is_some_and(|(dp, dr)| dp > 0.3 || dr > 3.0);
                 wrong_frames += usize::from(wrong);
-                if let Some(TrackerEvent::Committed { .. }) = r.result.event {
-                    commits += 1;
-                    wrong_commits += usize::from(wrong);
+                match r.result.event {
+                    Some(TrackerEvent::Committed { .. }) => {
+                        commits += 1;
+                        wrong_commits += usize::from(wrong);
+                    }
+                    Some(TrackerEvent::Relocalised) => {
+                        relocs += 1;
+                        wrong_relocs += usize::from(wrong);
+                    }
+                    _ => {}
                 }
                 if verbose {
                     let r2 = &r.result;
@@ -620,7 +632,8 @@ mod bench {
                 stats.second_opinions
             );
             eprintln!(
-                "{name}: {commits} commits, {wrong_commits} wrong (> 30 cm or 3° off the truth); {wrong_frames} frames with a pose that far off"
+                "{name}: {commits} commits ({wrong_commits} wrong: > 30 cm or 3° off the truth), {relocs} relocalisations \
+({wrong_relocs} wrong); {wrong_frames} frames with a pose that far off"
             );
         }
     }
