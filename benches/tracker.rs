@@ -11,7 +11,11 @@
 //! 1: the same recording tracked by another draw), `--verbose` (one line
 //! per frame), `--upright` (KT §5.4 mode for the rolling scenarios), `--no-hint` (search the
 //! whole model instead of a 3 m volume around the first ground-truth pose), `--config tracker.toml`,
-//! `--rig RIG.toml` (render and track with another rig: `tools/rigs/` has examples).
+//! `--rig RIG.toml` (render and track with another rig: `tools/rigs/` has examples),
+//! `--appearance realistic` (render with `Appearance::realistic()`: floorboards, trims, built-ins,
+//! closed doors, walls a few cm off the model, blur and JPEG — the world of the real photos,
+//! issue 19; cached apart from the default renders; any `Appearance::from_spec` spec works, e.g.
+//! `realistic+blur_px=0` to see what one effect does).
 //!
 //! It first reproduces Koch–Teller Figure 15 as a table (`--no-figure15` skips it).
 //!
@@ -69,6 +73,7 @@ mod bench {
         figure15: bool,
         init_trials: usize,
         tracker_seed: u64,
+        appearance: Option<String>,
     }
 
     fn args() -> Args {
@@ -85,6 +90,7 @@ mod bench {
             figure15: true,
             init_trials: 0,
             tracker_seed: 1,
+            appearance: None,
         };
         let mut it = std::env::args().skip(1);
         while let Some(x) = it.next() {
@@ -101,6 +107,10 @@ mod bench {
                 "--config" => a.config = it.next().map(PathBuf::from),
                 "--rig" => a.rig = Some(it.next().map(PathBuf::from).expect("--rig RIG.toml")),
                 "--no-figure15" => a.figure15 = false,
+                "--appearance" => {
+                    let spec = it.next().expect("--appearance SPEC");
+                    a.appearance = (spec != "default").then_some(spec);
+                }
                 "--tracker-seed" => a.tracker_seed = it.next().and_then(|s| s.parse().ok()).expect("--tracker-seed S"),
                 "--init-trials" => a.init_trials = it.next().and_then(|s| s.parse().ok()).expect("--init-trials N"),
                 _ => {}
@@ -389,10 +399,23 @@ mod bench {
             }
         };
         // Recordings of other rigs are cached apart from the shipped rig's.
-        let label = match &a.rig {
+        let mut label = match &a.rig {
             None => "default".to_string(),
             Some(_) => format!("rig-{}", rig.name),
         };
+        let mut options = RecordingOptions::default();
+        if let Some(spec) = &a.appearance {
+            options.appearance = omnitrack::desk::render::Appearance::from_spec(spec).unwrap_or_else(|e| {
+                eprintln!("--appearance {e}");
+                std::process::exit(2);
+            });
+            // The spec names the recording: `realistic` for the preset the README quotes.
+            label = if a.rig.is_some() {
+                format!("{label}-{spec}")
+            } else {
+                spec.clone()
+            };
+        }
         println!(
             "| scenario | frames | tracked | re-inits (relocalised) | ATE pos RMSE / max (cm) | ATE rot RMSE / max (°) | init (ms) | frame p50 / p99 / max (ms) | frames/s |"
         );
@@ -410,7 +433,7 @@ mod bench {
                 a.seed,
                 &label,
                 &rig,
-                &RecordingOptions::default(),
+                &options,
                 |d, t| eprint!("\rrendering {name}: {d}/{t}"),
             )
             .unwrap();
@@ -461,6 +484,10 @@ mod bench {
             let mut rot_err = Vec::new();
             let mut latency = Vec::new();
             let mut busy = Duration::ZERO;
+            // Commits (initial or after a loss), those > 30 cm or 3° off the truth, and frames
+            // whose pose is that far off: a tracker may say "no pose", not give a wrong one.
+            let (mut commits, mut wrong_commits, mut wrong_frames) = (0usize, 0usize, 0usize);
+            let (mut relocs, mut wrong_relocs) = (0usize, 0usize);
             let verbose = a.verbose;
             let stats = track(&mut source, &model, &table, &cfg, &opts, &mut |r, tracker| {
                 busy += r.frame_time;
@@ -512,6 +539,19 @@ mod bench {
                     }
                     _ => None,
                 };
+                let wrong = err.is_some_and(|(dp, dr)| dp > 0.3 || dr > 3.0);
+                wrong_frames += usize::from(wrong);
+                match r.result.event {
+                    Some(TrackerEvent::Committed { .. }) => {
+                        commits += 1;
+                        wrong_commits += usize::from(wrong);
+                    }
+                    Some(TrackerEvent::Relocalised) => {
+                        relocs += 1;
+                        wrong_relocs += usize::from(wrong);
+                    }
+                    _ => {}
+                }
                 if verbose {
                     let r2 = &r.result;
                     eprintln!(
@@ -590,6 +630,10 @@ mod bench {
             eprintln!(
                 "{name}: {} solves far from the prediction replaced by a second opinion",
                 stats.second_opinions
+            );
+            eprintln!(
+                "{name}: {commits} commits ({wrong_commits} wrong: > 30 cm or 3° off the truth), {relocs} relocalisations \
+({wrong_relocs} wrong); {wrong_frames} frames with a pose that far off"
             );
         }
     }

@@ -455,3 +455,156 @@ fn clutter_and_people_are_in_the_images_only() {
         assert!(r.cast(&keep[0], &d).unwrap().t > 0.6);
     }
 }
+
+/// A small two-pinhole rig, cheap to render in a test: up at the ceiling and 45° off it or,
+/// with `level`, level and 45° down at the floor.
+fn small_rig(level: bool) -> Rig {
+    let (first, tilt) = if level {
+        (
+            "0.7071067811865476, 0.7071067811865476",
+            "0.38268343236508984, 0.9238795325112867",
+        )
+    } else {
+        ("1.0, 0.0", "0.9238795325112867, 0.3826834323650898")
+    };
+    let text = "name = \"small\"\n\n[[sensors]]\nid = 0\nresolution = [160, 120]\nmodel = \"pinhole\"\n\
+intrinsics = [90.0, 90.0, 79.5, 59.5]\nrotation_wxyz = [FIRST, 0.0, 0.0]\ntranslation_m = [0.0, 0.0, 0.0]\n\n\
+[[sensors]]\nid = 1\nresolution = [160, 120]\nmodel = \"pinhole\"\nintrinsics = [90.0, 90.0, 79.5, 59.5]\n\
+rotation_wxyz = [TILT, 0.0, 0.0]\ntranslation_m = [0.0, 0.0, 0.0]\n"
+        .replace("FIRST", first)
+        .replace("TILT", tilt);
+    Rig::from_toml_str(&text, "small rig").unwrap()
+}
+
+/// FNV-1a over the bytes: a fingerprint of an image.
+fn fingerprint(bytes: &[u8]) -> u64 {
+    bytes.iter().fold(0xCBF2_9CE4_8422_2325u64, |h, &b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01B3)
+    })
+}
+
+/// The lab, a pose of its tour, and the keep-out points of that tour.
+fn lab_at(frame_index: usize) -> (Model, Isometry3<f64>, Vec<Point3<f64>>) {
+    use omnitrack::desk::scenario::{Scenario, ScenarioName};
+    let scenario = Scenario::get(ScenarioName::Lab);
+    let model = Model::from_obj_str(&scenario.model_obj().unwrap(), "lab.obj").unwrap();
+    let tour = scenario.trajectory(40, 11);
+    let keep = tour.iter().map(|s| Point3::from(s.pose.translation.vector)).collect();
+    (model, tour[frame_index].pose, keep)
+}
+
+/// `Appearance::default()` renders byte for byte what it rendered before the realism levels of
+/// issue 19 existed (fingerprints taken from that code): every level is off at 0, so the
+/// recordings and figures made with it stay valid.
+#[test]
+fn default_appearance_renders_as_before_the_realism_levels() {
+    let (model, pose, keep) = lab_at(25);
+    let r = Renderer::new(&model, &small_rig(false), Appearance::default(), &keep);
+    let images = r.render_frame(&frame(25, pose));
+    let prints: Vec<u64> = images.iter().map(|i| fingerprint(i.as_raw())).collect();
+    eprintln!("fingerprints {prints:x?}");
+    assert_eq!(prints, GOLDEN_DEFAULT);
+}
+
+const GOLDEN_DEFAULT: [u64; 2] = [0x84ac_c14d_3d72_f65f, 0xd36f_5782_08c6_82b7];
+
+/// A JPEG round trip keeps the image's size and roughly its values, but changes pixels.
+#[test]
+fn jpeg_round_trip_degrades_but_keeps_the_image() {
+    use omnitrack::desk::render::jpeg_round_trip;
+    let img = image::RgbImage::from_fn(70, 45, |x, y| {
+        if x * 3 + y > 90 {
+            image::Rgb([200, 180, 60])
+        } else {
+            image::Rgb([30, 60, (x * 3) as u8])
+        }
+    });
+    let out = jpeg_round_trip(&img, 60);
+    assert_eq!(out.dimensions(), img.dimensions());
+    let diffs: Vec<i32> = img
+        .as_raw()
+        .iter()
+        .zip(out.as_raw())
+        .map(|(&a, &b)| (i32::from(a) - i32::from(b)).abs())
+        .collect();
+    assert!(diffs.iter().any(|&d| d > 0), "no pixel changed");
+    let mean = diffs.iter().sum::<i32>() as f64 / diffs.len() as f64;
+    assert!(mean < 8.0, "mean change {mean}");
+}
+
+/// Each realism level, turned on alone over Default, changes the lab's render (each is wired
+/// to something the rig sees), and the realistic preset changes most of it.
+#[test]
+fn each_realism_level_changes_the_render() {
+    let (model, pose, keep) = lab_at(25);
+    let rig = small_rig(true);
+    let render = |a: Appearance| {
+        let r = Renderer::new(&model, &rig, a, &keep);
+        r.render_frame(&frame(25, pose))
+    };
+    let base = render(Appearance::default());
+    if let Some(dir) = std::env::var_os("OMNITRACK_TEST_PNG") {
+        for (k, img) in base.iter().chain(render(Appearance::realistic()).iter()).enumerate() {
+            img.save(Path::new(&dir).join(format!("small{k}.png"))).unwrap();
+        }
+    }
+    let changed = |a: Appearance| {
+        let imgs = render(a);
+        imgs.iter()
+            .zip(&base)
+            .map(|(x, y)| x.as_raw().iter().zip(y.as_raw()).filter(|(p, q)| p != q).count())
+            .sum::<usize>()
+    };
+    let d = Appearance::default;
+    let levels = [
+        (
+            "floor_pattern",
+            Appearance {
+                floor_pattern: 1.0,
+                ..d()
+            },
+        ),
+        (
+            "clutter_texture",
+            Appearance {
+                clutter_texture: 1.0,
+                ..d()
+            },
+        ),
+        ("trims", Appearance { trims: 1.0, ..d() }),
+        (
+            "wall_offset_m",
+            Appearance {
+                wall_offset_m: 0.03,
+                ..d()
+            },
+        ),
+        (
+            "jpeg_quality",
+            Appearance {
+                jpeg_quality: 85,
+                ..d()
+            },
+        ),
+        (
+            "lens_falloff",
+            Appearance {
+                lens_falloff: 0.5,
+                ..d()
+            },
+        ),
+        ("paint", Appearance { paint: 0.8, ..d() }),
+        ("blur_px", Appearance { blur_px: 1.5, ..d() }),
+    ];
+    let mut most = 0;
+    for (name, a) in levels {
+        let n = changed(a);
+        eprintln!("{name}: {n} bytes changed");
+        assert!(n > 0, "{name} changed nothing");
+        most = most.max(n);
+    }
+    let all = changed(Appearance::realistic());
+    let bytes: usize = base.iter().map(|i| i.as_raw().len()).sum();
+    assert!(all > bytes / 2, "realistic changed {all} of {bytes} bytes");
+    assert!(most > 0);
+}

@@ -4,7 +4,9 @@
 //! In: a rig, the model's OBJ text, a trajectory (`T_world_rig` per frame) and
 //! [`RecordingOptions`]. Out: `REC/rig.toml`, `REC/frames.csv`, `REC/sensorK/NNNNNN.png`,
 //! `REC/groundtruth.tum`, `REC/model.obj`, and a [`RecordingSummary`]. Every error is one line
-//! naming the path.
+//! naming the path. The images are the renderer's, already through JPEG when the appearance asks
+//! for it (`Appearance::jpeg_quality`), then stored losslessly; `model.obj` is the model as
+//! given, whatever the appearance displaced or added in the images.
 
 use crate::desk::render::{Appearance, FrameSpec, Renderer};
 use crate::model::Model;

@@ -9,16 +9,20 @@
 //! pixel's area and is averaged, as a real pixel integrates light (no aliased edges). Rays are
 //! cast into a [`Scene`]: the model's faces ear-clipped into triangles in a binned-SAH
 //! [`crate::model::bvh::Bvh`], plus clutter and people that exist only in the images (never in
-//! the model). Rows are rendered in parallel (rayon). Output is a pure function of model, rig,
-//! appearance (with its seed), keep-out points and frame: byte-identical on rerun.
+//! the model). Rows are rendered in parallel (rayon). Surfaces carry value-noise texture and a
+//! structured [`Pattern`] (floorboards, tiles, grain, stripes, slats); with
+//! `Appearance::jpeg_quality` each image goes through a JPEG encoder and decoder last, as a real
+//! camera's would. Output is a pure function of model, rig, appearance (with its seed),
+//! keep-out points and frame: byte-identical on rerun.
 
 pub mod appearance;
+pub mod fixtures;
 pub mod scene;
 
 pub use crate::model::bvh::{brute_force_closest, model_triangles, Aabb, Bvh, Ray, Triangle, TriangleBvh};
 pub use crate::model::triangulate::{ear_clip, triangulate_polygon};
 pub use appearance::Appearance;
-pub use scene::{Person, Scene, Surface, SurfaceKind};
+pub use scene::{Pattern, Person, Scene, Surface, SurfaceKind};
 
 use crate::geometry::Pose;
 use crate::model::Model;
@@ -70,6 +74,9 @@ pub struct Renderer {
     scene: Scene,
     appearance: Appearance,
     sensors: Vec<SensorRays>,
+    /// Angle one pixel spans (rad, the finest of the sensors'): the footprint patterns are
+    /// filtered over.
+    pixel_rad: f32,
 }
 
 #[inline]
@@ -101,7 +108,13 @@ impl Renderer {
                         let px = Point2::new(u as f64 + off(sub % n), v as f64 + off(sub / n));
                         if let (Some(r), Some(rs)) = (s.ray_in_rig(&px), s.lens.unproject(&px)) {
                             let theta = rs.z.clamp(-1.0, 1.0).acos() / theta_max;
-                            let vig = (1.0 - appearance.vignetting * theta * theta).max(0.0);
+                            let mut vig = (1.0 - appearance.vignetting * theta * theta).max(0.0);
+                            if appearance.lens_falloff > 0.0 {
+                                let c = (theta * std::f64::consts::FRAC_PI_3)
+                                    .min(std::f64::consts::FRAC_PI_2)
+                                    .cos();
+                                vig *= 1.0 - appearance.lens_falloff + appearance.lens_falloff * c.powi(4);
+                            }
                             *out = [r.x as f32, r.y as f32, r.z as f32, vig as f32];
                         }
                     }
@@ -112,10 +125,16 @@ impl Renderer {
                 }
             })
             .collect();
+        let pixel_rad = rig
+            .sensors
+            .iter()
+            .map(|s| s.max_off_axis() / (0.5 * f64::from(s.width).hypot(f64::from(s.height))).max(1.0))
+            .fold(f64::INFINITY, f64::min);
         Renderer {
             scene,
             appearance,
             sensors,
+            pixel_rad: if pixel_rad.is_finite() { pixel_rad as f32 } else { 1e-3 },
         }
     }
 
@@ -243,7 +262,15 @@ impl Renderer {
                 }
             }
         });
-        RgbImage::from_raw(w as u32, h as u32, buf).expect("buffer sized to the image")
+        let mut image = RgbImage::from_raw(w as u32, h as u32, buf).expect("buffer sized to the image");
+        if self.appearance.blur_px > 0.0 {
+            image = gaussian_blur(&image, self.appearance.blur_px);
+        }
+        if self.appearance.jpeg_quality > 0 {
+            jpeg_round_trip(&image, self.appearance.jpeg_quality)
+        } else {
+            image
+        }
     }
 
     /// Linear colour seen along a unit ray.
@@ -262,7 +289,7 @@ impl Renderer {
                 sample.people[slot as usize].intersect(ray, 1e-4, tb)
             })
         };
-        let (t, base, normal, tex_seed) = if let Some((slot, t)) = person {
+        let (t, base, normal, tex_seed, pattern) = if let Some((slot, t)) = person {
             let p = &sample.people[slot as usize];
             let pt = ray.at(t);
             let person = &self.scene.people[p.index as usize];
@@ -274,7 +301,7 @@ impl Renderer {
             } else {
                 2
             }];
-            (t, colour, p.normal(pt), 0xFFFF_0000 ^ p.index)
+            (t, colour, p.normal(pt), 0xFFFF_0000 ^ p.index, Pattern::None)
         } else if let Some((slot, t)) = hit {
             let tri = &geo.triangles[slot as usize];
             let sid = geo.payload[slot as usize];
@@ -284,12 +311,8 @@ impl Renderer {
                 tri.e1[0] * tri.e2[1] - tri.e1[1] * tri.e2[0],
             ];
             let l = dot(n, n).sqrt().max(1e-30);
-            (
-                t,
-                self.scene.surfaces[sid as usize].colour,
-                [n[0] / l, n[1] / l, n[2] / l],
-                sid,
-            )
+            let surface = &self.scene.surfaces[sid as usize];
+            (t, surface.colour, [n[0] / l, n[1] / l, n[2] / l], sid, surface.pattern)
         } else {
             let s = ray.dir[2].clamp(0.0, 1.0);
             return [0, 1, 2].map(|k| SKY_LOW[k] + (SKY_TOP[k] - SKY_LOW[k]) * s);
@@ -301,6 +324,13 @@ impl Renderer {
             let n1 = value_noise([p[0] * 2.9, p[1] * 2.9, p[2] * 2.9], seed);
             let n2 = value_noise([p[0] * 11.0, p[1] * 11.0, p[2] * 11.0], seed ^ 0x55);
             brightness *= 1.0 + a.texture as f32 * (1.4 * (n1 - 0.5) + 0.6 * (n2 - 0.5)) * 2.0;
+        }
+        if pattern != Pattern::None {
+            let p = ray.at(t);
+            let cos = dot(normal, ray.dir).abs().max(0.15);
+            let foot = t * self.pixel_rad / cos;
+            let seed = hash64(a.seed ^ u64::from(tex_seed).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+            brightness *= pattern_factor(&pattern, p, normal, foot, seed);
         }
         if a.shading > 0.0 {
             // Normal towards the viewer (faces are two-sided).
@@ -330,4 +360,148 @@ impl Renderer {
         }
         base.map(|c| c * brightness)
     }
+}
+
+/// `image` encoded as JPEG at `quality` (1–100) and decoded again: what a camera or photo set
+/// delivering JPEG does to it (8×8 blocks, ringing, chroma loss).
+pub fn jpeg_round_trip(image: &RgbImage, quality: u8) -> RgbImage {
+    let mut bytes = Vec::new();
+    let encoded =
+        image::codecs::jpeg::JpegEncoder::new_with_quality(&mut bytes, quality.clamp(1, 100)).encode_image(image);
+    // Encoding into memory fails only on an empty image, which has nothing to degrade.
+    if encoded.is_err() {
+        return image.clone();
+    }
+    match image::load_from_memory_with_format(&bytes, image::ImageFormat::Jpeg) {
+        Ok(decoded) => decoded.to_rgb8(),
+        Err(_) => image.clone(),
+    }
+}
+
+/// Share of a window `foot` wide centred at `x` that lines `width` wide centred on the
+/// multiples of `period` cover: a line seen through a pixel of that footprint.
+#[inline]
+fn line_cover(x: f32, period: f32, width: f32, foot: f32) -> f32 {
+    if foot >= period {
+        return (width / period).min(1.0);
+    }
+    let k = (x / period).round();
+    let mut c = 0.0;
+    for j in [k - 1.0, k, k + 1.0] {
+        let centre = j * period;
+        let lo = (x - 0.5 * foot).max(centre - 0.5 * width);
+        let hi = (x + 0.5 * foot).min(centre + 0.5 * width);
+        c += (hi - lo).max(0.0);
+    }
+    (c / foot.max(1e-6)).min(1.0)
+}
+
+/// Uniform in [0, 1) from a hash of a seed and two cell indices.
+#[inline]
+fn cell_unit(seed: u64, i: f32, j: f32) -> f32 {
+    let h = hash64(seed ^ hash64((i as i64 as u64) ^ (j as i64 as u64).rotate_left(32)));
+    (h >> 40) as f32 / (1u64 << 24) as f32
+}
+
+/// Brightness factor of `pattern` at world point `p` on a surface with unit normal `n`, seen
+/// through a pixel whose footprint there is `foot` metres.
+fn pattern_factor(pattern: &Pattern, p: [f32; 3], n: [f32; 3], foot: f32, seed: u64) -> f32 {
+    // In-plane coordinates: `a` horizontal along the surface, `b` up it (across, if horizontal).
+    let in_plane = || {
+        let h = if n[2].abs() < 0.9 {
+            let l = (n[0] * n[0] + n[1] * n[1]).sqrt();
+            [-n[1] / l, n[0] / l, 0.0]
+        } else {
+            [1.0, 0.0, 0.0]
+        };
+        let a = dot(p, h);
+        let b = if n[2].abs() < 0.9 { p[2] } else { p[1] };
+        (a, b)
+    };
+    let noise_seed = seed as u32;
+    match *pattern {
+        Pattern::None => 1.0,
+        Pattern::Boards { axis, contrast } => {
+            const WIDTH: f32 = 0.14;
+            const LENGTH: f32 = 1.3;
+            const SEAM: f32 = 0.004;
+            let s = p[0] * axis[0] + p[1] * axis[1];
+            let q = -p[0] * axis[1] + p[1] * axis[0];
+            let row = (q / WIDTH).floor();
+            // Board ends are staggered row by row, as boards are laid.
+            let se = s + LENGTH * cell_unit(seed, row, -7.0);
+            let board = (se / LENGTH).floor();
+            let tone = cell_unit(seed ^ 0xB0A4D, row, board) - 0.5;
+            let grain = value_noise([s * 1.5, q * 40.0, row], noise_seed) - 0.5;
+            let seam = line_cover(q, WIDTH, SEAM, foot).max(line_cover(se, LENGTH, SEAM, foot));
+            (1.0 + contrast * (0.36 * tone + 0.16 * grain)) * (1.0 - contrast * 0.6 * seam).max(0.0)
+        }
+        Pattern::Tiles { axis, size, contrast } => {
+            let u = p[0] * axis[0] + p[1] * axis[1];
+            let v = -p[0] * axis[1] + p[1] * axis[0];
+            let grout = line_cover(u, size, 0.005, foot).max(line_cover(v, size, 0.005, foot));
+            let tone = cell_unit(seed, (u / size).floor(), (v / size).floor()) - 0.5;
+            (1.0 + contrast * 0.14 * tone) * (1.0 - contrast * 0.45 * grout).max(0.0)
+        }
+        Pattern::Grain { contrast } => {
+            let (a, b) = in_plane();
+            let g = 0.7 * value_noise([a * 2.0, b * 35.0, 0.0], noise_seed)
+                + 0.3 * value_noise([a * 6.0, b * 110.0, 3.0], noise_seed);
+            (1.0 + contrast * 0.5 * (g - 0.5)).max(0.0)
+        }
+        Pattern::Stripes { period, contrast } => {
+            let (_, b) = in_plane();
+            let cover = line_cover(b, period, 0.5 * period, foot);
+            (1.0 + contrast * 0.35 * (1.0 - 2.0 * cover)).max(0.0)
+        }
+        Pattern::Slats => {
+            const PITCH: f32 = 0.025;
+            let (_, b) = in_plane();
+            // Each slat is lit more at its top edge than at its bottom (it curves away).
+            let shade = if foot < 0.5 * PITCH {
+                0.8 + 0.25 * (b / PITCH - (b / PITCH).floor())
+            } else {
+                0.925
+            };
+            shade * (1.0 - 0.7 * line_cover(b, PITCH, 0.003, foot))
+        }
+    }
+}
+
+/// `image` blurred by a Gaussian of standard deviation `sigma_px` (separable, kernel to 3σ,
+/// edges clamped).
+pub fn gaussian_blur(image: &RgbImage, sigma_px: f64) -> RgbImage {
+    let r = (3.0 * sigma_px).ceil().max(1.0) as i64;
+    let kernel: Vec<f32> = (-r..=r)
+        .map(|i| (-(i * i) as f64 / (2.0 * sigma_px * sigma_px)).exp() as f32)
+        .collect();
+    let sum: f32 = kernel.iter().sum();
+    let kernel: Vec<f32> = kernel.iter().map(|k| k / sum).collect();
+    let (w, h) = (image.width() as i64, image.height() as i64);
+    let src: Vec<f32> = image.as_raw().iter().map(|&b| f32::from(b)).collect();
+    let pass = |src: &[f32], horizontal: bool| -> Vec<f32> {
+        let mut out = vec![0.0f32; src.len()];
+        out.par_chunks_mut((w * 3) as usize).enumerate().for_each(|(y, row)| {
+            for x in 0..w {
+                let mut acc = [0.0f32; 3];
+                for (k, wgt) in kernel.iter().enumerate() {
+                    let d = k as i64 - r;
+                    let (sx, sy) = if horizontal {
+                        ((x + d).clamp(0, w - 1), y as i64)
+                    } else {
+                        (x, (y as i64 + d).clamp(0, h - 1))
+                    };
+                    let i = ((sy * w + sx) * 3) as usize;
+                    for c in 0..3 {
+                        acc[c] += wgt * src[i + c];
+                    }
+                }
+                row[(x * 3) as usize..(x * 3 + 3) as usize].copy_from_slice(&acc);
+            }
+        });
+        out
+    };
+    let blurred = pass(&pass(&src, true), false);
+    let bytes = blurred.iter().map(|v| v.round().clamp(0.0, 255.0) as u8).collect();
+    RgbImage::from_raw(w as u32, h as u32, bytes).expect("same size")
 }

@@ -2,10 +2,13 @@
 //! surface), plus clutter and people that exist only in the images, never in the model.
 //!
 //! In: a [`Model`], an [`Appearance`] and keep-out points (the trajectory) that clutter and
-//! people must leave free. Out: a [`Scene`]: one triangle BVH over model and clutter, the
-//! surface table its hits index, the people and the lights.
+//! people must leave free. Out: a [`Scene`]: one triangle BVH over model, fixtures (module
+//! [`super::fixtures`]) and clutter, the surface table its hits index (each surface with the
+//! [`Pattern`] painted on it), the people and the lights. With `Appearance::wall_offset_m` the
+//! model's triangles are those of its displaced vertices.
 
-use super::appearance::{hsv, Appearance, Rng};
+use super::appearance::{hash64, hsv, Appearance, Rng};
+use super::fixtures::{self, FixtureCounts, Probe};
 use crate::model::bvh::{Aabb, Bvh, Ray, Triangle, TriangleBvh};
 use crate::model::Model;
 use nalgebra::{Point3, Vector3};
@@ -27,12 +30,74 @@ pub enum SurfaceKind {
     Shelf,
     /// Clutter: poster on a wall.
     Poster,
+    /// Fixture: door or window casing, sill or baseboard.
+    Trim,
+    /// Fixture: built-in cabinet or counter.
+    BuiltIn,
+    /// Fixture: a door slab closing an opening, or its handle.
+    Door,
+    /// Fixture: a window blind.
+    Blind,
+    /// Fixture: a rug on the floor.
+    Rug,
 }
 
 impl SurfaceKind {
-    /// Whether the surface belongs to the model (as opposed to clutter).
+    /// Whether the surface belongs to the model (as opposed to clutter and fixtures).
     pub fn in_model(self) -> bool {
-        !matches!(self, SurfaceKind::Furniture | SurfaceKind::Shelf | SurfaceKind::Poster)
+        !matches!(
+            self,
+            SurfaceKind::Furniture
+                | SurfaceKind::Shelf
+                | SurfaceKind::Poster
+                | SurfaceKind::Trim
+                | SurfaceKind::BuiltIn
+                | SurfaceKind::Door
+                | SurfaceKind::Blind
+                | SurfaceKind::Rug
+        )
+    }
+}
+
+/// A structured pattern painted on a surface (multiplies its brightness), beyond the value-noise
+/// texture. Lines are box-filtered over the pixel's footprint, so that thin seams read as the
+/// faint continuous lines a real pixel records rather than dashes.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Pattern {
+    None,
+    /// Floorboards along the horizontal unit `axis`: ~14 cm wide, ~1.3 m long with staggered
+    /// ends, dark seams and grain; `contrast` scales it all.
+    Boards {
+        axis: [f32; 2],
+        contrast: f32,
+    },
+    /// Square tiles of side `size` (m) along `axis`, with grout lines.
+    Tiles {
+        axis: [f32; 2],
+        size: f32,
+        contrast: f32,
+    },
+    /// Wood grain: streaks along the surface's horizontal direction.
+    Grain {
+        contrast: f32,
+    },
+    /// Horizontal bands of `period` (m): a striped print.
+    Stripes {
+        period: f32,
+        contrast: f32,
+    },
+    /// Blind slats: 2.5 cm pitch, each shaded across its curve, dark gaps between.
+    Slats,
+}
+
+impl Pattern {
+    /// Grain at `level`, or none at 0.
+    pub fn grain(level: f64) -> Pattern {
+        if level > 0.0 {
+            Pattern::Grain { contrast: level as f32 }
+        } else {
+            Pattern::None
+        }
     }
 }
 
@@ -43,6 +108,7 @@ pub struct Surface {
     pub kind: SurfaceKind,
     /// Linear RGB in [0, 1].
     pub colour: [f32; 3],
+    pub pattern: Pattern,
 }
 
 /// A person: a vertical capsule walking back and forth between `start` and `end` (floor points).
@@ -167,9 +233,11 @@ pub struct Scene {
     pub clutter_counts: [usize; 3],
     /// Model triangles (the first `model_triangles` of the input, before clutter).
     pub model_triangles: usize,
+    /// What [`super::fixtures`] found and added.
+    pub fixture_counts: FixtureCounts,
 }
 
-fn kind_of(model: &Model, face: &crate::model::Face, mid_z: f64) -> SurfaceKind {
+pub(super) fn kind_of(model: &Model, face: &crate::model::Face, mid_z: f64) -> SurfaceKind {
     for label in [face.material, face.group, face.object] {
         let name = model.label(label).to_ascii_lowercase();
         if name.contains("door") {
@@ -217,23 +285,19 @@ fn surface_colour(kind: SurfaceKind, index: usize, appearance: &Appearance) -> [
         SurfaceKind::WindowReveal => (0.65, 0.70 + 0.25 * var),
         _ => (0.45, 0.50 + 0.40 * var),
     };
-    hsv(hue, (s * appearance.colour).clamp(0.0, 1.0), v)
-}
-
-/// Ray queries on the model alone, used to place clutter and people.
-struct Probe<'a> {
-    bvh: &'a TriangleBvh,
-}
-
-impl Probe<'_> {
-    /// Free distance from `o` along unit `d` (capped at `max`).
-    fn free(&self, o: [f64; 3], d: [f64; 3], max: f64) -> f64 {
-        let ray = Ray::new(
-            [o[0] as f32, o[1] as f32, o[2] as f32],
-            [d[0] as f32, d[1] as f32, d[2] as f32],
-        );
-        self.bvh.closest(&ray, 1e-4, max as f32).map_or(max, |(_, t)| t as f64)
+    let own = hsv(hue, (s * appearance.colour).clamp(0.0, 1.0), v);
+    let p = appearance.paint.clamp(0.0, 1.0) as f32;
+    if p == 0.0 {
+        return own;
     }
+    let sat = appearance.colour.clamp(0.0, 1.0);
+    let paint = match kind {
+        SurfaceKind::Wall | SurfaceKind::DoorReveal | SurfaceKind::WindowReveal => hsv(0.11, 0.10 * sat, 0.86),
+        SurfaceKind::Ceiling => hsv(0.11, 0.04 * sat, 0.93),
+        SurfaceKind::Floor => hsv(0.07, 0.50 * sat, 0.50),
+        _ => own,
+    };
+    [0, 1, 2].map(|k| (1.0 - p) * own[k] + p * paint[k])
 }
 
 fn add(a: [f64; 3], b: [f64; 3], s: f64) -> [f64; 3] {
@@ -241,7 +305,7 @@ fn add(a: [f64; 3], b: [f64; 3], s: f64) -> [f64; 3] {
 }
 
 /// Twelve triangles of a box: centre, three orthogonal half-axes.
-fn box_triangles(c: [f64; 3], ax: [[f64; 3]; 3], out: &mut Vec<Triangle>) {
+pub(super) fn box_triangles(c: [f64; 3], ax: [[f64; 3]; 3], out: &mut Vec<Triangle>) {
     let corner = |sx: f64, sy: f64, sz: f64| {
         let mut p = c;
         for (k, s) in [sx, sy, sz].into_iter().enumerate() {
@@ -266,7 +330,7 @@ fn box_triangles(c: [f64; 3], ax: [[f64; 3]; 3], out: &mut Vec<Triangle>) {
     }
 }
 
-fn quad_triangles(c: [f64; 3], u: [f64; 3], v: [f64; 3], out: &mut Vec<Triangle>) {
+pub(super) fn quad_triangles(c: [f64; 3], u: [f64; 3], v: [f64; 3], out: &mut Vec<Triangle>) {
     let p = |a: f64, b: f64| {
         let q = add(add(c, u, a), v, b);
         [q[0] as f32, q[1] as f32, q[2] as f32]
@@ -285,10 +349,46 @@ struct WallSpot {
     ceil: f64,
 }
 
-fn near_keep_out(keep_out: &[[f64; 3]], lo: [f64; 3], hi: [f64; 3], margin: f64) -> bool {
-    keep_out
+use fixtures::near_keep_out;
+
+/// The floor pattern of the `index`-th surface: boards along or across the building's main
+/// direction, or (one floor in four) tiles.
+fn floor_pattern(axis: [f32; 2], index: usize, appearance: &Appearance) -> Pattern {
+    if appearance.floor_pattern <= 0.0 {
+        return Pattern::None;
+    }
+    let h = hash64(appearance.seed ^ 0xF100_u64 << 32 ^ index as u64);
+    let contrast = appearance.floor_pattern as f32;
+    let across = [-axis[1], axis[0]];
+    let along = if h & 1 == 0 { axis } else { across };
+    if (h >> 8) % 4 == 0 {
+        let size = [0.3, 0.45, 0.6][((h >> 16) % 3) as usize];
+        Pattern::Tiles { axis, size, contrast }
+    } else {
+        Pattern::Boards { axis: along, contrast }
+    }
+}
+
+/// A furnishing colour muted by `Appearance::paint`: real furniture is mostly wood, grey and
+/// beige, not the saturated hues that tell synthetic boxes apart.
+fn muted(colour: [f32; 3], appearance: &Appearance) -> [f32; 3] {
+    let p = 0.7 * appearance.paint.clamp(0.0, 1.0) as f32;
+    if p == 0.0 {
+        return colour;
+    }
+    let grey = 0.3 * colour[0] + 0.59 * colour[1] + 0.11 * colour[2];
+    colour.map(|c| (1.0 - p) * c + p * grey)
+}
+
+/// The building's main horizontal direction: that of its longest horizontal segment.
+fn main_axis(model: &Model) -> [f32; 2] {
+    model
+        .segments
         .iter()
-        .any(|p| (0..3).all(|k| p[k] >= lo[k] - margin && p[k] <= hi[k] + margin))
+        .filter(|s| (s.b.z - s.a.z).abs() < 1e-3 * s.length())
+        .max_by(|a, b| a.length().total_cmp(&b.length()))
+        .and_then(|s| nalgebra::Vector2::new(s.b.x - s.a.x, s.b.y - s.a.y).try_normalize(1e-9))
+        .map_or([1.0, 0.0], |d| [d.x as f32, d.y as f32])
 }
 
 /// Samples a point on one of `tris` (area-weighted), given their cumulative areas.
@@ -315,6 +415,7 @@ impl Scene {
         let keep: Vec<[f64; 3]> = keep_out.iter().map(|p| [p.x, p.y, p.z]).collect();
         let (lo, hi) = model.bounds().unwrap_or((Point3::origin(), Point3::origin()));
         let mid_z = 0.5 * (lo.z + hi.z);
+        let axis = main_axis(model);
 
         // Surfaces: (material, oriented plane) → surface index, in first-appearance order.
         let mut surfaces: Vec<Surface> = Vec::new();
@@ -347,11 +448,23 @@ impl Scene {
                 surfaces.push(Surface {
                     kind,
                     colour: surface_colour(kind, next as usize, appearance),
+                    pattern: if kind == SurfaceKind::Floor {
+                        floor_pattern(axis, next as usize, appearance)
+                    } else {
+                        Pattern::None
+                    },
                 });
             }
             face_surface.push(sid);
         }
-        for (tri, fi) in super::model_triangles(model) {
+        let rendered = if appearance.wall_offset_m > 0.0 {
+            let mut moved = model.clone();
+            moved.vertices = fixtures::displaced_vertices(model, appearance.wall_offset_m, appearance.seed);
+            super::model_triangles(&moved)
+        } else {
+            super::model_triangles(model)
+        };
+        for (tri, fi) in rendered {
             triangles.push(tri);
             payload.push(face_surface[fi as usize]);
             tri_face.push((tri, fi as usize));
@@ -377,6 +490,20 @@ impl Scene {
         let (wall_tris, wall_cum) = pick(&|f| model.faces[f].normal.z.abs() < 0.1);
         let floor_area = floor_cum.last().copied().unwrap_or(0.0);
 
+        // Fixtures: decided before clutter so that clutter keeps out of them, appended after it
+        // so that the clutter's surfaces keep their indices (and texture seeds).
+        let fixtures = {
+            let floor = |rng: &mut Rng| sample_on(&floor_tris, &floor_cum, rng).map(|(p, _)| p);
+            fixtures::build(model, &face_kind, appearance, &keep, &probe, &floor, floor_area)
+        };
+        let blocked = |lo: [f64; 3], hi: [f64; 3]| {
+            fixtures
+                .blockers
+                .iter()
+                .any(|b| (0..3).all(|k| lo[k] < b.1[k] && b.0[k] < hi[k]))
+        };
+        let grain = Pattern::grain(appearance.clutter_texture);
+
         let mut rng = Rng::new(appearance.seed ^ 0xC1u64 << 32);
         let mut clutter_counts = [0usize; 3];
         let count = |level: f64, per_m2: f64| (level.max(0.0) * floor_area / per_m2).round() as usize;
@@ -398,7 +525,7 @@ impl Scene {
                 probe.free([p[0], p[1], probe_z], d, 5.0) > (hx * hx + hy * hy).sqrt() + 0.05
             }) && probe.free([p[0], p[1], p[2] + 0.05], [0.0, 0.0, 1.0], 10.0) > h + 0.3;
             let (blo, bhi) = ([p[0] - hx, p[1] - hy, p[2]], [p[0] + hx, p[1] + hy, p[2] + h]);
-            if !clear || near_keep_out(&keep, blo, bhi, 0.6) {
+            if !clear || near_keep_out(&keep, blo, bhi, 0.6) || blocked(blo, bhi) {
                 continue;
             }
             let sid = surfaces.len() as u32;
@@ -409,7 +536,8 @@ impl Scene {
             );
             surfaces.push(Surface {
                 kind: SurfaceKind::Furniture,
-                colour,
+                colour: muted(colour, appearance),
+                pattern: grain,
             });
             let before = triangles.len();
             box_triangles(
@@ -501,7 +629,7 @@ impl Scene {
                 }
             }
             (lo[2], hi[2]) = (floor, floor + h);
-            if near_keep_out(&keep, lo, hi, 0.6) {
+            if near_keep_out(&keep, lo, hi, 0.6) || blocked(lo, hi) {
                 continue;
             }
             let sid = surfaces.len() as u32;
@@ -512,7 +640,8 @@ impl Scene {
             );
             surfaces.push(Surface {
                 kind: SurfaceKind::Shelf,
-                colour,
+                colour: muted(colour, appearance),
+                pattern: grain,
             });
             let before = triangles.len();
             let t = 0.015;
@@ -566,9 +695,20 @@ impl Scene {
             let inner = hsv(hue + 0.5, 0.8 * sat, rng.range(0.2, 0.5));
             for (k, (colour, inset, off)) in [(outer, 1.0, 0.008), (inner, 0.7, 0.009)].into_iter().enumerate() {
                 let sid = surfaces.len() as u32;
+                let pattern = if appearance.clutter_texture > 0.0 && k == 1 {
+                    // From a hash, not `rng`: the clutter's placement stays that of Default.
+                    let h = hash64(appearance.seed ^ 0x0579_19E5_u64 << 20 ^ sid as u64);
+                    Pattern::Stripes {
+                        period: 0.02 + 0.04 * (h >> 40) as f32 / (1u64 << 24) as f32,
+                        contrast: appearance.clutter_texture as f32,
+                    }
+                } else {
+                    Pattern::None
+                };
                 surfaces.push(Surface {
                     kind: SurfaceKind::Poster,
                     colour,
+                    pattern,
                 });
                 let before = triangles.len();
                 let c = add([base[0], base[1], zc + if k == 1 { 0.1 * h } else { 0.0 }], side, off);
@@ -581,6 +721,13 @@ impl Scene {
                 payload.resize(payload.len() + triangles.len() - before, sid);
             }
             clutter_counts[2] += 1;
+        }
+
+        for piece in fixtures.pieces {
+            let sid = surfaces.len() as u32;
+            surfaces.push(piece.surface);
+            payload.resize(payload.len() + piece.triangles.len(), sid);
+            triangles.extend(piece.triangles);
         }
 
         // People walking on straight paths.
@@ -665,6 +812,7 @@ impl Scene {
             lights,
             clutter_counts,
             model_triangles,
+            fixture_counts: fixtures.counts,
         }
     }
 
