@@ -492,6 +492,42 @@ fn heavy_clutter_and_texture_commit_no_wrong_pose() {
     );
 }
 
+/// The realistic world (README, "A synthetic world that predicts the real one": casings, one
+/// paint, floorboards, closed doors, walls off the model, blur and JPEG): the tracker may track
+/// less well than in the default world, but never commits or relocalises to a wrong place.
+#[test]
+fn the_realistic_world_commits_no_wrong_pose() {
+    use omnitrack::desk::recording::RecordingOptions;
+    use omnitrack::desk::render::Appearance;
+    let options = RecordingOptions {
+        appearance: Appearance::realistic(),
+        ..RecordingOptions::default()
+    };
+    let f = common::lab_recording_with(30, "firmware_config/ladybug2.toml", "realistic", &options);
+    let mut source = ReplaySource::open(&f.rec, Pacing::AsFastAsPossible).unwrap();
+    let mut errs = Vec::new();
+    run_hinted(&f, &mut source, &mut |r, _| {
+        if let Some(p) = &r.result.pose {
+            errs.push(errors(&f, r.timestamp_ns, p));
+        }
+        Ok(())
+    });
+    let worst = errs.iter().fold((0.0f64, 0.0f64), |m, e| (m.0.max(e.0), m.1.max(e.1)));
+    eprintln!(
+        "realistic world: {} of 30 frames with a pose, worst {:.1} cm, {:.2}°",
+        errs.len(),
+        worst.0 * 100.0,
+        worst.1
+    );
+    assert!(errs.len() >= 20, "only {} of 30 frames with a pose", errs.len());
+    assert!(
+        worst.0 < 0.30 && worst.1 < 3.0,
+        "a pose {:.1} cm, {:.2}° off",
+        worst.0 * 100.0,
+        worst.1
+    );
+}
+
 /// Frames of the other-rig runs (5 Hz: eight seconds of the lab tour).
 const OTHER_RIG_FRAMES: usize = 40;
 
