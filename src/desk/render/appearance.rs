@@ -154,17 +154,8 @@ impl Appearance {
             lighting_drift: 0.0,
             clutter: 0.0,
             people: 0.0,
-            paint: 0.0,
-            floor_pattern: 0.0,
-            clutter_texture: 0.0,
-            trims: 0.0,
-            built_ins: 0.0,
-            closed_doors: 0.0,
-            blinds: 0.0,
-            wall_offset_m: 0.0,
-            jpeg_quality: 0,
-            lens_falloff: 0.0,
-            blur_px: 0.0,
+            // The realism levels are off in `Default` already.
+            ..Appearance::default()
         }
     }
 

@@ -429,19 +429,9 @@ impl Scene {
         for face in &model.faces {
             let kind = kind_of(model, face, mid_z);
             face_kind.push(kind);
-            let n = face.normal.into_inner();
             // The plane without its orientation: faces are two-sided, so coplanar faces of one
             // material are one surface whichever way their normals point.
-            let sign = if n.x > 1e-9 || n.x.abs() <= 1e-9 && (n.y > 1e-9 || n.y.abs() <= 1e-9 && n.z > 0.0) {
-                1.0
-            } else {
-                -1.0
-            };
-            let q = |x: f64, scale: f64| (sign * x * scale).round() as i64;
-            let key = (
-                face.material,
-                [q(n.x, 1e3), q(n.y, 1e3), q(n.z, 1e3), q(face.offset, 1e2)],
-            );
+            let key = (face.material, fixtures::oriented_plane(face).2);
             let next = surfaces.len() as u32;
             let sid = *keys.entry(key).or_insert(next);
             if sid == next {
