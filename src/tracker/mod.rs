@@ -469,14 +469,22 @@ impl<'m> Tracker<'m> {
         result
     }
 
-    /// Whether the best candidate so far beats every other by the configured margin (the others'
-    /// mean merit at most `clear_winner_ratio` × its): no further frames are needed to decide.
+    /// Whether the best candidate so far beats every other outside its basin by the configured
+    /// margin (their mean merit at most `clear_winner_ratio` × its): no further frames are needed
+    /// to decide. Candidates in its basin (the same place a few centimetres or a degree apart,
+    /// as the search's own clear-winner test counts them) are the same answer, not rivals: they
+    /// score alike on every frame, and counting them kept the tracker searching afresh forever
+    /// where the search had found nothing but the truth (ZInD `pano_33`).
     fn clear_winner(&self) -> bool {
         let live = || self.confirming[..self.confirm_count].iter().filter(|c| c.alive);
         let mean = |c: &Confirming| c.merit_sum / c.frames.max(1) as f64;
-        let best = live().map(mean).fold(f64::NEG_INFINITY, f64::max);
+        let Some(best) = live().max_by(|a, b| mean(a).total_cmp(&mean(b))) else {
+            return false;
+        };
         let ratio = self.cfg.initialisation.clear_winner_ratio;
-        live().filter(|c| mean(c) < best).all(|c| mean(c) <= ratio * best)
+        live()
+            .filter(|c| !init::same_pose(&c.pose, &best.pose, BASIN_M, BASIN_RAD))
+            .all(|c| mean(c) <= ratio * mean(best))
     }
 
     /// The least fraction of VIS(T) a pose must explain: `min_explained_ratio` of the running
