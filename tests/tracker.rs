@@ -618,7 +618,7 @@ fn the_true_pose_draws_fewer_lines_across_plain_surfaces_than_a_wrong_one() {
     // And the candidates' merit carries it: the truth polished keeps a small blank share.
     let c = init.polish(&truth, &edges).expect("the truth polishes");
     assert!((c.blank - init.blank_share(&c.pose, &edges)).abs() < 1e-12);
-    assert!(c.merit() <= c.explained * c.support);
+    assert!(c.blank < 0.05, "the polished truth's blank share {:.2}", c.blank);
     // Radius 0 turns it off.
     let mut off = cfg.clone();
     off.initialisation.blank_radius_deg = 0.0;

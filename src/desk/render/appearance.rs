@@ -216,6 +216,11 @@ impl Appearance {
                 .split_once('=')
                 .ok_or_else(|| format!("{spec}: {part:?} is not field=value"))?;
             let x: f64 = v.parse().map_err(|_| format!("{spec}: {v:?} is not a number"))?;
+            // Every level is off at 0 and grows from there: a negative or non-finite one would
+            // render nonsense (or, as a blur radius, never finish).
+            if !(x.is_finite() && x >= 0.0) {
+                return Err(format!("{spec}: {field} = {v} is not a level (finite, 0 or more)"));
+            }
             let level = match field {
                 "seed" => {
                     a.seed = x as u64;
@@ -400,5 +405,8 @@ mod tests {
         assert!(Appearance::from_spec("plain+trims").is_err());
         assert!(Appearance::from_spec("plain+glow=1").is_err());
         assert!(Appearance::from_spec("plain+trims=x").is_err());
+        assert!(Appearance::from_spec("plain+trims=-1").is_err());
+        assert!(Appearance::from_spec("plain+blur_px=inf").is_err());
+        assert!(Appearance::from_spec("plain+noise=NaN").is_err());
     }
 }
