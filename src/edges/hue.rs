@@ -32,6 +32,14 @@ pub(crate) struct HueAcc {
 }
 
 impl HueAcc {
+    #[inline]
+    pub fn add(&mut self, other: &HueAcc) {
+        self.cos += other.cos;
+        self.sin += other.sin;
+        self.kept += other.kept;
+        self.total += other.total;
+    }
+
     /// (mean, variance, kept fraction).
     pub fn stats(&self) -> (f32, f32, f32) {
         let kept = if self.total > 0 {
@@ -61,9 +69,6 @@ impl HueAcc {
 pub(crate) struct HueTable {
     cos: Box<[f32]>,
     sin: Box<[f32]>,
-    /// 1 / d for d in 0..=255 (0 at 0): the sector formula multiplies instead of dividing, on
-    /// every pixel of every strip.
-    recip: Box<[f32]>,
     /// Minimum max(r, g, b) in grey levels.
     min_value: u16,
     /// Minimum saturation (max − min) / max, × 1024.
@@ -77,7 +82,6 @@ impl HueTable {
         HueTable {
             cos: (0..HUE_STEPS).map(|k| angle(k).cos() as f32).collect(),
             sin: (0..HUE_STEPS).map(|k| angle(k).sin() as f32).collect(),
-            recip: (0..256).map(|d| if d == 0 { 0.0 } else { 1.0 / d as f32 }).collect(),
             min_value: (min_value.clamp(0.0, 1.0) * 255.0).ceil() as u16,
             min_sat_1024: (min_saturation.clamp(0.0, 1.0) * 1024.0).ceil() as u32,
         }
@@ -95,13 +99,12 @@ impl HueTable {
             return None;
         }
         // Sector formula of HSV; h6 in [-1, 5).
-        let inv = self.recip[delta as usize];
         let h6 = if max == r {
-            (g - b) as f32 * inv
+            (g - b) as f32 / delta as f32
         } else if max == g {
-            2.0 + (b - r) as f32 * inv
+            2.0 + (b - r) as f32 / delta as f32
         } else {
-            4.0 + (r - g) as f32 * inv
+            4.0 + (r - g) as f32 / delta as f32
         };
         // h6 ≥ −1, so the shifted value is positive and truncation rounds it.
         let k = (h6 * (HUE_STEPS as f32 / 6.0) + (HUE_STEPS as f32 + 0.5)) as usize;

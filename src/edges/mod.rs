@@ -9,14 +9,13 @@
 //! derivative's cross axis only (3 px wide across an edge, so a door or window reveal's two edges
 //! 2–3 px apart stay apart), the strongest channel kept per pixel → non-maximum suppression →
 //! edgels linked into chains (direction within ~50°) → sub-pixel edgels (Gaussian peak: parabola
-//! through the log magnitudes across the gradient) unprojected to unit rays through a ray table
-//! built at start-up (a ray every 4 px, bilinear) → planes fitted to the rays (smallest eigenvector of Σ w r rᵀ, w
+//! through the log magnitudes across the gradient) unprojected to unit rays through a per-pixel
+//! ray table built at start-up → planes fitted to the rays (smallest eigenvector of Σ w r rᵀ, w
 //! the gradient magnitude; outliers beyond 2.5 RMS refitted out), chains split where they bend off
 //! a great circle or where two planes fit a piece far better than one (two lines a pixel or two
 //! apart, end to end or side by side), and neighbouring collinear pieces merged, also across
 //! chains (short pieces' normals are loose, so candidates within 5° are tried; the merged fit
-//! decides, under the same two-line test) → the strongest kept → hue strips on both sides of
-//! each, along the fitted edge where the image shows it. Fisheye curvature costs
+//! decides, under the same two-line test) → hue strips on both sides. Fisheye curvature costs
 //! nothing: rays, not pixels, are fitted.
 //!
 //! Memory is fixed: every buffer is sized in [`EdgeDetector::new`] from the rig (resolution) and

@@ -1,8 +1,7 @@
 //! One sensor's edge extraction, on buffers allocated once: grey image → integer Sobel gradients →
-//! non-maximum suppression → edgel chains → sub-pixel edgels unprojected to rays (a ray table of
-//! every 4th pixel, bilinear) → planes through the optical centre (split where a chain bends,
-//! merge collinear pieces, also across chains) → the strongest `max_edges` edges → their hue
-//! strips.
+//! non-maximum suppression → edgel chains → sub-pixel edgels unprojected to rays (per-pixel ray
+//! table, bilinear) → planes through the optical centre (split where a chain bends, merge
+//! collinear pieces, also across chains) → hue strips → the strongest `max_edges` edges.
 
 use super::gradient::{bin, bin_step, gradients_and_edgels, Rows};
 use super::hue::{HueAcc, HueTable};
@@ -21,17 +20,6 @@ const MAX_CHAIN: usize = 4096;
 /// of it (sin 10°: within 10° of the line's normal, as along a real line; texture beside a gap
 /// points every way).
 const GAP_ACROSS_COS: f64 = 0.174;
-
-/// Pixels between the nodes of the ray table. A table of every pixel (12 bytes each: 3.7 MB for
-/// 640 × 480) misses the cache on nearly every edgel, which was a tenth of the time on real
-/// photos; rays interpolated over 4 px are off the lens's own by ~S²/8 · |∂²r/∂u²|, at most
-/// 0.005 px on the shipped fisheyes (test `the_coarse_ray_table_matches_the_lens`), far below
-/// an edgel's sub-pixel noise. Where a node has no ray (outside a fisheye's image circle) the
-/// lens is asked directly.
-const RAY_GRID_STEP: usize = 4;
-
-/// Pieces of the polyline along which an edge's hue strips are placed.
-const HUE_KNOTS: usize = 8;
 
 /// Neighbour steps (du, dv) in angular order, 45° apart.
 const DIRS: [(isize, isize); 8] = [(1, 0), (1, 1), (0, 1), (-1, 1), (-1, 0), (-1, -1), (0, -1), (1, -1)];
@@ -53,6 +41,8 @@ struct Candidate {
     support: f64,
     /// Net count of edgels brighter on the left (> 0: left is the bright side).
     bright_left: i32,
+    left: HueAcc,
+    right: HueAcc,
     alive: bool,
     /// Merged in the last pass of `merge_across_chains`, and in the current one.
     changed: bool,
@@ -94,6 +84,9 @@ pub(crate) struct Workspace {
     stack: Vec<(u32, u32)>,
     pieces: Vec<(u32, u32)>,
     cands: Vec<Candidate>,
+    /// The candidates' normals packed for the pair test of `merge_across_chains` (0 once dead):
+    /// the test of every pair against every other reads these, not the candidates.
+    normals: Vec<[f32; 3]>,
     pub edges: Vec<Edge>,
     /// Counters of the last run (for benchmarks and diagnostics).
     pub stats: SensorStats,
@@ -160,6 +153,7 @@ impl Workspace {
             stack: Vec::with_capacity(2 * MAX_CHAIN),
             pieces: Vec::with_capacity(2 * MAX_CHAIN),
             cands: Vec::with_capacity(cand_cap),
+            normals: Vec::with_capacity(cand_cap),
             edges: Vec::with_capacity(max_edges),
             stats: SensorStats::default(),
         }
@@ -190,10 +184,10 @@ impl Workspace {
             &mut self.map,
         );
         let t1 = Instant::now();
-        self.link();
+        self.link(img.pixels());
         let t2 = Instant::now();
         self.merge_across_chains();
-        self.select(img.pixels());
+        self.select();
         let t3 = Instant::now();
         let ns = |d: std::time::Duration| d.as_nanos().min(u32::MAX as u128) as u32;
         self.stats.pixel_ns = ns(t1 - t0);
@@ -236,7 +230,7 @@ impl Workspace {
     }
 
     #[inline(never)]
-    fn link(&mut self) {
+    fn link(&mut self, rgb: &[u8]) {
         let (w, h) = (self.w, self.h);
         let mut map = std::mem::take(&mut self.map);
         let mut fwd = std::mem::take(&mut self.fwd);
@@ -278,7 +272,7 @@ impl Workspace {
                         .chain(std::iter::once(i as u32))
                         .chain(fwd.iter().copied()),
                 );
-                self.fit_chain();
+                self.fit_chain(rgb);
             }
         }
         self.map = map;
@@ -308,11 +302,10 @@ impl Workspace {
             // Gaussian sub-pixel peak: the parabola through the logarithms of the magnitudes
             // (exact for a Gaussian profile; less biased than a parabola on the magnitudes for
             // the narrow profiles of the 3-px-wide derivative).
-            // ln a − 2 ln m + ln b and ln a − ln b as two logarithms of ratios, not three.
-            let (la, l0, lb) = (ma.max(1.0), m0.max(1.0), mb.max(1.0));
-            let denom = (la * lb / (l0 * l0)).ln();
+            let (la, l0, lb) = (ma.max(1.0).ln(), m0.max(1.0).ln(), mb.max(1.0).ln());
+            let denom = la - 2.0 * l0 + lb;
             let s = if denom < 0.0 {
-                (0.5 * (la / lb).ln() / denom).clamp(-0.5, 0.5)
+                (0.5 * (la - lb) / denom).clamp(-0.5, 0.5)
             } else {
                 0.0
             };
@@ -335,18 +328,11 @@ impl Workspace {
         let (w, h) = (self.w, self.h);
         let x = x.clamp(0.0, (w - 1) as f32);
         let y = y.clamp(0.0, (h - 1) as f32);
-        let (gw, _) = ray_grid(w, h);
-        let step = RAY_GRID_STEP as f32;
-        let (gx, gy) = (x / step, y / step);
-        let (u0, v0) = (gx as usize, gy as usize);
-        let (fx, fy) = (gx - u0 as f32, gy - v0 as f32);
-        let i = v0 * gw + u0;
+        let (u0, v0) = ((x as usize).min(w - 2), (y as usize).min(h - 2));
+        let (fx, fy) = (x - u0 as f32, y - v0 as f32);
+        let i = v0 * w + u0;
         let t = &self.rays;
-        let (a, b, c, d) = (t[i], t[i + 1], t[i + gw], t[i + gw + 1]);
-        if [a, b, c, d].iter().any(|r| r[0].is_nan()) {
-            let r = self.lens.unproject(&Point2::new(f64::from(x), f64::from(y)))?;
-            return Some(r.into_inner());
-        }
+        let (a, b, c, d) = (t[i], t[i + 1], t[i + w], t[i + w + 1]);
         let mut r = [0.0f64; 3];
         for k in 0..3 {
             let top = a[k] as f64 + (b[k] as f64 - a[k] as f64) * fx as f64;
@@ -376,7 +362,7 @@ impl Workspace {
     }
 
     #[inline(never)]
-    fn fit_chain(&mut self) {
+    fn fit_chain(&mut self, rgb: &[u8]) {
         let n = self.ray.len();
         let min_n = self.params.min_chain_edgels;
         if n < min_n {
@@ -437,7 +423,7 @@ impl Workspace {
                 self.stack.push((k as u32 + 1, b));
                 self.stack.push((a, k as u32));
             } else {
-                self.add_piece(a as usize, b as usize);
+                self.add_piece(a as usize, b as usize, rgb);
             }
         }
         self.pieces = pieces;
@@ -520,7 +506,7 @@ impl Workspace {
 
     /// Fits, measures and (if long enough) records one piece of the chain as a candidate.
     #[inline(never)]
-    fn add_piece(&mut self, a: usize, b: usize) {
+    fn add_piece(&mut self, a: usize, b: usize, rgb: &[u8]) {
         let Some((m, fitted, mut nrm)) = self.robust_fit(a, b) else {
             return;
         };
@@ -536,17 +522,43 @@ impl Workspace {
         if span < 0.5 * self.min_len_rad {
             return;
         }
-        // Polarity, left of the walk from edgel a to edgel b. The hue strips wait for `select`:
-        // most pieces are merged or dropped, and sampling them all was a fifth of the time.
+        // Hue strips and polarity; left of the walk from edgel a to edgel b.
         let (pa, pb) = (self.pos[a], self.pos[b]);
         let left = [pb[1] - pa[1], -(pb[0] - pa[0])];
+        let mut lacc = HueAcc::default();
+        let mut racc = HueAcc::default();
         let mut bright_left = 0i32;
         let mut strength = 0.0f32;
+        let count = b + 1 - a;
+        let step = count.div_ceil(self.params.hue_samples_per_edge.max(1)).max(1);
         for k in a..=b {
             strength += self.emag[k];
             let g = self.grad[k];
             let side = g[0] * left[0] + g[1] * left[1];
             bright_left += if side > 0.0 { 1 } else { -1 };
+            if (k - a) % step != 0 {
+                continue;
+            }
+            let gn = (g[0] * g[0] + g[1] * g[1]).sqrt();
+            if gn == 0.0 {
+                continue;
+            }
+            let s = if side >= 0.0 { 1.0 } else { -1.0 } / gn;
+            let (dx, dy) = (g[0] * s, g[1] * s); // unit, pointing to the left side
+            let p = self.pos[k];
+            for t in 0..self.strip_px {
+                let d = self.params.hue_strip_offset_px + t as f32;
+                for (sign, acc) in [(1.0f32, &mut lacc), (-1.0, &mut racc)] {
+                    // +1 keeps the value positive, so truncation rounds.
+                    let x = (p[0] + sign * d * dx + 1.5) as usize;
+                    let y = (p[1] + sign * d * dy + 1.5) as usize;
+                    if x < 1 || y < 1 || x > self.w || y > self.h {
+                        continue;
+                    }
+                    let i = ((y - 1) * self.w + x - 1) * 3;
+                    self.hue.accumulate(acc, [rgb[i], rgb[i + 1], rgb[i + 2]]);
+                }
+            }
         }
         let cand = Candidate {
             m,
@@ -557,6 +569,8 @@ impl Workspace {
             strength: strength / 64.0,
             support: span,
             bright_left,
+            left: lacc,
+            right: racc,
             alive: true,
             changed: false,
             merged_now: false,
@@ -581,7 +595,8 @@ impl Workspace {
     }
 
     /// Joins candidates of different chains that lie on one plane, end to end (a line broken by
-    /// an occluder, a gap in the edgels or a junction), same polarity.
+    /// an occluder, a gap in the edgels or a junction). Polarity is not compared: an edge seen
+    /// against a background that turns from darker to brighter flips it halfway (README).
     #[inline(never)]
     fn merge_across_chains(&mut self) {
         let cos_max = self.params.merge_angle_rad.cos();
@@ -590,6 +605,11 @@ impl Workspace {
         let two_line = self.params.two_line_excess;
         let min_support = self.params.merge_min_support;
         let min_evidence = self.params.merge_gap_evidence;
+        let pack = |n: &Vector3<f64>| [n.x as f32, n.y as f32, n.z as f32];
+        self.normals.clear();
+        self.normals.extend(self.cands.iter().map(|c| pack(&c.n)));
+        // The f32 test lets through every pair the f64 one below would.
+        let cos_loose = cos_max as f32 - 1e-5;
         for pass in 0..3 {
             let mut merged_any = false;
             for i in 0..self.cands.len() {
@@ -597,6 +617,10 @@ impl Workspace {
                     continue;
                 }
                 for j in i + 1..self.cands.len() {
+                    let (a, b) = (self.normals[i], self.normals[j]);
+                    if (a[0] * b[0] + a[1] * b[1] + a[2] * b[2]).abs() < cos_loose {
+                        continue;
+                    }
                     // A pair whose members are unchanged since the last pass was tried then.
                     if !self.cands[j].alive || (pass > 0 && !self.cands[i].changed && !self.cands[j].changed) {
                         continue;
@@ -613,6 +637,8 @@ impl Workspace {
                         }
                         self.cands[i] = m;
                         self.cands[j].alive = false;
+                        self.normals[i] = pack(&m.n);
+                        self.normals[j] = [0.0; 3];
                         self.stats.merged += 1;
                         merged_any = true;
                         self.cands[i].merged_now = true;
@@ -708,81 +734,9 @@ impl Workspace {
         false
     }
 
-    /// The hue strips of an edge (Koch–Teller §4.2.1): at up to `hue_samples_per_edge` places
-    /// evenly along it, `strip_px` pixels on each side across the line, from
-    /// `hue_strip_offset_px` out; left is the side of the walk from end 1 to end 2. A place
-    /// where the image shows no edge (a gap that merging bridged: an occluder, a weak stretch)
-    /// is not sampled, so that the strips describe the two surfaces the edge divides.
-    fn hue_strips(&self, c: &Candidate, rgb: &[u8]) -> (HueAcc, HueAcc) {
-        let (mut left, mut right) = (HueAcc::default(), HueAcc::default());
-        let span = c.r1.dot(&c.r2).clamp(-1.0, 1.0).acos();
-        let e2 = c.n.cross(&c.r1);
-        let ray = |a: f64| c.r1 * a.cos() + e2 * a.sin();
-        // The projected arc as a polyline of at most HUE_KNOTS pieces: a piece of a great
-        // circle 1/8 of an edge long is straight to well under a pixel through any lens.
-        let mut knots = [Point2::origin(); HUE_KNOTS + 1];
-        let (Some(a), Some(b)) = (self.lens.project(&c.r1), self.lens.project(&c.r2)) else {
-            return (left, right);
-        };
-        let length_px = (b - a).norm();
-        let samples = (length_px as usize).clamp(1, self.params.hue_samples_per_edge.max(1));
-        let pieces = samples.min(HUE_KNOTS);
-        for (k, knot) in knots.iter_mut().enumerate().take(pieces + 1) {
-            match self.lens.project(&ray(span * k as f64 / pieces as f64)) {
-                Some(p) => *knot = p,
-                None => return (left, right),
-            }
-        }
-        let threshold = i32::from(self.params.gradient_threshold) / 2;
-        for s in 0..samples {
-            let f = (s as f64 + 0.5) / samples as f64 * pieces as f64;
-            let k = (f as usize).min(pieces - 1);
-            let (k0, k1) = (knots[k], knots[k + 1]);
-            let chord = k1 - k0;
-            let norm = chord.norm();
-            if norm < 1e-9 {
-                continue;
-            }
-            let p = k0 + chord * (f - k as f64);
-            // Unit, towards the left of the walk.
-            let (dx, dy) = ((chord.y / norm) as f32, (-chord.x / norm) as f32);
-            if !self.edge_near(p.x as f32, p.y as f32, dx, dy, threshold) {
-                continue;
-            }
-            for t in 0..self.strip_px {
-                let d = self.params.hue_strip_offset_px + t as f32;
-                for (sign, acc) in [(1.0f32, &mut left), (-1.0, &mut right)] {
-                    // +1 keeps the value positive, so truncation rounds.
-                    let x = (p.x as f32 + sign * d * dx + 1.5) as usize;
-                    let y = (p.y as f32 + sign * d * dy + 1.5) as usize;
-                    if x < 1 || y < 1 || x > self.w || y > self.h {
-                        continue;
-                    }
-                    let i = ((y - 1) * self.w + x - 1) * 3;
-                    self.hue.accumulate(acc, [rgb[i], rgb[i + 1], rgb[i + 2]]);
-                }
-            }
-        }
-        (left, right)
-    }
-
-    /// Whether the pixel of (x, y) or one of its neighbours across the line (unit normal
-    /// (nx, ny)) has an L1 gradient of at least `threshold`.
-    #[inline]
-    fn edge_near(&self, x: f32, y: f32, nx: f32, ny: f32, threshold: i32) -> bool {
-        (-1..=1).any(|t| {
-            let (u, v) = ((x + t as f32 * nx + 0.5).floor(), (y + t as f32 * ny + 0.5).floor());
-            u >= 0.0
-                && v >= 0.0
-                && (u as usize) < self.w
-                && (v as usize) < self.h
-                && i32::from(self.mag[v as usize * self.w + u as usize]) >= threshold
-        })
-    }
-
     /// Keeps the strongest `max_edges` candidates and turns them into edges (rig frame).
     #[inline(never)]
-    fn select(&mut self, rgb: &[u8]) {
+    fn select(&mut self) {
         let min_cos = self.min_len_rad.cos();
         self.cands.retain(|c| c.r1.dot(&c.r2) <= min_cos);
         let k = self.max_edges;
@@ -798,14 +752,12 @@ impl Workspace {
         }
         self.cands.sort_unstable_by(|a, b| b.strength.total_cmp(&a.strength));
         let rot = self.rotation;
-        for k in 0..self.cands.len() {
-            let c = self.cands[k];
+        for c in &self.cands {
             let (Some(p1), Some(p2)) = (self.lens.project(&c.r1), self.lens.project(&c.r2)) else {
                 continue;
             };
-            let (left, right) = self.hue_strips(&c, rgb);
-            let (lm, lv, lk) = left.stats();
-            let (rm, rv, rk) = right.stats();
+            let (lm, lv, lk) = c.left.stats();
+            let (rm, rv, rk) = c.right.stats();
             let n_rig = rot * c.n;
             let plane = EdgePlane {
                 normal: Unit::new_normalize(n_rig),
@@ -981,10 +933,10 @@ fn try_merge(
     // Orient j like i.
     let di = ci.r2 - ci.r1;
     let same = di.dot(&(cj.r2 - cj.r1)) >= 0.0;
-    let (jr1, jr2, jb) = if same {
-        (cj.r1, cj.r2, cj.bright_left)
+    let (jr1, jr2, jl, jr, jb) = if same {
+        (cj.r1, cj.r2, cj.left, cj.right, cj.bright_left)
     } else {
-        (cj.r2, cj.r1, -cj.bright_left)
+        (cj.r2, cj.r1, cj.right, cj.left, -cj.bright_left)
     };
     // Cheapest reject: the nearest ends further apart than any gap or overlap allowed (pairs
     // on one line far apart are most of those tried).
@@ -1061,6 +1013,10 @@ fn try_merge(
     if support < min_support * r1.dot(&r2).clamp(-1.0, 1.0).acos() {
         return None;
     }
+    let mut left = ci.left;
+    left.add(&jl);
+    let mut right = ci.right;
+    right.add(&jr);
     Some(Candidate {
         m,
         count,
@@ -1070,32 +1026,26 @@ fn try_merge(
         strength: ci.strength + cj.strength,
         support,
         bright_left: ci.bright_left + jb,
+        left,
+        right,
         alive: true,
         changed: false,
         merged_now: false,
     })
 }
 
-/// The ray table (sensor frame) of a sensor's lens: unit rays at every [`RAY_GRID_STEP`]-th
-/// pixel of each row and column, (w − 1) / step + 2 nodes across and likewise down, so that the
-/// nodes enclose every pixel; NaN where the lens has no ray.
+/// The per-pixel ray table (sensor frame) of a sensor's lens.
 pub(crate) fn ray_table(sensor: &Sensor) -> Arc<[[f32; 3]]> {
-    let (gw, gh) = ray_grid(sensor.width as usize, sensor.height as usize);
-    let mut t = vec![[f32::NAN; 3]; gw * gh];
-    for j in 0..gh {
-        for i in 0..gw {
-            let p = Point2::new((i * RAY_GRID_STEP) as f64, (j * RAY_GRID_STEP) as f64);
-            if let Some(r) = sensor.lens.unproject(&p) {
-                t[j * gw + i] = [r.x as f32, r.y as f32, r.z as f32];
+    let (w, h) = (sensor.width as usize, sensor.height as usize);
+    let mut t = vec![[f32::NAN; 3]; w * h];
+    for v in 0..h {
+        for u in 0..w {
+            if let Some(r) = sensor.lens.unproject(&Point2::new(u as f64, v as f64)) {
+                t[v * w + u] = [r.x as f32, r.y as f32, r.z as f32];
             }
         }
     }
     t.into()
-}
-
-/// Nodes across and down of the ray table of a w × h image.
-fn ray_grid(w: usize, h: usize) -> (usize, usize) {
-    ((w.max(1) - 1) / RAY_GRID_STEP + 2, (h.max(1) - 1) / RAY_GRID_STEP + 2)
 }
 
 #[cfg(test)]
@@ -1103,47 +1053,6 @@ mod tests {
     use super::*;
     use rand::rngs::SmallRng;
     use rand::{Rng, SeedableRng};
-
-    /// Rays interpolated from the coarse table agree with the lens's own unprojection to a
-    /// hundredth of a pixel, over the whole image of the shipped fisheye rig and a pinhole, the
-    /// fisheyes' dark corners (where the table asks the lens) included.
-    #[test]
-    fn the_coarse_ray_table_matches_the_lens() {
-        let root = env!("CARGO_MANIFEST_DIR");
-        let mut rng = SmallRng::seed_from_u64(9);
-        for rig in ["firmware_config/ladybug2.toml", "tools/rigs/pinhole1.toml"] {
-            let rig = crate::rig::Rig::load(&std::path::Path::new(root).join(rig)).unwrap();
-            for sensor in rig.sensors.iter().take(2) {
-                let ws = Workspace::new(
-                    sensor,
-                    ray_table(sensor),
-                    Arc::new(HueTable::new(0.15, 0.1)),
-                    EdgeParams::default(),
-                    5,
-                    256,
-                    2.0,
-                );
-                let pixel_rad = 1.0 / sensor.lens.fx();
-                let (mut worst, mut checked) = (0.0f64, 0);
-                for _ in 0..20_000 {
-                    let x = rng.random_range(0.0..(sensor.width - 1) as f32);
-                    let y = rng.random_range(0.0..(sensor.height - 1) as f32);
-                    let exact = sensor.lens.unproject(&Point2::new(f64::from(x), f64::from(y)));
-                    let table = ws.ray_at(x, y);
-                    match (exact, table) {
-                        (Some(e), Some(t)) => {
-                            worst = worst.max(e.cross(&t).norm().asin() / pixel_rad);
-                            checked += 1;
-                        }
-                        (None, None) => {}
-                        (e, t) => panic!("sensor {} at ({x}, {y}): lens {e:?}, table {t:?}", sensor.id),
-                    }
-                }
-                assert!(checked > 10_000, "sensor {}: {checked} rays", sensor.id);
-                assert!(worst < 0.01, "sensor {}: {worst} px off the lens", sensor.id);
-            }
-        }
-    }
 
     /// The adjugate's normal is the smallest eigenvector, on rays from short and long arcs of
     /// random great circles with noise off the plane, down to pieces of a few edgels.

@@ -89,7 +89,8 @@ struct Cli {
     verbose: bool,
     /// Instead of the table: per panorama, what the initialisation sees at the true pose (the
     /// share of VIS(T) explained, the polished truth's score against the acceptance limit) and
-    /// the search's candidates from the first hint radius, each with the grid's coarse merit
+    /// the search's candidates from the first hint radius (the whole house when no row has a
+    /// hint), each with the grid's coarse merit
     /// (the truth's too) and the soft share explained (1 − truncated ξ / cap²); the best wrong
     /// candidate drawn over the images in RIG/PANO/rival.jpg.
     #[arg(long)]
@@ -221,9 +222,10 @@ fn run(cli: &Cli) -> Result<(), String> {
             let (mut found, mut first) = (0, 0);
             for (k, (pano, dir)) in panos.iter().zip(&recordings).enumerate() {
                 let truth = pano.t_world_rig();
-                let hint = radius.map(|r| SearchVolume {
+                // With no hinted row, the whole house is searched.
+                let hint = Some(SearchVolume {
                     centre: hint_centre(&truth, cli.hint_offset_m, cli.seed, k),
-                    diameter_m: Some(2.0 * r),
+                    diameter_m: radius.map(|r| 2.0 * r),
                 });
                 let rank = diagnose(dir, &pano.id, &model, &table, &cfg, hint, cli.seed, &truth)?;
                 found += rank.is_some() as usize;
