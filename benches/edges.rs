@@ -43,12 +43,7 @@ mod bench {
     use std::path::{Path, PathBuf};
     use std::time::Instant;
 
-    fn percentile(sorted: &[f64], q: f64) -> f64 {
-        if sorted.is_empty() {
-            return f64::NAN;
-        }
-        sorted[((sorted.len() - 1) as f64 * q).round() as usize]
-    }
+    use omnitrack::desk::demo::percentile;
 
     /// A run being collected: first and last ray, pixel length, last pixel.
     type Run = Option<(Vector3<f64>, Vector3<f64>, f64, nalgebra::Point2<f64>)>;

@@ -45,12 +45,7 @@ mod bench {
         std::process::exit(2);
     }
 
-    fn percentile(sorted: &[f64], q: f64) -> f64 {
-        if sorted.is_empty() {
-            return f64::NAN;
-        }
-        sorted[((sorted.len() - 1) as f64 * q).round() as usize]
-    }
+    use omnitrack::desk::demo::percentile;
 
     fn is_image(p: &Path) -> bool {
         matches!(

@@ -97,12 +97,7 @@ mod bench {
         }
     }
 
-    fn percentile(sorted: &[f64], q: f64) -> f64 {
-        if sorted.is_empty() {
-            return f64::NAN;
-        }
-        sorted[((sorted.len() - 1) as f64 * q).round() as usize]
-    }
+    use omnitrack::desk::demo::percentile;
 
     struct Run {
         name: &'static str,

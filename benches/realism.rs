@@ -41,12 +41,7 @@ mod bench {
         std::process::exit(2);
     }
 
-    fn quantile(sorted: &[f64], q: f64) -> f64 {
-        if sorted.is_empty() {
-            return f64::NAN;
-        }
-        sorted[((sorted.len() - 1) as f64 * q).round() as usize]
-    }
+    use omnitrack::desk::demo::percentile;
 
     fn appearance(spec: &str) -> Appearance {
         Appearance::from_spec(spec).unwrap_or_else(|e| fail(&format!("--appearance {e}")))
@@ -207,12 +202,12 @@ mod bench {
             on_model.sort_by(f64::total_cmp);
             println!(
                 "| {name} | {:.2} ({:.2}–{:.2}) | {:.0} ({:.0}–{:.0}) | {:.0} |",
-                quantile(&explained, 0.5),
-                quantile(&explained, 0.25),
-                quantile(&explained, 0.75),
-                quantile(&on_model, 0.5),
-                quantile(&on_model, 0.25),
-                quantile(&on_model, 0.75),
+                percentile(&explained, 0.5),
+                percentile(&explained, 0.25),
+                percentile(&explained, 0.75),
+                percentile(&on_model, 0.5),
+                percentile(&on_model, 0.25),
+                percentile(&on_model, 0.75),
                 n_edges as f64 / picks.len().max(1) as f64
             );
         }

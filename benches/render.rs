@@ -62,9 +62,7 @@ mod bench {
         (obj, faces)
     }
 
-    fn percentile(sorted: &[f64], q: f64) -> f64 {
-        sorted[((sorted.len() - 1) as f64 * q).round() as usize]
-    }
+    use omnitrack::desk::demo::percentile;
 
     /// Renders `frames` frames walking through a room row; returns per-frame ms.
     fn run(renderer: &Renderer, traj: &[Stamped], frames: usize) -> Vec<f64> {

@@ -43,12 +43,7 @@ mod bench {
     use std::path::{Path, PathBuf};
     use std::time::Duration;
 
-    fn percentile(sorted: &[f64], q: f64) -> f64 {
-        if sorted.is_empty() {
-            return f64::NAN;
-        }
-        sorted[((sorted.len() - 1) as f64 * q).round() as usize]
-    }
+    use omnitrack::desk::demo::percentile;
 
     /// The largest standard deviation of a pose covariance's position (`block` 0, m) or rotation
     /// (`block` 3, rad) block.

@@ -230,7 +230,9 @@ fn bar(show: bool, len: u64, template: &str) -> ProgressBar {
     bar
 }
 
-fn percentile(sorted: &[f64], q: f64) -> f64 {
+/// The nearest-rank `q` quantile (0..=1) of ascending `sorted` values; NaN when there are none.
+/// One definition for the demo's and the benchmarks' figures.
+pub fn percentile(sorted: &[f64], q: f64) -> f64 {
     if sorted.is_empty() {
         return f64::NAN;
     }

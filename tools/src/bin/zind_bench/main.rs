@@ -90,9 +90,9 @@ struct Cli {
     /// Instead of the table: per panorama, what the initialisation sees at the true pose (the
     /// share of VIS(T) explained, the polished truth's score against the acceptance limit) and
     /// the search's candidates from the first hint radius (the whole house when no row has a
-    /// hint), each with the grid's coarse merit
-    /// (the truth's too) and the soft share explained (1 − truncated ξ / cap²); the best wrong
-    /// candidate drawn over the images in RIG/PANO/rival.jpg.
+    /// hint), each with the grid's coarse merit (the truth's too) and the soft share explained
+    /// (1 − truncated ξ / cap²); the best wrong candidate drawn over the images in
+    /// RIG/PANO/rival.jpg.
     #[arg(long)]
     diagnose: bool,
 }
@@ -223,11 +223,11 @@ fn run(cli: &Cli) -> Result<(), String> {
             for (k, (pano, dir)) in panos.iter().zip(&recordings).enumerate() {
                 let truth = pano.t_world_rig();
                 // With no hinted row, the whole house is searched.
-                let hint = Some(SearchVolume {
+                let volume = SearchVolume {
                     centre: hint_centre(&truth, cli.hint_offset_m, cli.seed, k),
                     diameter_m: radius.map(|r| 2.0 * r),
-                });
-                let rank = diagnose(dir, &pano.id, &model, &table, &cfg, hint, cli.seed, &truth)?;
+                };
+                let rank = diagnose(dir, &pano.id, &model, &table, &cfg, volume, cli.seed, &truth)?;
                 found += rank.is_some() as usize;
                 first += (rank == Some(0)) as usize;
             }
@@ -464,7 +464,7 @@ fn diagnose(
     model: &Model,
     table: &VisibilityTable,
     cfg: &TrackerConfig,
-    hint: Option<SearchVolume>,
+    volume: SearchVolume,
     seed: u64,
     truth: &Pose,
 ) -> Result<Option<usize>, String> {
@@ -525,42 +525,40 @@ fn diagnose(
     }
     let mut rank = None;
     let mut rival = None;
-    if let Some(volume) = hint {
-        let mut rng = SmallRng::seed_from_u64(seed);
-        let (candidates, report) = init.run(&edges, &volume, &mut rng);
-        let candidates = candidates.to_vec();
-        let _ = write!(
-            line,
-            "  | search {} cells {:.0} ms (grid under {} rotations {:.0} ms):",
-            report.cells_searched,
-            ms(report.elapsed),
-            report.rotations,
-            ms(report.grid_elapsed)
-        );
-        let _ = write!(
-            line,
-            " grid merit: truth {:.3}",
-            init.grid_merit(truth).unwrap_or(f64::NAN)
-        );
-        for (k, c) in candidates.iter().enumerate() {
-            let (dp, dr) = err(&c.pose);
-            let _ = write!(line, " ({:.3})", init.grid_merit(&c.pose).unwrap_or(f64::NAN));
-            if dp <= 0.1 && dr <= 2.0 && rank.is_none() {
-                rank = Some(k);
-            }
-            if rival.is_none() && (dp > 0.3 || dr > 5.0) {
-                rival = Some(c.pose);
-            }
-            let _ = write!(
-                line,
-                " [{dp:.2} m {dr:.1}° z {:.2} expl {:.2} sup {:.2} blank {:.2} soft {:.2}]",
-                c.pose.translation.vector.z,
-                c.explained,
-                c.support,
-                c.blank,
-                1.0 - c.score / cap2
-            );
+    let mut rng = SmallRng::seed_from_u64(seed);
+    let (candidates, report) = init.run(&edges, &volume, &mut rng);
+    let candidates = candidates.to_vec();
+    let _ = write!(
+        line,
+        "  | search {} cells {:.0} ms (grid under {} rotations {:.0} ms):",
+        report.cells_searched,
+        ms(report.elapsed),
+        report.rotations,
+        ms(report.grid_elapsed)
+    );
+    let _ = write!(
+        line,
+        " grid merit: truth {:.3}",
+        init.grid_merit(truth).unwrap_or(f64::NAN)
+    );
+    for (k, c) in candidates.iter().enumerate() {
+        let (dp, dr) = err(&c.pose);
+        let _ = write!(line, " ({:.3})", init.grid_merit(&c.pose).unwrap_or(f64::NAN));
+        if dp <= 0.1 && dr <= 2.0 && rank.is_none() {
+            rank = Some(k);
         }
+        if rival.is_none() && (dp > 0.3 || dr > 5.0) {
+            rival = Some(c.pose);
+        }
+        let _ = write!(
+            line,
+            " [{dp:.2} m {dr:.1}° z {:.2} expl {:.2} sup {:.2} blank {:.2} soft {:.2}]",
+            c.pose.translation.vector.z,
+            c.explained,
+            c.support,
+            c.blank,
+            1.0 - c.score / cap2
+        );
     }
     println!("{line}");
     // A picture of the best wrong candidate (over 0.3 m or 5° off): what it aligns with.
