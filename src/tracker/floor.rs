@@ -101,6 +101,23 @@ impl Floors {
     }
 }
 
+impl Floors {
+    /// The heights within `slab` (lowest, highest) at which a rig carried `band` above a floor
+    /// can stand at plan position (`x`, `y`), or `None` where no floor beneath can carry it
+    /// there.
+    ///
+    /// The floor is looked for at least `band[0]` below the slab's top, for a floor any higher
+    /// could only carry the rig above the slab. Looked for from the slab's top itself, the
+    /// answer in a room lower than the slab is that room's ceiling (a horizontal face like any
+    /// floor: winding says nothing), and the search skipped every such room (the closets of the
+    /// ZInD house, ceilings at 2.24 m under a slab reaching 2.25 m).
+    pub fn band(&self, x: f64, y: f64, slab: [f64; 2], band: [f64; 2]) -> Option<(f64, f64)> {
+        let floor = self.below(&Point3::new(x, y, slab[1] - band[0]))?;
+        let (lo, hi) = ((floor + band[0]).max(slab[0]), (floor + band[1]).min(slab[1]));
+        (lo <= hi).then_some((lo, hi))
+    }
+}
+
 /// Even-odd rule.
 fn contains(ring: &[Point2<f64>], q: &Point2<f64>) -> bool {
     let mut inside = false;
@@ -159,6 +176,25 @@ mod tests {
         // In a doorway through a thick wall: the floor a step away.
         assert_eq!(floors.below(&Point3::new(4.3, 1.0, 1.5)), Some(0.0));
         assert_eq!(floors.below(&Point3::new(2.0, 1.0, -0.5)), None);
+    }
+
+    #[test]
+    fn a_room_lower_than_the_slab_is_searched_above_its_floor_not_its_ceiling() {
+        // A closet 2 × 2 m, floor at 0 and ceiling at 2.2 m, under node layers reaching 2.25 m.
+        let obj = "v 0 0 0\nv 2 0 0\nv 2 2 0\nv 0 2 0\n\
+                   v 0 0 2.2\nv 2 0 2.2\nv 2 2 2.2\nv 0 2 2.2\n\
+                   f 1 2 3 4\nf 8 7 6 5\n";
+        let floors = Floors::new(&Model::from_obj_str(obj, "closet.obj").unwrap());
+        assert_eq!(floors.band(1.0, 1.0, [0.75, 2.25], [1.0, 2.0]), Some((1.0, 2.0)));
+        // The ceiling is what lies highest beneath the slab's top.
+        assert_eq!(floors.below(&Point3::new(1.0, 1.0, 2.25)), Some(2.2));
+        // Upstairs: the upper floor carries the rig in an upper slab.
+        let two = Floors::new(&two_storeys());
+        assert_eq!(two.band(2.0, 1.0, [3.75, 5.25], [1.0, 2.0]), Some((4.0, 5.0)));
+        assert_eq!(two.band(2.0, 3.0, [0.75, 2.25], [1.0, 2.0]), Some((1.0, 2.0)));
+        // Outside the building, or a band the slab cannot hold: nothing.
+        assert_eq!(two.band(6.0, 1.0, [0.75, 2.25], [1.0, 2.0]), None);
+        assert_eq!(two.band(2.0, 1.0, [0.75, 0.9], [1.0, 2.0]), None);
     }
 
     #[test]

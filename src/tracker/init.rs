@@ -756,10 +756,10 @@ impl<'m> Initialiser<'m> {
                     let (z_lo, z_hi) = match self.opts.upright_height_m {
                         Some(z) => (z, z),
                         None if self.floors.any() => {
-                            let Some(floor) = self.floors.below(&Point3::new(x, y, slab_hi)) else {
-                                continue;
-                            };
-                            ((floor + band_lo).max(slab_lo), (floor + band_hi).min(slab_hi))
+                            match self.floors.band(x, y, [slab_lo, slab_hi], [band_lo, band_hi]) {
+                                Some(b) => b,
+                                None => continue,
+                            }
                         }
                         None => (slab_lo, slab_hi),
                     };

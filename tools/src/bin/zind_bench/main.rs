@@ -141,6 +141,9 @@ impl Row {
 struct Outcome {
     /// Last frame's pose error (m, deg), if it had a pose.
     last: Option<(f64, f64)>,
+    /// Last frame's position error along the world axes (x, y, z), m: a coarse model's walls
+    /// and a nominal camera height show as a bias in one direction.
+    last_offset: Option<Vector3<f64>>,
     /// Some frame's pose was more than 1 m or 10° off.
     wrong: bool,
     first_pose_frame: Option<usize>,
@@ -277,12 +280,16 @@ fn run(cli: &Cli) -> Result<(), String> {
                 );
                 if cli.verbose {
                     eprintln!(
-                        "  {} {:<8} {:<22} error {:>7.3} m {:>7.2}° wrong {} first pose frame {:?} after {:?} ms",
+                        "  {} {:<8} {:<22} error {:>7.3} m {:>7.2}° (x, y, z {}) wrong {} first pose frame {:?} after {:?} ms",
                         rig.name,
                         pano.id,
                         row.name(),
                         dp,
                         dr,
+                        outcome
+                            .last_offset
+                            .map(|v| format!("{:+.3}, {:+.3}, {:+.3} m", v.x, v.y, v.z))
+                            .unwrap_or_else(|| "-".into()),
                         outcome.wrong,
                         outcome.first_pose_frame,
                         outcome.time_to_first_pose.map(ms)
@@ -447,8 +454,12 @@ fn track_one(
                     outcome.time_to_first_pose = Some(elapsed);
                 }
                 outcome.last = Some((dp, dr));
+                outcome.last_offset = Some(p.translation.vector - truth.translation.vector);
             }
-            None => outcome.last = None,
+            None => {
+                outcome.last = None;
+                outcome.last_offset = None;
+            }
         }
         Ok(())
     };
