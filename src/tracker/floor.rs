@@ -2,16 +2,21 @@
 //! the floor it stands on (beyond the papers; KT §5.4 fixes the height outright for a cart).
 //!
 //! In: the model's faces (once, at start-up) and a position. Out: the height of the highest
-//! near-horizontal face below the position whose outline contains it in plan, or `None` where
-//! there is none (outside the building, or a model drawn without floors).
+//! near-horizontal face below the position whose outline contains it in plan (or passes near
+//! it, with nothing in the way: a doorway through a thick wall), or `None` where there is none
+//! (outside the building, inside a wall, or a model drawn without floors). Nothing here reads
+//! the faces' winding: a floor and a ceiling are both horizontal faces, told apart only by
+//! where the position stands.
 //!
 //! Why: on real photographs a wrong pose that explains as much as the truth is most often one
 //! that floats: the same room seen from decimetres too high or low, or from above a ceiling or
 //! outside the walls. A floor under the rig and a height above it in the band that people carry
 //! rigs at refuse those, and narrow the search's height.
 //!
-//! Memory: the horizontal faces' plan outlines, copied at start-up; a query allocates nothing.
+//! Memory: the horizontal faces' plan outlines and the model's triangles (for the step onto a
+//! floor from a doorway), built at start-up; a query allocates nothing.
 
+use crate::model::bvh::{model_triangles, Ray, TriangleBvh};
 use crate::model::Model;
 use nalgebra::{Point2, Point3};
 
@@ -24,6 +29,10 @@ const ON_FLOOR_M: f64 = 0.02;
 /// A floor this close in plan still counts as beneath (m): floor plans drawn room by room leave
 /// no floor in a doorway through a thick wall, and a rig stands in doorways.
 const REACH_M: f64 = 0.5;
+/// ... provided the rig can step onto it: the straight way from the rig to this far past the
+/// floor's edge (m) meets no face of the model. A doorway passes; the inside of a wall, which
+/// the floors' edges pass just as near, does not.
+const STEP_PAST_M: f64 = 0.05;
 
 struct Horizontal {
     /// Range into `Floors::outline`.
@@ -39,6 +48,8 @@ struct Horizontal {
 pub struct Floors {
     faces: Vec<Horizontal>,
     outline: Vec<Point2<f64>>,
+    /// Every face of the model, for the step onto a floor from outside its outline.
+    solid: TriangleBvh,
 }
 
 impl Floors {
@@ -71,7 +82,16 @@ impl Floors {
                 c: [f.offset / n.z, -n.x / n.z, -n.y / n.z],
             });
         }
-        Floors { faces, outline }
+        let (triangles, payload): (Vec<_>, Vec<_>) = if faces.is_empty() {
+            (Vec::new(), Vec::new())
+        } else {
+            model_triangles(model).into_iter().unzip()
+        };
+        Floors {
+            faces,
+            outline,
+            solid: TriangleBvh::build(&triangles, &payload),
+        }
     }
 
     /// Whether the model has any floor at all (a model of walls alone gives no height prior).
@@ -80,7 +100,8 @@ impl Floors {
     }
 
     /// The height of the floor beneath `p`: the highest horizontal face at most [`ON_FLOOR_M`]
-    /// above it whose outline contains it in plan, or passes within [`REACH_M`] of it.
+    /// above it whose outline contains it in plan, or passes within [`REACH_M`] of it with
+    /// nothing in the way from `p` ([`STEP_PAST_M`]).
     pub fn below(&self, p: &Point3<f64>) -> Option<f64> {
         let q = Point2::new(p.x, p.y);
         let mut best: Option<f64> = None;
@@ -93,11 +114,30 @@ impl Floors {
                 continue;
             }
             let ring = &self.outline[f.start..f.end];
-            if contains(ring, &q) || distance(ring, &q) <= REACH_M {
+            if contains(ring, &q) || self.steps_onto(ring, p) {
                 best = Some(z);
             }
         }
         best
+    }
+
+    /// Whether a rig at `p`, outside the outline `ring` in plan, can step onto it: the ring
+    /// passes within [`REACH_M`] and the level way from `p` to [`STEP_PAST_M`] beyond its
+    /// nearest point crosses no face (a doorway, not the inside of a wall: the walls around a
+    /// room stand on its outline).
+    fn steps_onto(&self, ring: &[Point2<f64>], p: &Point3<f64>) -> bool {
+        let q = Point2::new(p.x, p.y);
+        let (near, d) = nearest(ring, &q);
+        if d > REACH_M {
+            return false;
+        }
+        if d < 1e-9 {
+            return true;
+        }
+        let dir = (near - q) / d;
+        let length = d + STEP_PAST_M;
+        let ray = Ray::new([p.x as f32, p.y as f32, p.z as f32], [dir.x as f32, dir.y as f32, 0.0]);
+        !self.solid.occluded(&ray, 1e-4, length as f32)
     }
 }
 
@@ -132,9 +172,9 @@ fn contains(ring: &[Point2<f64>], q: &Point2<f64>) -> bool {
     inside
 }
 
-/// Distance in plan from `q` to the ring's edges.
-fn distance(ring: &[Point2<f64>], q: &Point2<f64>) -> f64 {
-    let mut d = f64::INFINITY;
+/// The point of the ring's edges nearest `q` in plan, and its distance.
+fn nearest(ring: &[Point2<f64>], q: &Point2<f64>) -> (Point2<f64>, f64) {
+    let mut best = (ring[0], f64::INFINITY);
     let mut j = ring.len() - 1;
     for i in 0..ring.len() {
         let (a, b) = (ring[j], ring[i]);
@@ -144,10 +184,14 @@ fn distance(ring: &[Point2<f64>], q: &Point2<f64>) -> f64 {
         } else {
             0.0
         };
-        d = d.min((q - (a + ab * t)).norm());
+        let r = a + ab * t;
+        let d = (q - r).norm();
+        if d < best.1 {
+            best = (r, d);
+        }
         j = i;
     }
-    d
+    best
 }
 
 #[cfg(test)]
@@ -195,6 +239,36 @@ mod tests {
         // Outside the building, or a band the slab cannot hold: nothing.
         assert_eq!(two.band(6.0, 1.0, [0.75, 2.25], [1.0, 2.0]), None);
         assert_eq!(two.band(2.0, 1.0, [0.75, 0.9], [1.0, 2.0]), None);
+    }
+
+    /// Two rooms 2 m square, floors drawn room by room, a 0.2 m wall between them (its two faces
+    /// on the rooms' outlines) with a doorway from y = 0.8 to 1.6, 2 m high.
+    fn doorway() -> Model {
+        let mut obj = String::from(
+            "v 0 0 0\nv 2 0 0\nv 2 2 0\nv 0 2 0\nv 2.2 0 0\nv 4.2 0 0\nv 4.2 2 0\nv 2.2 2 0\nf 1 2 3 4\nf 5 6 7 8\n",
+        );
+        let mut n = 8;
+        for x in [2.0, 2.2] {
+            for (y0, y1, z0, z1) in [(0.0, 0.8, 0.0, 2.5), (1.6, 2.0, 0.0, 2.5), (0.8, 1.6, 2.0, 2.5)] {
+                obj += &format!("v {x} {y0} {z0}\nv {x} {y1} {z0}\nv {x} {y1} {z1}\nv {x} {y0} {z1}\n");
+                obj += &format!("f {} {} {} {}\n", n + 1, n + 2, n + 3, n + 4);
+                n += 4;
+            }
+        }
+        Model::from_obj_str(&obj, "doorway.obj").unwrap()
+    }
+
+    #[test]
+    fn a_doorway_through_a_thick_wall_has_a_floor_and_the_inside_of_the_wall_has_none() {
+        let floors = Floors::new(&doorway());
+        assert_eq!(floors.below(&Point3::new(2.1, 1.2, 1.4)), Some(0.0));
+        assert_eq!(floors.below(&Point3::new(2.1, 0.4, 1.4)), None);
+        assert_eq!(floors.below(&Point3::new(2.1, 1.9, 1.4)), None);
+        // Above the doorway's head the wall is solid again.
+        assert_eq!(floors.below(&Point3::new(2.1, 1.2, 2.2)), None);
+        // Inside either room, and beside the building within reach with nothing in the way.
+        assert_eq!(floors.below(&Point3::new(1.0, 0.4, 1.4)), Some(0.0));
+        assert_eq!(floors.below(&Point3::new(-0.3, 1.0, 1.4)), Some(0.0));
     }
 
     #[test]
