@@ -124,7 +124,9 @@ impl Floors {
     /// Whether a rig at `p`, outside the outline `ring` in plan, can step onto it: the ring
     /// passes within [`REACH_M`] and the level way from `p` to [`STEP_PAST_M`] beyond its
     /// nearest point crosses no face (a doorway, not the inside of a wall: the walls around a
-    /// room stand on its outline).
+    /// room stand on its outline). Only the way to the nearest point is tried: in a doorway
+    /// that is straight through the opening, except within a few centimetres of a jamb at a
+    /// room's corner.
     fn steps_onto(&self, ring: &[Point2<f64>], p: &Point3<f64>) -> bool {
         let q = Point2::new(p.x, p.y);
         let (near, d) = nearest(ring, &q);
@@ -139,9 +141,7 @@ impl Floors {
         let ray = Ray::new([p.x as f32, p.y as f32, p.z as f32], [dir.x as f32, dir.y as f32, 0.0]);
         !self.solid.occluded(&ray, 1e-4, length as f32)
     }
-}
 
-impl Floors {
     /// The heights within `slab` (lowest, highest) at which a rig carried `band` above a floor
     /// can stand at plan position (`x`, `y`), or `None` where no floor beneath can carry it
     /// there.
