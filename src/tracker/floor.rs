@@ -13,10 +13,11 @@
 //! outside the walls. A floor under the rig and a height above it in the band that people carry
 //! rigs at refuse those, and narrow the search's height.
 //!
-//! Memory: the horizontal faces' plan outlines and the model's triangles (for the step onto a
-//! floor from a doorway), built at start-up; a query allocates nothing.
+//! Memory: the horizontal faces' plan outlines, copied at start-up; the step onto a floor from
+//! a doorway casts a ray against the model's triangles that the caller holds (the BVH of
+//! `visibility::at_pose`). A query allocates nothing.
 
-use crate::model::bvh::{model_triangles, Ray, TriangleBvh};
+use crate::model::bvh::{Ray, TriangleBvh};
 use crate::model::Model;
 use nalgebra::{Point2, Point3};
 
@@ -48,8 +49,6 @@ struct Horizontal {
 pub struct Floors {
     faces: Vec<Horizontal>,
     outline: Vec<Point2<f64>>,
-    /// Every face of the model, for the step onto a floor from outside its outline.
-    solid: TriangleBvh,
 }
 
 impl Floors {
@@ -82,16 +81,7 @@ impl Floors {
                 c: [f.offset / n.z, -n.x / n.z, -n.y / n.z],
             });
         }
-        let (triangles, payload): (Vec<_>, Vec<_>) = if faces.is_empty() {
-            (Vec::new(), Vec::new())
-        } else {
-            model_triangles(model).into_iter().unzip()
-        };
-        Floors {
-            faces,
-            outline,
-            solid: TriangleBvh::build(&triangles, &payload),
-        }
+        Floors { faces, outline }
     }
 
     /// Whether the model has any floor at all (a model of walls alone gives no height prior).
@@ -101,8 +91,8 @@ impl Floors {
 
     /// The height of the floor beneath `p`: the highest horizontal face at most [`ON_FLOOR_M`]
     /// above it whose outline contains it in plan, or passes within [`REACH_M`] of it with
-    /// nothing in the way from `p` ([`STEP_PAST_M`]).
-    pub fn below(&self, p: &Point3<f64>) -> Option<f64> {
+    /// nothing of `solid` (the model's triangles) in the way from `p` ([`STEP_PAST_M`]).
+    pub fn below(&self, p: &Point3<f64>, solid: &TriangleBvh) -> Option<f64> {
         let q = Point2::new(p.x, p.y);
         let mut best: Option<f64> = None;
         for f in &self.faces {
@@ -114,32 +104,11 @@ impl Floors {
                 continue;
             }
             let ring = &self.outline[f.start..f.end];
-            if contains(ring, &q) || self.steps_onto(ring, p) {
+            if contains(ring, &q) || steps_onto(ring, p, solid) {
                 best = Some(z);
             }
         }
         best
-    }
-
-    /// Whether a rig at `p`, outside the outline `ring` in plan, can step onto it: the ring
-    /// passes within [`REACH_M`] and the level way from `p` to [`STEP_PAST_M`] beyond its
-    /// nearest point crosses no face (a doorway, not the inside of a wall: the walls around a
-    /// room stand on its outline). Only the way to the nearest point is tried: in a doorway
-    /// that is straight through the opening, except within a few centimetres of a jamb at a
-    /// room's corner.
-    fn steps_onto(&self, ring: &[Point2<f64>], p: &Point3<f64>) -> bool {
-        let q = Point2::new(p.x, p.y);
-        let (near, d) = nearest(ring, &q);
-        if d > REACH_M {
-            return false;
-        }
-        if d < 1e-9 {
-            return true;
-        }
-        let dir = (near - q) / d;
-        let length = d + STEP_PAST_M;
-        let ray = Ray::new([p.x as f32, p.y as f32, p.z as f32], [dir.x as f32, dir.y as f32, 0.0]);
-        !self.solid.occluded(&ray, 1e-4, length as f32)
     }
 
     /// The heights within `slab` (lowest, highest) at which a rig carried `band` above a floor
@@ -151,11 +120,32 @@ impl Floors {
     /// answer in a room lower than the slab is that room's ceiling (a horizontal face like any
     /// floor: winding says nothing), and the search skipped every such room (the closets of the
     /// ZInD house, ceilings at 2.24 m under a slab reaching 2.25 m).
-    pub fn band(&self, x: f64, y: f64, slab: [f64; 2], band: [f64; 2]) -> Option<(f64, f64)> {
-        let floor = self.below(&Point3::new(x, y, slab[1] - band[0]))?;
+    pub fn band(&self, x: f64, y: f64, slab: [f64; 2], band: [f64; 2], solid: &TriangleBvh) -> Option<(f64, f64)> {
+        let floor = self.below(&Point3::new(x, y, slab[1] - band[0]), solid)?;
         let (lo, hi) = ((floor + band[0]).max(slab[0]), (floor + band[1]).min(slab[1]));
         (lo <= hi).then_some((lo, hi))
     }
+}
+
+/// Whether a rig at `p`, outside the outline `ring` in plan, can step onto it: the ring
+/// passes within [`REACH_M`] and the level way from `p` to [`STEP_PAST_M`] beyond its
+/// nearest point crosses no face (a doorway, not the inside of a wall: the walls around a
+/// room stand on its outline). Only the way to the nearest point is tried: in a doorway
+/// that is straight through the opening, except within a few centimetres of a jamb at a
+/// room's corner.
+fn steps_onto(ring: &[Point2<f64>], p: &Point3<f64>, solid: &TriangleBvh) -> bool {
+    let q = Point2::new(p.x, p.y);
+    let (near, d) = nearest(ring, &q);
+    if d > REACH_M {
+        return false;
+    }
+    if d < 1e-9 {
+        return true;
+    }
+    let dir = (near - q) / d;
+    let length = d + STEP_PAST_M;
+    let ray = Ray::new([p.x as f32, p.y as f32, p.z as f32], [dir.x as f32, dir.y as f32, 0.0]);
+    !solid.occluded(&ray, 1e-4, length as f32)
 }
 
 /// Even-odd rule.
@@ -197,6 +187,12 @@ fn nearest(ring: &[Point2<f64>], q: &Point2<f64>) -> (Point2<f64>, f64) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::visibility::at_pose::PoseVisibility;
+
+    /// The floors of `model` and its triangles, as the initialisation holds them.
+    fn floors_of(model: &Model) -> (Floors, TriangleBvh) {
+        (Floors::new(model), PoseVisibility::new(model).solid().clone())
+    }
 
     /// Two storeys: a 4 × 4 floor at 0 and a 4 × 2 slab at 3 over half of it, and a wall.
     fn two_storeys() -> Model {
@@ -209,17 +205,17 @@ mod tests {
 
     #[test]
     fn the_floor_below_is_the_highest_face_under_the_point_and_none_outside() {
-        let floors = Floors::new(&two_storeys());
+        let (floors, solid) = floors_of(&two_storeys());
         assert!(floors.any());
-        assert_eq!(floors.below(&Point3::new(2.0, 3.0, 1.5)), Some(0.0));
-        assert_eq!(floors.below(&Point3::new(2.0, 1.0, 1.5)), Some(0.0));
-        assert_eq!(floors.below(&Point3::new(2.0, 1.0, 4.5)), Some(3.0));
+        assert_eq!(floors.below(&Point3::new(2.0, 3.0, 1.5), &solid), Some(0.0));
+        assert_eq!(floors.below(&Point3::new(2.0, 1.0, 1.5), &solid), Some(0.0));
+        assert_eq!(floors.below(&Point3::new(2.0, 1.0, 4.5), &solid), Some(3.0));
         // Beside the slab, the ground floor is still below.
-        assert_eq!(floors.below(&Point3::new(2.0, 3.0, 4.5)), Some(0.0));
-        assert_eq!(floors.below(&Point3::new(5.0, 1.0, 1.5)), None);
+        assert_eq!(floors.below(&Point3::new(2.0, 3.0, 4.5), &solid), Some(0.0));
+        assert_eq!(floors.below(&Point3::new(5.0, 1.0, 1.5), &solid), None);
         // In a doorway through a thick wall: the floor a step away.
-        assert_eq!(floors.below(&Point3::new(4.3, 1.0, 1.5)), Some(0.0));
-        assert_eq!(floors.below(&Point3::new(2.0, 1.0, -0.5)), None);
+        assert_eq!(floors.below(&Point3::new(4.3, 1.0, 1.5), &solid), Some(0.0));
+        assert_eq!(floors.below(&Point3::new(2.0, 1.0, -0.5), &solid), None);
     }
 
     #[test]
@@ -228,17 +224,26 @@ mod tests {
         let obj = "v 0 0 0\nv 2 0 0\nv 2 2 0\nv 0 2 0\n\
                    v 0 0 2.2\nv 2 0 2.2\nv 2 2 2.2\nv 0 2 2.2\n\
                    f 1 2 3 4\nf 8 7 6 5\n";
-        let floors = Floors::new(&Model::from_obj_str(obj, "closet.obj").unwrap());
-        assert_eq!(floors.band(1.0, 1.0, [0.75, 2.25], [1.0, 2.0]), Some((1.0, 2.0)));
+        let (floors, solid) = floors_of(&Model::from_obj_str(obj, "closet.obj").unwrap());
+        assert_eq!(
+            floors.band(1.0, 1.0, [0.75, 2.25], [1.0, 2.0], &solid),
+            Some((1.0, 2.0))
+        );
         // The ceiling is what lies highest beneath the slab's top.
-        assert_eq!(floors.below(&Point3::new(1.0, 1.0, 2.25)), Some(2.2));
+        assert_eq!(floors.below(&Point3::new(1.0, 1.0, 2.25), &solid), Some(2.2));
         // Upstairs: the upper floor carries the rig in an upper slab.
-        let two = Floors::new(&two_storeys());
-        assert_eq!(two.band(2.0, 1.0, [3.75, 5.25], [1.0, 2.0]), Some((4.0, 5.0)));
-        assert_eq!(two.band(2.0, 3.0, [0.75, 2.25], [1.0, 2.0]), Some((1.0, 2.0)));
+        let (two, two_solid) = floors_of(&two_storeys());
+        assert_eq!(
+            two.band(2.0, 1.0, [3.75, 5.25], [1.0, 2.0], &two_solid),
+            Some((4.0, 5.0))
+        );
+        assert_eq!(
+            two.band(2.0, 3.0, [0.75, 2.25], [1.0, 2.0], &two_solid),
+            Some((1.0, 2.0))
+        );
         // Outside the building, or a band the slab cannot hold: nothing.
-        assert_eq!(two.band(6.0, 1.0, [0.75, 2.25], [1.0, 2.0]), None);
-        assert_eq!(two.band(2.0, 1.0, [0.75, 0.9], [1.0, 2.0]), None);
+        assert_eq!(two.band(6.0, 1.0, [0.75, 2.25], [1.0, 2.0], &two_solid), None);
+        assert_eq!(two.band(2.0, 1.0, [0.75, 0.9], [1.0, 2.0], &two_solid), None);
     }
 
     /// Two rooms 2 m square, floors drawn room by room, a 0.2 m wall between them (its two faces
@@ -260,22 +265,22 @@ mod tests {
 
     #[test]
     fn a_doorway_through_a_thick_wall_has_a_floor_and_the_inside_of_the_wall_has_none() {
-        let floors = Floors::new(&doorway());
-        assert_eq!(floors.below(&Point3::new(2.1, 1.2, 1.4)), Some(0.0));
-        assert_eq!(floors.below(&Point3::new(2.1, 0.4, 1.4)), None);
-        assert_eq!(floors.below(&Point3::new(2.1, 1.9, 1.4)), None);
+        let (floors, solid) = floors_of(&doorway());
+        assert_eq!(floors.below(&Point3::new(2.1, 1.2, 1.4), &solid), Some(0.0));
+        assert_eq!(floors.below(&Point3::new(2.1, 0.4, 1.4), &solid), None);
+        assert_eq!(floors.below(&Point3::new(2.1, 1.9, 1.4), &solid), None);
         // Above the doorway's head the wall is solid again.
-        assert_eq!(floors.below(&Point3::new(2.1, 1.2, 2.2)), None);
+        assert_eq!(floors.below(&Point3::new(2.1, 1.2, 2.2), &solid), None);
         // Inside either room, and beside the building within reach with nothing in the way.
-        assert_eq!(floors.below(&Point3::new(1.0, 0.4, 1.4)), Some(0.0));
-        assert_eq!(floors.below(&Point3::new(-0.3, 1.0, 1.4)), Some(0.0));
+        assert_eq!(floors.below(&Point3::new(1.0, 0.4, 1.4), &solid), Some(0.0));
+        assert_eq!(floors.below(&Point3::new(-0.3, 1.0, 1.4), &solid), Some(0.0));
     }
 
     #[test]
     fn walls_alone_are_no_floor() {
         let walls = Model::from_obj_str("v 0 0 0\nv 4 0 0\nv 4 0 3\nv 0 0 3\nf 1 2 3 4\n", "w.obj").unwrap();
-        let floors = Floors::new(&walls);
+        let (floors, solid) = floors_of(&walls);
         assert!(!floors.any());
-        assert_eq!(floors.below(&Point3::new(1.0, 1.0, 1.0)), None);
+        assert_eq!(floors.below(&Point3::new(1.0, 1.0, 1.0), &solid), None);
     }
 }

@@ -758,7 +758,10 @@ impl<'m> Initialiser<'m> {
                     let (z_lo, z_hi) = match self.opts.upright_height_m {
                         Some(z) => (z, z),
                         None if self.floors.any() => {
-                            match self.floors.band(x, y, [slab_lo, slab_hi], [band_lo, band_hi]) {
+                            match self
+                                .floors
+                                .band(x, y, [slab_lo, slab_hi], [band_lo, band_hi], self.at_pose.solid())
+                            {
                                 Some(b) => b,
                                 None => continue,
                             }
@@ -1385,7 +1388,7 @@ impl<'m> Initialiser<'m> {
         let p = Point3::from(pose.translation.vector);
         let [lo, hi] = self.opts.height_above_floor_m;
         self.floors
-            .below(&p)
+            .below(&p, self.at_pose.solid())
             .is_some_and(|f| p.z - f >= lo - HEIGHT_SLACK_M && p.z - f <= hi + HEIGHT_SLACK_M)
     }
 

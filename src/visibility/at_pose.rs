@@ -82,6 +82,12 @@ impl PoseVisibility {
         }
     }
 
+    /// The model's triangles in a BVH: for other ray casts against the model (the step onto a
+    /// floor, `tracker::floor`), so that it is built once.
+    pub fn solid(&self) -> &TriangleBvh {
+        &self.bvh
+    }
+
     /// The segments seen from `at` with the share of each in sight (empty outside the table).
     /// `model` and `table` must be the ones given to [`Self::new`] and the table built for it.
     pub fn at(&mut self, model: &Model, table: &VisibilityTable, at: &Point3<f64>) -> &[SeenSegment] {

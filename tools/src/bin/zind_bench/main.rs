@@ -497,6 +497,11 @@ fn diagnose(
         cfg.solver_options(),
         max_edges,
     );
+    // The whole house is searched on the tracker's whole-model budget, as `run` does.
+    if volume.diameter_m.is_none() {
+        let budget = cfg.initialisation.whole_model_time_budget_ms / 1e3;
+        init.set_time_budget(Duration::from_secs_f64(budget));
+    }
     let cap2 = cfg.maintenance.inlier_angle_deg.to_radians().powi(2);
     let limit = (1.0 - cfg.initialisation.accept_explained_fraction) * cap2;
     let err = |p: &Pose| {
