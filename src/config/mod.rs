@@ -170,7 +170,7 @@ impl Default for InitialisationConfig {
             search_diameter_m: 3.0,    // Koch–Teller §5.3
             best_edges_per_segment: 3, // Koch–Teller §4.1.2, k = 3
             max_samples: 5000,
-            time_budget_ms: 1000.0,
+            time_budget_ms: 950.0,
             simplex_refinement: true, // Koch–Teller §4.1.3
             confirm_frames: 3,
             edges_considered: 40,
