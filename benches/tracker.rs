@@ -8,7 +8,10 @@
 //! (default 300 per scenario; `--full` for the paper's lengths, Table 2: 1500, 7800 and 1900
 //! frames — an hour of rendering on 2 cores, cached afterwards), `--seed S` (the rendering's:
 //! a new seed renders a new recording), `--tracker-seed S` (the tracker's random sampling, default
-//! 1: the same recording tracked by another draw), `--verbose` (one line
+//! 1: the same recording tracked by another draw), `--tracker-seeds A-B` (each of those seeds in
+//! turn, one row each, then the median, best and worst ATE over them: the searches work to a
+//! clock, so a scenario that relocalises often gives different runs; quote several seeds),
+//! `--verbose` (one line
 //! per frame), `--upright` (KT §5.4 mode for the rolling scenarios), `--no-hint` (search the
 //! whole model instead of a 3 m volume around the first ground-truth pose), `--config tracker.toml`,
 //! `--rig RIG.toml` (render and track with another rig: `tools/rigs/` has examples),
@@ -67,7 +70,7 @@ mod bench {
         rig: Option<PathBuf>,
         figure15: bool,
         init_trials: usize,
-        tracker_seed: u64,
+        tracker_seeds: Vec<u64>,
         appearance: Option<String>,
     }
 
@@ -84,7 +87,7 @@ mod bench {
             rig: None,
             figure15: true,
             init_trials: 0,
-            tracker_seed: 1,
+            tracker_seeds: vec![1],
             appearance: None,
         };
         let mut it = std::env::args().skip(1);
@@ -106,7 +109,18 @@ mod bench {
                     let spec = it.next().expect("--appearance SPEC");
                     a.appearance = (spec != "default").then_some(spec);
                 }
-                "--tracker-seed" => a.tracker_seed = it.next().and_then(|s| s.parse().ok()).expect("--tracker-seed S"),
+                "--tracker-seed" => {
+                    a.tracker_seeds = vec![it.next().and_then(|s| s.parse().ok()).expect("--tracker-seed S")]
+                }
+                "--tracker-seeds" => {
+                    let spec = it.next().expect("--tracker-seeds A-B");
+                    let range = spec
+                        .split_once('-')
+                        .and_then(|(lo, hi)| Some((lo.parse::<u64>().ok()?, hi.parse::<u64>().ok()?)))
+                        .filter(|(lo, hi)| lo <= hi)
+                        .expect("--tracker-seeds A-B (A <= B)");
+                    a.tracker_seeds = (range.0..=range.1).collect();
+                }
                 "--init-trials" => a.init_trials = it.next().and_then(|s| s.parse().ok()).expect("--init-trials N"),
                 _ => {}
             }
@@ -465,171 +479,197 @@ mod bench {
                 );
                 continue;
             }
-            let hint = a.hint.then(|| SearchVolume {
-                centre: Point3::from(truth[0].pose.translation.vector),
-                diameter_m: Some(cfg.initialisation.search_diameter_m),
-            });
-            let opts = RunOptions {
-                hint,
-                seed: a.tracker_seed,
-                max_frames: None,
-            };
-            let mut estimate: Vec<Stamped> = Vec::new();
-            let mut pos_err = Vec::new();
-            let mut rot_err = Vec::new();
-            let mut latency = Vec::new();
-            let mut busy = Duration::ZERO;
-            // Commits (initial or after a loss), those > 30 cm or 3° off the truth, and frames
-            // whose pose is that far off: a tracker may say "no pose", not give a wrong one.
-            let (mut commits, mut wrong_commits, mut wrong_frames) = (0usize, 0usize, 0usize);
-            let (mut relocs, mut wrong_relocs) = (0usize, 0usize);
-            let verbose = a.verbose;
-            let stats = track(&mut source, &model, &table, &cfg, &opts, &mut |r, tracker| {
-                busy += r.frame_time;
-                latency.push(r.frame_time.as_secs_f64() * 1e3);
-                if let Some(TrackerEvent::Searched(rep)) = r.result.event {
-                    if verbose {
-                        eprintln!(
-                            "  search: {}/{} cells, {} triplet matches, {} samples, {:.0} ms (grid under {} rotations {:.0} ms){}",
-                            rep.cells_searched,
-                            rep.cells_in_volume,
-                            rep.triplet_matches,
-                            rep.samples,
-                            rep.elapsed.as_secs_f64() * 1e3,
-                            rep.rotations,
-                            rep.grid_elapsed.as_secs_f64() * 1e3,
-                            if rep.timed_out { " (timed out)" } else { "" }
-                        );
-                    }
-                }
-                let gt = truth
-                    .iter()
-                    .find(|s| s.timestamp_ns.abs_diff(r.timestamp_ns) < 1_000_000);
-                if verbose {
-                    if let Some(g) = gt {
-                        for (p, score, frames, alive) in tracker.candidates() {
+            // Each tracker seed in turn: one row each (the seed in the row's name when there are
+            // several), then the spread of the ATE over them.
+            let mut per_seed: Vec<f64> = Vec::new();
+            for &tracker_seed in &a.tracker_seeds {
+                let row = if a.tracker_seeds.len() > 1 {
+                    format!("{name} (tracker seed {tracker_seed})")
+                } else {
+                    name.to_string()
+                };
+                source = ReplaySource::open(&dir, Pacing::AsFastAsPossible).unwrap();
+                let hint = a.hint.then(|| SearchVolume {
+                    centre: Point3::from(truth[0].pose.translation.vector),
+                    diameter_m: Some(cfg.initialisation.search_diameter_m),
+                });
+                let opts = RunOptions {
+                    hint,
+                    seed: tracker_seed,
+                    max_frames: None,
+                };
+                let mut estimate: Vec<Stamped> = Vec::new();
+                let mut pos_err = Vec::new();
+                let mut rot_err = Vec::new();
+                let mut latency = Vec::new();
+                let mut busy = Duration::ZERO;
+                // Commits (initial or after a loss), those > 30 cm or 3° off the truth, and frames
+                // whose pose is that far off: a tracker may say "no pose", not give a wrong one.
+                let (mut commits, mut wrong_commits, mut wrong_frames) = (0usize, 0usize, 0usize);
+                let (mut relocs, mut wrong_relocs) = (0usize, 0usize);
+                let verbose = a.verbose;
+                let stats = track(&mut source, &model, &table, &cfg, &opts, &mut |r, tracker| {
+                    busy += r.frame_time;
+                    latency.push(r.frame_time.as_secs_f64() * 1e3);
+                    if let Some(TrackerEvent::Searched(rep)) = r.result.event {
+                        if verbose {
                             eprintln!(
-                                "    candidate {:6.1} cm {:6.2}° score {:.2e} over {frames} frames{}",
-                                (p.translation.vector - g.pose.translation.vector).norm() * 100.0,
-                                p.rotation.angle_to(&g.pose.rotation).to_degrees(),
-                                score,
-                                if alive { "" } else { " (dropped)" }
+                                "  search: {}/{} cells, {} triplet matches, {} samples, {:.0} ms (grid under {} rotations {:.0} ms){}",
+                                rep.cells_searched,
+                                rep.cells_in_volume,
+                                rep.triplet_matches,
+                                rep.samples,
+                                rep.elapsed.as_secs_f64() * 1e3,
+                                rep.rotations,
+                                rep.grid_elapsed.as_secs_f64() * 1e3,
+                                if rep.timed_out { " (timed out)" } else { "" }
                             );
                         }
                     }
-                }
-                if let Some(p) = &r.result.pose {
-                    estimate.push(Stamped {
-                        timestamp_ns: r.timestamp_ns,
-                        pose: *p,
-                    });
-                }
-                let err = match (&r.result.pose, gt) {
-                    (Some(p), Some(g)) => {
-                        let dp = (p.translation.vector - g.pose.translation.vector).norm();
-                        let dr = p.rotation.angle_to(&g.pose.rotation).to_degrees();
-                        pos_err.push(dp);
-                        rot_err.push(dr);
-                        Some((dp, dr))
-                    }
-                    _ => None,
-                };
-                let wrong = err.is_some_and(|(dp, dr)| dp > 0.3 || dr > 3.0);
-                wrong_frames += usize::from(wrong);
-                match r.result.event {
-                    Some(TrackerEvent::Committed { .. }) => {
-                        commits += 1;
-                        wrong_commits += usize::from(wrong);
-                    }
-                    Some(TrackerEvent::Relocalised) => {
-                        relocs += 1;
-                        wrong_relocs += usize::from(wrong);
-                    }
-                    _ => {}
-                }
-                if verbose {
-                    let r2 = &r.result;
-                    eprintln!(
-                        "{:4} {:?} {} σ {:5.1} cm expl {:.2} inl {:3} u/p/a {:?} samples {:4} edges {:4} match {:.2} solve {:.2} ms{}",
-                        r.sequence,
-                        r2.state,
-                        match err {
-                            Some((dp, dr)) => format!("{:6.1} cm {:5.2}°", dp * 100.0, dr),
-                            None => "      --         ".into(),
-                        },
-                        largest_sigma(&r2.covariance, 0) * 100.0,
-                        r2.explained,
-                        r2.inliers,
-                        r2.states,
-                        r2.samples,
-                        r.edges,
-                        r2.match_time.as_secs_f64() * 1e3,
-                        r2.solve_time.as_secs_f64() * 1e3,
-                        match r2.event {
-                            Some(TrackerEvent::Committed {
-                                candidates,
-                                changed_mind,
-                            }) => format!(" committed ({candidates} candidates, changed mind: {changed_mind})"),
-                            Some(TrackerEvent::LostLock) => " LOST".into(),
-                            Some(TrackerEvent::Relocalised) => " relocalised".into(),
-                            _ => String::new(),
+                    let gt = truth
+                        .iter()
+                        .find(|s| s.timestamp_ns.abs_diff(r.timestamp_ns) < 1_000_000);
+                    if verbose {
+                        if let Some(g) = gt {
+                            for (p, score, frames, alive) in tracker.candidates() {
+                                eprintln!(
+                                    "    candidate {:6.1} cm {:6.2}° score {:.2e} over {frames} frames{}",
+                                    (p.translation.vector - g.pose.translation.vector).norm() * 100.0,
+                                    p.rotation.angle_to(&g.pose.rotation).to_degrees(),
+                                    score,
+                                    if alive { "" } else { " (dropped)" }
+                                );
+                            }
                         }
-                    );
-                }
-                Ok(())
-            })
-            .unwrap();
-            let init_ms = stats.first_search.map_or(f64::NAN, |d| d.as_secs_f64() * 1e3);
-            // The table's ATE is desk::eval's (the same numbers as `evo_ape tum`, checked by
-            // tools/check_evo.py); the estimate is written beside the recording for evo itself.
-            let est_path = dir.join("estimate.tum");
-            std::fs::write(&est_path, omnitrack::trajectory::to_tum_string(&estimate)).unwrap();
-            if estimate.is_empty() {
-                println!("| {name} | {frames} | 0.0 % | no pose on any frame | | | | | |");
-                continue;
-            }
-            let ev = omnitrack::desk::eval::evaluate(&truth, &estimate, &omnitrack::desk::eval::EvalOptions::default())
+                    }
+                    if let Some(p) = &r.result.pose {
+                        estimate.push(Stamped {
+                            timestamp_ns: r.timestamp_ns,
+                            pose: *p,
+                        });
+                    }
+                    let err = match (&r.result.pose, gt) {
+                        (Some(p), Some(g)) => {
+                            let dp = (p.translation.vector - g.pose.translation.vector).norm();
+                            let dr = p.rotation.angle_to(&g.pose.rotation).to_degrees();
+                            pos_err.push(dp);
+                            rot_err.push(dr);
+                            Some((dp, dr))
+                        }
+                        _ => None,
+                    };
+                    let wrong = err.is_some_and(|(dp, dr)| dp > 0.3 || dr > 3.0);
+                    wrong_frames += usize::from(wrong);
+                    match r.result.event {
+                        Some(TrackerEvent::Committed { .. }) => {
+                            commits += 1;
+                            wrong_commits += usize::from(wrong);
+                        }
+                        Some(TrackerEvent::Relocalised) => {
+                            relocs += 1;
+                            wrong_relocs += usize::from(wrong);
+                        }
+                        _ => {}
+                    }
+                    if verbose {
+                        let r2 = &r.result;
+                        eprintln!(
+                            "{:4} {:?} {} σ {:5.1} cm expl {:.2} inl {:3} u/p/a {:?} samples {:4} edges {:4} match {:.2} solve {:.2} ms{}",
+                            r.sequence,
+                            r2.state,
+                            match err {
+                                Some((dp, dr)) => format!("{:6.1} cm {:5.2}°", dp * 100.0, dr),
+                                None => "      --         ".into(),
+                            },
+                            largest_sigma(&r2.covariance, 0) * 100.0,
+                            r2.explained,
+                            r2.inliers,
+                            r2.states,
+                            r2.samples,
+                            r.edges,
+                            r2.match_time.as_secs_f64() * 1e3,
+                            r2.solve_time.as_secs_f64() * 1e3,
+                            match r2.event {
+                                Some(TrackerEvent::Committed {
+                                    candidates,
+                                    changed_mind,
+                                }) => format!(" committed ({candidates} candidates, changed mind: {changed_mind})"),
+                                Some(TrackerEvent::LostLock) => " LOST".into(),
+                                Some(TrackerEvent::Relocalised) => " relocalised".into(),
+                                _ => String::new(),
+                            }
+                        );
+                    }
+                    Ok(())
+                })
                 .unwrap();
-            eprintln!(
-                "{name}: evo_ape tum {} {} (ATE {:.4} m RMSE over {} poses)",
-                dir.join("groundtruth.tum").display(),
-                est_path.display(),
-                ev.ate.translation_m.rmse,
-                ev.ate.translation_m.count
-            );
-            let (pos_err, rot_err): (Vec<f64>, Vec<f64>) = ev
-                .ate
-                .per_pose
-                .iter()
-                .map(|e| (e.translation_m, e.rotation_deg))
-                .unzip();
-            let rmse = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64).sqrt();
-            let max = |v: &[f64]| v.iter().cloned().fold(0.0, f64::max);
-            latency.sort_by(f64::total_cmp);
-            println!(
-                "| {name} | {} | {:.1} % | {} ({}) | {:.2} / {:.1} | {:.3} / {:.2} | {:.0} | {:.1} / {:.1} / {:.1} | {:.1} |",
-                stats.frames,
-                100.0 * stats.tracked as f64 / stats.frames.max(1) as f64,
-                stats.reinitialisations,
-                stats.relocalisations,
-                rmse(&pos_err) * 100.0,
-                max(&pos_err) * 100.0,
-                rmse(&rot_err),
-                max(&rot_err),
-                init_ms,
-                percentile(&latency, 0.5),
-                percentile(&latency, 0.99),
-                latency.last().copied().unwrap_or(f64::NAN),
-                stats.frames as f64 / busy.as_secs_f64(),
-            );
-            eprintln!(
-                "{name}: {} solves far from the prediction replaced by a second opinion",
-                stats.second_opinions
-            );
-            eprintln!(
-                "{name}: {commits} commits ({wrong_commits} wrong: > 30 cm or 3° off the truth), {relocs} relocalisations \
-({wrong_relocs} wrong); {wrong_frames} frames with a pose that far off"
-            );
+                let init_ms = stats.first_search.map_or(f64::NAN, |d| d.as_secs_f64() * 1e3);
+                // The table's ATE is desk::eval's (the same numbers as `evo_ape tum`, checked by
+                // tools/check_evo.py); the estimate is written beside the recording for evo itself.
+                let est_path = dir.join("estimate.tum");
+                std::fs::write(&est_path, omnitrack::trajectory::to_tum_string(&estimate)).unwrap();
+                if estimate.is_empty() {
+                    println!("| {row} | {frames} | 0.0 % | no pose on any frame | | | | | |");
+                    continue;
+                }
+                let ev =
+                    omnitrack::desk::eval::evaluate(&truth, &estimate, &omnitrack::desk::eval::EvalOptions::default())
+                        .unwrap();
+                eprintln!(
+                    "{name}: evo_ape tum {} {} (ATE {:.4} m RMSE over {} poses)",
+                    dir.join("groundtruth.tum").display(),
+                    est_path.display(),
+                    ev.ate.translation_m.rmse,
+                    ev.ate.translation_m.count
+                );
+                let (pos_err, rot_err): (Vec<f64>, Vec<f64>) = ev
+                    .ate
+                    .per_pose
+                    .iter()
+                    .map(|e| (e.translation_m, e.rotation_deg))
+                    .unzip();
+                let rmse = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64).sqrt();
+                let max = |v: &[f64]| v.iter().cloned().fold(0.0, f64::max);
+                per_seed.push(rmse(&pos_err) * 100.0);
+                latency.sort_by(f64::total_cmp);
+                println!(
+                    "| {row} | {} | {:.1} % | {} ({}) | {:.2} / {:.1} | {:.3} / {:.2} | {:.0} | {:.1} / {:.1} / {:.1} | {:.1} |",
+                    stats.frames,
+                    100.0 * stats.tracked as f64 / stats.frames.max(1) as f64,
+                    stats.reinitialisations,
+                    stats.relocalisations,
+                    rmse(&pos_err) * 100.0,
+                    max(&pos_err) * 100.0,
+                    rmse(&rot_err),
+                    max(&rot_err),
+                    init_ms,
+                    percentile(&latency, 0.5),
+                    percentile(&latency, 0.99),
+                    latency.last().copied().unwrap_or(f64::NAN),
+                    stats.frames as f64 / busy.as_secs_f64(),
+                );
+                eprintln!(
+                    "{name}: {} solves far from the prediction replaced by a second opinion",
+                    stats.second_opinions
+                );
+                eprintln!(
+                    "{name}: {commits} commits ({wrong_commits} wrong: > 30 cm or 3° off the truth), {relocs} relocalisations \
+    ({wrong_relocs} wrong); {wrong_frames} frames with a pose that far off"
+                );
+            }
+            if per_seed.len() > 1 {
+                per_seed.sort_by(f64::total_cmp);
+                eprintln!(
+                    "{name}: ATE pos RMSE over tracker seeds {}-{}: median {:.2} cm, best {:.2}, worst {:.2} ({} of {} runs with a pose)",
+                    a.tracker_seeds[0],
+                    a.tracker_seeds[a.tracker_seeds.len() - 1],
+                    percentile(&per_seed, 0.5),
+                    per_seed[0],
+                    per_seed[per_seed.len() - 1],
+                    per_seed.len(),
+                    a.tracker_seeds.len()
+                );
+            }
         }
     }
 }
