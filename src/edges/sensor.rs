@@ -14,7 +14,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 /// ln(max(m, 1)) of every gradient magnitude m (|gx| + |gy| ≤ 32640 < 2¹⁵), for the sub-pixel
-/// peak: three logarithms per edgel were a tenth of the chain step on real photographs. Built
+/// peak: three logarithms per edgel were a sixth of the chain step on real photographs. Built
 /// once, by the first [`Workspace::new`].
 static LN_MAG: std::sync::LazyLock<Box<[f32]>> =
     std::sync::LazyLock::new(|| (0..1u32 << 15).map(|m| (m as f32).max(1.0).ln()).collect());
