@@ -90,9 +90,10 @@ pub(crate) struct Workspace {
     stack: Vec<(u32, u32)>,
     pieces: Vec<(u32, u32)>,
     cands: Vec<Candidate>,
-    /// The candidates' normals packed for the pair test of `merge_across_chains` (0 once dead):
-    /// the test of every pair against every other reads these, not the candidates.
-    normals: Vec<[f32; 3]>,
+    /// The candidates' normals packed for the pair test of `merge_across_chains` (0 once dead),
+    /// one array per coordinate so that the test of a block of pairs vectorises: the test of
+    /// every pair against every other reads these, not the candidates.
+    normals: [Vec<f32>; 3],
     pub edges: Vec<Edge>,
     /// Counters of the last run (for benchmarks and diagnostics).
     pub stats: SensorStats,
@@ -160,7 +161,7 @@ impl Workspace {
             stack: Vec::with_capacity(2 * MAX_CHAIN),
             pieces: Vec::with_capacity(2 * MAX_CHAIN),
             cands: Vec::with_capacity(cand_cap),
-            normals: Vec::with_capacity(cand_cap),
+            normals: std::array::from_fn(|_| Vec::with_capacity(cand_cap)),
             edges: Vec::with_capacity(max_edges),
             stats: SensorStats::default(),
         }
@@ -617,43 +618,65 @@ impl Workspace {
         let min_support = self.params.merge_min_support;
         let min_evidence = self.params.merge_gap_evidence;
         let pack = |n: &Vector3<f64>| [n.x as f32, n.y as f32, n.z as f32];
-        self.normals.clear();
-        self.normals.extend(self.cands.iter().map(|c| pack(&c.n)));
+        for (k, coord) in self.normals.iter_mut().enumerate() {
+            coord.clear();
+            coord.extend(self.cands.iter().map(|c| pack(&c.n)[k]));
+        }
         // The f32 test lets through every pair the f64 one below would.
         let cos_loose = cos_max as f32 - 1e-5;
+        let len = self.cands.len();
         for pass in 0..3 {
             let mut merged_any = false;
-            for i in 0..self.cands.len() {
+            for i in 0..len {
                 if !self.cands[i].alive {
                     continue;
                 }
-                for j in i + 1..self.cands.len() {
-                    let (a, b) = (self.normals[i], self.normals[j]);
-                    if (a[0] * b[0] + a[1] * b[1] + a[2] * b[2]).abs() < cos_loose {
-                        continue;
+                // The normal test of a block of pairs at once (the compiler vectorises it):
+                // nearly every pair fails it. Pairs that pass are tried in the same order as
+                // one by one, and a merge, which turns i's normal, tests the rest of the
+                // block again.
+                let mut j = i + 1;
+                while j < len {
+                    let end = (j + PAIR_BLOCK).min(len);
+                    let [nx, ny, nz] = &self.normals;
+                    let a = [nx[i], ny[i], nz[i]];
+                    let mut mask = 0u32;
+                    for (k, ((bx, by), bz)) in nx[j..end].iter().zip(&ny[j..end]).zip(&nz[j..end]).enumerate() {
+                        let d = (a[0] * bx + a[1] * by + a[2] * bz).abs();
+                        mask |= u32::from(!(d < cos_loose)) << k;
                     }
-                    // A pair whose members are unchanged since the last pass was tried then.
-                    if !self.cands[j].alive || (pass > 0 && !self.cands[i].changed && !self.cands[j].changed) {
-                        continue;
-                    }
-                    let (ci, cj) = (&self.cands[i], &self.cands[j]);
-                    let dot = ci.n.dot(&cj.n);
-                    if dot.abs() < cos_max {
-                        continue;
-                    }
-                    if let Some(m) = try_merge(ci, cj, gap_max, tol, two_line, min_support) {
-                        if min_evidence > 0.0 && self.gap_evidence(&m, ci, cj, min_evidence) < min_evidence {
-                            self.stats.merges_refused += 1;
+                    let mut next = end;
+                    while mask != 0 {
+                        let jj = j + mask.trailing_zeros() as usize;
+                        mask &= mask - 1;
+                        // A pair whose members are unchanged since the last pass was tried then.
+                        if !self.cands[jj].alive || (pass > 0 && !self.cands[i].changed && !self.cands[jj].changed) {
                             continue;
                         }
-                        self.cands[i] = m;
-                        self.cands[j].alive = false;
-                        self.normals[i] = pack(&m.n);
-                        self.normals[j] = [0.0; 3];
-                        self.stats.merged += 1;
-                        merged_any = true;
-                        self.cands[i].merged_now = true;
+                        let (ci, cj) = (&self.cands[i], &self.cands[jj]);
+                        let dot = ci.n.dot(&cj.n);
+                        if dot.abs() < cos_max {
+                            continue;
+                        }
+                        if let Some(m) = try_merge(ci, cj, gap_max, tol, two_line, min_support) {
+                            if min_evidence > 0.0 && self.gap_evidence(&m, ci, cj, min_evidence) < min_evidence {
+                                self.stats.merges_refused += 1;
+                                continue;
+                            }
+                            self.cands[i] = m;
+                            self.cands[jj].alive = false;
+                            for (k, coord) in self.normals.iter_mut().enumerate() {
+                                coord[i] = pack(&m.n)[k];
+                                coord[jj] = 0.0;
+                            }
+                            self.stats.merged += 1;
+                            merged_any = true;
+                            self.cands[i].merged_now = true;
+                            next = jj + 1;
+                            break;
+                        }
                     }
+                    j = next;
                 }
             }
             if !merged_any {
@@ -932,6 +955,9 @@ fn angle_in_plane(n: &Vector3<f64>, e1: &Vector3<f64>, r: &Vector3<f64>) -> f64 
     let e2 = n.cross(e1);
     r.dot(&e2).atan2(r.dot(e1))
 }
+
+/// Pairs whose normals `merge_across_chains` tests at once.
+const PAIR_BLOCK: usize = 32;
 
 fn try_merge(
     ci: &Candidate,
