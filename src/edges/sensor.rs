@@ -643,7 +643,7 @@ impl Workspace {
                     let mut mask = 0u32;
                     for (k, ((bx, by), bz)) in nx[j..end].iter().zip(&ny[j..end]).zip(&nz[j..end]).enumerate() {
                         let d = (a[0] * bx + a[1] * by + a[2] * bz).abs();
-                        mask |= u32::from(!(d < cos_loose)) << k;
+                        mask |= u32::from(d >= cos_loose) << k;
                     }
                     let mut next = end;
                     while mask != 0 {
