@@ -165,23 +165,24 @@ intrinsics = [{fx:?}, {fy:?}, {cx:?}, {cy:?}]\nrotation_wxyz = [1.0, 0.0, 0.0, 0
         if let Some(x) = number("--two-line") {
             params.two_line_excess = x;
         }
-        let mut detectors: HashMap<(u32, u32), EdgeDetector> = HashMap::new();
+        let mut detectors: HashMap<(u32, u32), (EdgeDetector, Rig)> = HashMap::new();
         for (_, si) in &images {
             let size = (si.width(), si.height());
             detectors.entry(size).or_insert_with(|| {
-                EdgeDetector::with_params(&pinhole_rig(size.0, size.1, intrinsics), &config, params)
+                let rig = pinhole_rig(size.0, size.1, intrinsics);
+                (EdgeDetector::with_params(&rig, &config, params), rig)
             });
         }
         // Warm-up pass; it also writes the CSVs (the detector is deterministic).
         let mut edges_total = 0usize;
         for (name, si) in &images {
-            let det = detectors
+            let (det, rig) = detectors
                 .get_mut(&(si.width(), si.height()))
                 .expect("a detector per size");
             let edges = det.detect_sensor(si);
             edges_total += edges.len();
             let path = out_dir.join(format!("{name}.csv"));
-            std::fs::write(&path, edges_csv(edges)).unwrap_or_else(|e| fail(&format!("{}: {e}", path.display())));
+            std::fs::write(&path, edges_csv(edges, rig)).unwrap_or_else(|e| fail(&format!("{}: {e}", path.display())));
         }
         let mut timing = String::from("image,pass,ms\n");
         let mut ms = Vec::with_capacity(passes * images.len());
@@ -191,7 +192,7 @@ intrinsics = [{fx:?}, {fy:?}, {cx:?}, {cy:?}]\nrotation_wxyz = [1.0, 0.0, 0.0, 0
         let mut counts = [0f64; 7];
         for pass in 0..passes {
             for (name, si) in &images {
-                let det = detectors
+                let (det, _) = detectors
                     .get_mut(&(si.width(), si.height()))
                     .expect("a detector per size");
                 let t = Instant::now();

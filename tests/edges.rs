@@ -430,7 +430,7 @@ fn csv_header_and_columns() {
     });
     let mut det = EdgeDetector::new(&rig, &EdgeConfig::default());
     let edges = det.detect_sensor(&img).to_vec();
-    let csv = edges_csv(&edges);
+    let csv = edges_csv(&edges, &rig);
     let mut lines = csv.lines();
     let header = lines.next().unwrap();
     assert_eq!(header, EDGES_CSV_HEADER);
@@ -444,6 +444,93 @@ fn csv_header_and_columns() {
         assert!((f[0].parse::<f64>().unwrap() - e.px[0].x).abs() < 1e-3);
         assert_eq!(f[8], "2");
     }
+}
+
+/// A line broken by an occluder is one edge (its plane fitted to both pieces) that remembers the
+/// gap: the occluder lies in it, and the CSV's `pieces` column gives the two pieces on either
+/// side.
+#[test]
+fn a_line_broken_by_an_occluder_is_one_edge_with_its_gap() {
+    let _g = serial();
+    let rig = rig();
+    let n = Vector3::new(1.0, 0.0, 0.0);
+    let band = |r: &Vector3<f64>| (r.y - 0.1).abs() < 0.04;
+    let img = render(&rig, 2, &[n], |r| {
+        if band(r) {
+            [110.0, 110.0, 110.0]
+        } else if r.x < 0.0 {
+            [30.0, 30.0, 160.0]
+        } else {
+            [200.0, 200.0, 40.0]
+        }
+    });
+    let mut det = EdgeDetector::new(&rig, &EdgeConfig::default());
+    let edges = det.detect_sensor(&img).to_vec();
+    let to_sensor = rig.sensors[2].t_rig_sensor.rotation.inverse();
+    let line = edges
+        .iter()
+        .find(|e| (to_sensor * e.plane.normal.into_inner()).x.abs() > 0.999)
+        .expect("the broken line is one edge");
+    assert_eq!(line.gaps().len(), 1, "one gap: {:?}", line.gaps());
+    let [t0, t1] = line.gaps()[0].map(f64::from);
+    // The occluder spans 0.08 rad; the gap is the occluder, give or take the pixels the
+    // edgels next to it lose.
+    assert!((t1 - t0 - 0.08).abs() < 0.02, "gap {t0}..{t1}");
+    let mid = to_sensor * line.ray_at(0.5 * (t0 + t1));
+    assert!(band(&mid), "the middle of the gap {mid:?} is on the occluder");
+    for t in [t0 - 0.01, t1 + 0.01] {
+        assert!(
+            !band(&(to_sensor * line.ray_at(t))),
+            "{t} rad is on the line, not the occluder"
+        );
+    }
+    let pieces: Vec<[f64; 2]> = line.pieces().collect();
+    assert_eq!(pieces, vec![[0.0, t0], [t1, line.length_rad]]);
+    // In the CSV: two pieces, from the edge's own first end to its own last.
+    let csv = edges_csv(std::slice::from_ref(line), &rig);
+    let row = csv.lines().nth(1).expect("a row");
+    let groups: Vec<Vec<f64>> = row
+        .rsplit(',')
+        .next()
+        .expect("pieces column")
+        .split(';')
+        .map(|g| g.split(' ').map(|x| x.parse().expect("number")).collect())
+        .collect();
+    assert_eq!(groups.len(), 2, "{row}");
+    assert!((groups[0][0] - line.px[0].x).abs() < 1e-3 && (groups[0][1] - line.px[0].y).abs() < 1e-3);
+    assert!((groups[1][2] - line.px[1].x).abs() < 1e-3 && (groups[1][3] - line.px[1].y).abs() < 1e-3);
+    // The pieces' inner ends lie on the line, either side of the occluder's rows.
+    let s = &rig.sensors[2];
+    let rows = |v: f64| {
+        s.lens
+            .unproject(&nalgebra::Point2::new(line.px[0].x, v))
+            .expect("ray")
+            .y
+    };
+    let (inner_a, inner_b) = (rows(groups[0][3]), rows(groups[1][1]));
+    assert!(
+        inner_a.min(inner_b) < 0.07 && inner_a.max(inner_b) > 0.13,
+        "{inner_a} {inner_b}"
+    );
+    // A line the image shows whole has no gaps and an empty pieces column.
+    let whole = render(&rig, 2, &[n], |r| {
+        if r.x < 0.0 {
+            [30.0, 30.0, 160.0]
+        } else {
+            [200.0, 200.0, 40.0]
+        }
+    });
+    let edges = det.detect_sensor(&whole).to_vec();
+    let line = edges
+        .iter()
+        .find(|e| (to_sensor * e.plane.normal.into_inner()).x.abs() > 0.999)
+        .expect("the line");
+    assert!(line.gaps().is_empty());
+    assert!(edges_csv(std::slice::from_ref(line), &rig)
+        .lines()
+        .nth(1)
+        .expect("row")
+        .ends_with(','));
 }
 
 /// Six images with content (polygons in every sensor), two different frames alternating: after

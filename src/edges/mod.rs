@@ -36,7 +36,7 @@ use crate::geometry::EdgePlane;
 use crate::rig::Rig;
 use crossbeam::channel::{bounded, Receiver, Sender};
 use hue::HueTable;
-use nalgebra::Point2;
+use nalgebra::{Point2, Vector3};
 use sensor::Workspace;
 use std::fmt::Write as _;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -45,6 +45,9 @@ use std::thread::JoinHandle;
 
 /// Unit ray (sensor frame) of every pixel of a lens, shared by the sensors that use the lens.
 type RayTable = Arc<[[f32; 3]]>;
+
+/// Gaps an [`Edge`] remembers: the widest, when merging bridged more.
+pub const MAX_GAPS: usize = 4;
 
 /// One observed straight edge of one sensor image.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -69,6 +72,38 @@ pub struct Edge {
     pub edgels: u32,
     /// RMS angle (rad) of the edgels' rays off the fitted plane.
     pub rms_rad: f32,
+    /// Where the image does not show the edge: the stretches (rad from `ends[0]` along the
+    /// edge, in order) that merging bridged between collinear pieces, such as a line broken by
+    /// an occluder or by noise, or plain wall between two window tops. The plane is fitted to
+    /// the pieces alone. At most the [`MAX_GAPS`] widest (the first `n_gaps`); see
+    /// [`Edge::pieces`].
+    pub gaps: [[f32; 2]; MAX_GAPS],
+    pub n_gaps: u8,
+}
+
+impl Edge {
+    /// The stretches the image does not show (see [`Edge::gaps`](Edge#structfield.gaps)).
+    pub fn gaps(&self) -> &[[f32; 2]] {
+        &self.gaps[..usize::from(self.n_gaps).min(MAX_GAPS)]
+    }
+
+    /// The stretches the image shows, from `ends[0]` to `ends[1]` (rad along the edge): one for
+    /// an edge without gaps.
+    pub fn pieces(&self) -> impl Iterator<Item = [f64; 2]> + '_ {
+        let gaps = self.gaps();
+        (0..=gaps.len()).map(move |k| {
+            let from = if k == 0 { 0.0 } else { f64::from(gaps[k - 1][1]) };
+            let to = gaps.get(k).map_or(self.length_rad, |g| f64::from(g[0]));
+            [from, to]
+        })
+    }
+
+    /// The unit ray (rig frame, from the sensor's centre) `t` rad from `ends[0]` along the edge.
+    pub fn ray_at(&self, t: f64) -> Vector3<f64> {
+        let e0 = self.plane.ends[0].into_inner();
+        let towards = self.plane.normal.cross(&e0);
+        e0 * t.cos() + towards * t.sin()
+    }
 }
 
 /// Smoothing of each colour channel before the Sobel.
@@ -382,22 +417,25 @@ impl Drop for EdgeDetector {
     }
 }
 
-/// Header of the `omnitrack edges` CSV (INTERFACES.md), then our extra columns.
+/// Header of the `omnitrack edges` CSV (INTERFACES.md), then our extra columns. `pieces` is
+/// empty for an edge the image shows whole; otherwise the pixel ends of the pieces it does show,
+/// from end 1 to end 2, as `u1 v1 u2 v2` groups separated by `;` (the edge's own ends are those
+/// of the whole span its plane was fitted over, across its [`Edge::gaps`]).
 pub const EDGES_CSV_HEADER: &str = "u1,v1,u2,v2,hue_left_mean,hue_left_var,hue_right_mean,hue_right_var,\
-sensor,length_deg,strength,nx,ny,nz,hue_left_kept,hue_right_kept";
+sensor,length_deg,strength,nx,ny,nz,hue_left_kept,hue_right_kept,pieces";
 
 /// The `omnitrack edges` CSV of some edges (header line included). Hue means are in [0, 1) or
 /// `NaN` for a strip without any pixel of meaningful hue; the normal is in the rig frame.
-pub fn edges_csv(edges: &[Edge]) -> String {
+pub fn edges_csv(edges: &[Edge], rig: &Rig) -> String {
     let mut s = String::with_capacity(64 + edges.len() * 160);
     s.push_str(EDGES_CSV_HEADER);
     s.push('\n');
     for e in edges {
         let n = e.plane.normal;
         let h = &e.hue;
-        let _ = writeln!(
+        let _ = write!(
             s,
-            "{:.3},{:.3},{:.3},{:.3},{:.5},{:.6},{:.5},{:.6},{},{:.4},{:.1},{:.7},{:.7},{:.7},{:.3},{:.3}",
+            "{:.3},{:.3},{:.3},{:.3},{:.5},{:.6},{:.5},{:.6},{},{:.4},{:.1},{:.7},{:.7},{:.7},{:.3},{:.3},",
             e.px[0].x,
             e.px[0].y,
             e.px[1].x,
@@ -415,6 +453,28 @@ pub fn edges_csv(edges: &[Edge]) -> String {
             h.left_kept,
             h.right_kept
         );
+        // The pieces, projected from their end rays; the outer ends are the edge's own.
+        if e.n_gaps > 0 {
+            let sensor = rig.sensors.get(usize::from(e.sensor));
+            let px = |t: f64, at_end: Option<usize>| -> Option<[f64; 2]> {
+                if let Some(k) = at_end {
+                    return Some([e.px[k].x, e.px[k].y]);
+                }
+                let s = sensor?;
+                let ray = s.t_rig_sensor.rotation.inverse() * e.ray_at(t);
+                s.lens.project(&ray).map(|p| [p.x, p.y])
+            };
+            let n = e.gaps().len();
+            for (k, [from, to]) in e.pieces().enumerate() {
+                let a = px(from, (k == 0).then_some(0));
+                let b = px(to, (k == n).then_some(1));
+                if let (Some(a), Some(b)) = (a, b) {
+                    let sep = if k == 0 { "" } else { ";" };
+                    let _ = write!(s, "{sep}{:.3} {:.3} {:.3} {:.3}", a[0], a[1], b[0], b[1]);
+                }
+            }
+        }
+        s.push('\n');
     }
     s
 }
@@ -456,5 +516,5 @@ pub fn edges_csv_for_image(
         ..EdgeParams::default()
     };
     let mut det = EdgeDetector::with_params(rig, config, params);
-    Ok(edges_csv(det.detect_sensor(&si)))
+    Ok(edges_csv(det.detect_sensor(&si), rig))
 }

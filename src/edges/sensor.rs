@@ -5,7 +5,7 @@
 
 use super::gradient::{bin, bin_step, gradients_and_edgels, Rows};
 use super::hue::{HueAcc, HueTable};
-use super::{Edge, EdgeParams, HueSignature};
+use super::{Edge, EdgeParams, HueSignature, MAX_GAPS};
 use crate::capture::SensorImage;
 use crate::geometry::{EdgePlane, Lens};
 use crate::rig::Sensor;
@@ -49,6 +49,9 @@ struct Candidate {
     bright_left: i32,
     left: HueAcc,
     right: HueAcc,
+    /// The widest gaps merging bridged, as the end rays of the pieces on either side.
+    gaps: [[Vector3<f64>; 2]; MAX_GAPS],
+    n_gaps: u8,
     alive: bool,
     /// Merged in the last pass of `merge_across_chains`, and in the current one.
     changed: bool,
@@ -583,6 +586,8 @@ impl Workspace {
             bright_left,
             left: lacc,
             right: racc,
+            gaps: [[Vector3::zeros(); 2]; MAX_GAPS],
+            n_gaps: 0,
             alive: true,
             changed: false,
             merged_now: false,
@@ -799,11 +804,28 @@ impl Workspace {
                 ends: [Unit::new_normalize(rot * c.r1), Unit::new_normalize(rot * c.r2)],
             };
             let lambda = plane_residual(&c.m, &c.n);
+            let length_rad = c.r1.dot(&c.r2).clamp(-1.0, 1.0).acos();
+            // The gaps as angles from r1 along the plane, in order.
+            let mut gaps = [[0f32; 2]; MAX_GAPS];
+            let mut n_gaps = 0;
+            for g in &c.gaps[..usize::from(c.n_gaps)] {
+                let along = |r: &Vector3<f64>| {
+                    let r = (r - c.n * c.n.dot(r)).normalize();
+                    angle_in_plane(&c.n, &c.r1, &r)
+                };
+                let (ta, tb) = (along(&g[0]), along(&g[1]));
+                let (t0, t1) = (ta.min(tb), ta.max(tb));
+                if t0 > 0.0 && t1 < length_rad && t1 > t0 {
+                    gaps[n_gaps] = [t0 as f32, t1 as f32];
+                    n_gaps += 1;
+                }
+            }
+            gaps[..n_gaps].sort_unstable_by(|x, y| x[0].total_cmp(&y[0]));
             self.edges.push(Edge {
                 sensor: self.sensor,
                 plane,
                 px: [Point2::new(p1.x, p1.y), Point2::new(p2.x, p2.y)],
-                length_rad: c.r1.dot(&c.r2).clamp(-1.0, 1.0).acos(),
+                length_rad,
                 strength: c.strength,
                 hue: HueSignature {
                     left_mean: lm,
@@ -820,6 +842,8 @@ impl Workspace {
                 },
                 edgels: c.count,
                 rms_rad: (lambda / c.m[6].max(1e-12)).max(0.0).sqrt() as f32,
+                gaps,
+                n_gaps: n_gaps as u8,
             });
         }
     }
@@ -1050,6 +1074,17 @@ fn try_merge(
     if support < min_support * r1.dot(&r2).clamp(-1.0, 1.0).acos() {
         return None;
     }
+    // The gaps: both pieces' own, and the one between them.
+    let mut gaps = ci.gaps;
+    let mut n_gaps = usize::from(ci.n_gaps);
+    let between = (gap > 0.0).then_some(if ja.0 >= ia.1 - 1e-9 {
+        [ci.r2, jr1]
+    } else {
+        [jr2, ci.r1]
+    });
+    for g in cj.gaps[..usize::from(cj.n_gaps)].iter().copied().chain(between) {
+        keep_widest(&mut gaps, &mut n_gaps, g);
+    }
     let mut left = ci.left;
     left.add(&jl);
     let mut right = ci.right;
@@ -1065,10 +1100,32 @@ fn try_merge(
         bright_left: ci.bright_left + jb,
         left,
         right,
+        gaps,
+        n_gaps: n_gaps as u8,
         alive: true,
         changed: false,
         merged_now: false,
     })
+}
+
+/// Adds the gap `g` (its two end rays) to the first `n` of `gaps`, or, when they are full, in
+/// place of the narrowest if it is wider: a gap left out counts as seen, as every gap did before
+/// edges kept them.
+fn keep_widest(gaps: &mut [[Vector3<f64>; 2]; MAX_GAPS], n: &mut usize, g: [Vector3<f64>; 2]) {
+    if *n < MAX_GAPS {
+        gaps[*n] = g;
+        *n += 1;
+        return;
+    }
+    // Cosines: the narrowest gap has the largest.
+    let (k, narrowest) = gaps
+        .iter()
+        .enumerate()
+        .map(|(k, x)| (k, x[0].dot(&x[1])))
+        .fold((0, f64::NEG_INFINITY), |a, b| if b.1 > a.1 { b } else { a });
+    if g[0].dot(&g[1]) < narrowest {
+        gaps[k] = g;
+    }
 }
 
 /// The per-pixel ray table (sensor frame) of a sensor's lens.

@@ -272,6 +272,8 @@ mod tests {
             edgels: 10,
             polarity: 0,
             rms_rad: 0.0,
+            gaps: Default::default(),
+            n_gaps: 0,
         };
         let pred = Predicted::new(&seg, &pose, &centres);
         let gate = Gate {

@@ -429,6 +429,8 @@ mod tests {
                     edgels: 10,
                     polarity: 0,
                     rms_rad: 0.0,
+                    gaps: Default::default(),
+                    n_gaps: 0,
                 }
             })
             .collect()

@@ -314,6 +314,8 @@ mod tests {
                     edgels: 100,
                     polarity: 0,
                     rms_rad: 0.0,
+                    gaps: Default::default(),
+                    n_gaps: 0,
                 }
             })
             .collect()
