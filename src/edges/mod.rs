@@ -3,7 +3,8 @@
 //! In: a [`FrameSet`] (one RGB8 image per sensor). Out: per sensor, at most
 //! `EdgeConfig::max_edges_per_sensor` [`Edge`]s (the strongest), each the plane through its
 //! sensor's optical centre that contains a straight 3D edge (rig frame), its pixel and ray end
-//! points, angular length, strength and [`HueSignature`].
+//! points, angular length, strength, [`HueSignature`] and gaps (where merging bridged
+//! collinear pieces that the image does not join).
 //!
 //! Per sensor: per colour channel, integer Sobel gradients on the channel smoothed along the
 //! derivative's cross axis only (3 px wide across an edge, so a door or window reveal's two edges
