@@ -29,6 +29,9 @@ pub struct InitialisationConfig {
     pub time_budget_ms: f64,
     pub simplex_refinement: bool,
     pub confirm_frames: u32,
+    /// A rig imaging less than half the sphere commits only where this many decided searches in
+    /// a row chose the same place (one narrow view cannot tell a symmetric place from its twin).
+    pub narrow_rig_searches: u32,
     pub edges_considered: u32,
     pub segments_considered: u32,
     pub samples_per_cell: u32,
@@ -173,6 +176,7 @@ impl Default for InitialisationConfig {
             time_budget_ms: 950.0,
             simplex_refinement: true, // Koch–Teller §4.1.3
             confirm_frames: 3,
+            narrow_rig_searches: 3,
             edges_considered: 40,
             segments_considered: 40,
             samples_per_cell: 100,
@@ -368,6 +372,7 @@ impl TrackerConfig {
         at_least("initialisation.max_samples", i.max_samples, 1)?;
         positive("initialisation.time_budget_ms", i.time_budget_ms)?;
         at_least("initialisation.confirm_frames", i.confirm_frames, 1)?;
+        at_least("initialisation.narrow_rig_searches", i.narrow_rig_searches, 1)?;
         at_least("initialisation.edges_considered", i.edges_considered, 3)?;
         if i.edges_considered > 64 {
             return Err(format!(

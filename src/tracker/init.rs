@@ -482,6 +482,11 @@ impl<'m> Initialiser<'m> {
         }
     }
 
+    /// Share of the sphere of directions the rig's sensors image ([`ViewMap::share`]).
+    pub fn view_share(&self) -> f64 {
+        self.view.share()
+    }
+
     pub fn options(&self) -> &InitOptions {
         &self.opts
     }

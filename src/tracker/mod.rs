@@ -144,6 +144,11 @@ fn acceptable(cfg: &TrackerConfig, c: &Candidate) -> bool {
 const BASIN_M: f64 = 0.6;
 const BASIN_RAD: f64 = 0.175;
 
+/// A rig imaging less than this share of the sphere is narrow: a half-turn or a step along a
+/// symmetric corridor shows it the same lines (see `Tracker::narrow`). Four pinholes 90° wide
+/// round the horizon see 0.6 of it; one 50° pinhole a twentieth.
+const NARROW_VIEW_SHARE: f64 = 0.5;
+
 /// A committed pose may lie this far outside the search volume (m): the truth at the volume's
 /// edge polishes a few centimetres either way.
 const VOLUME_SLACK_M: f64 = 0.1;
@@ -192,6 +197,12 @@ pub struct Tracker<'m> {
     last_inliers: u32,
     /// The last search found no acceptable candidate: search more broadly.
     widen: bool,
+    /// The rig images less than half the sphere: one view cannot tell a symmetric place from its
+    /// twin, so a commit needs `narrow_rig_searches` decided searches in a row to choose one
+    /// place.
+    narrow: bool,
+    /// The place the last decided searches chose (narrow rigs), and how many in a row chose it.
+    agreed: Option<(Pose, u32)>,
     /// Running mean of the fraction of VIS(T) that good frames explain (NaN before the first
     /// commit): a pose explaining much less is suspect (`maintenance.min_explained_ratio`).
     explained_ref: f64,
@@ -214,6 +225,7 @@ impl<'m> Tracker<'m> {
         let m = &cfg.maintenance;
         let opts = InitOptions::from_config(cfg);
         let init = Initialiser::new(rig, model, table, opts, solver.clone(), max_edges);
+        let narrow = init.view_share() < NARROW_VIEW_SHARE;
         let max_set = (0..table.node_count() as u32)
             .map(|n| table.node_set(n).segments.len())
             .max()
@@ -254,6 +266,8 @@ impl<'m> Tracker<'m> {
             bad_frames: 0,
             last_inliers: 0,
             widen: false,
+            narrow,
+            agreed: None,
             explained_ref: f64::NAN,
             stats: TrackerStats::default(),
         }
@@ -442,10 +456,32 @@ impl<'m> Tracker<'m> {
             .max()
             .unwrap_or(0);
         let decided = alive == 1 || self.clear_winner();
+        // A narrow rig's search that decided counts towards agreement: it commits only once
+        // `narrow_rig_searches` decided searches in a row chose the same place.
+        let agreement = match (decided, self.narrow) {
+            (true, true) => {
+                let best = self.best_confirming().map(|c| c.pose);
+                let n = match (self.agreed, best) {
+                    (Some((place, n)), Some(p)) if init::same_pose(&p, &place, BASIN_M, BASIN_RAD) => n + 1,
+                    _ => 1,
+                };
+                self.agreed = best.map(|p| (p, n));
+                n
+            }
+            _ => u32::MAX,
+        };
         if alive == 0 || (frames >= self.cfg.initialisation.confirm_frames && !decided) {
-            // Nothing left, or the frames did not tell the candidates apart: search afresh.
+            // Nothing left, or the frames did not tell the candidates apart: search afresh. Two
+            // places that stayed alike are the ambiguity a narrow rig's agreement waits out.
+            if alive > 1 {
+                self.agreed = None;
+            }
+            self.confirm_count = 0;
+        } else if decided && agreement < self.cfg.initialisation.narrow_rig_searches {
+            // Not yet agreed: search afresh.
             self.confirm_count = 0;
         } else if decided {
+            self.agreed = None;
             let (k, winner) = self.confirming[..self.confirm_count]
                 .iter()
                 .enumerate()
@@ -467,6 +503,14 @@ impl<'m> Tracker<'m> {
         }
         result.match_time = started.elapsed();
         result
+    }
+
+    /// The live candidate with the best mean merit.
+    fn best_confirming(&self) -> Option<&Confirming> {
+        self.confirming[..self.confirm_count]
+            .iter()
+            .filter(|c| c.alive)
+            .max_by(|a, b| (a.merit_sum / a.frames as f64).total_cmp(&(b.merit_sum / b.frames as f64)))
     }
 
     /// Whether the best candidate so far beats every other outside its basin by the configured
@@ -607,5 +651,30 @@ impl<'m> Tracker<'m> {
                 self.set_track.push(i);
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::NARROW_VIEW_SHARE;
+    use crate::rig::{Rig, ViewMap};
+    use std::path::Path;
+
+    /// Only the one-pinhole example waits for searches to agree: the shipped rig and the other
+    /// examples see enough of the sphere to tell twins apart on one frame.
+    #[test]
+    fn only_a_rig_seeing_less_than_half_the_sphere_is_narrow() {
+        let share = |path: &str| {
+            let rig = Rig::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join(path)).expect("rig");
+            ViewMap::new(&rig).share()
+        };
+        for wide in [
+            "firmware_config/ladybug2.toml",
+            "tools/rigs/pinhole4.toml",
+            "tools/rigs/dual_fisheye.toml",
+        ] {
+            assert!(share(wide) >= NARROW_VIEW_SHARE, "{wide}: {}", share(wide));
+        }
+        assert!(share("tools/rigs/pinhole1.toml") < NARROW_VIEW_SHARE);
     }
 }
