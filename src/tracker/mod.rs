@@ -460,7 +460,7 @@ impl<'m> Tracker<'m> {
         // `narrow_rig_searches` decided searches in a row chose the same place.
         let agreement = match (decided, self.narrow) {
             (true, true) => {
-                let best = self.best_confirming().map(|c| c.pose);
+                let best = self.best_confirming().map(|(_, c)| c.pose);
                 let n = match (self.agreed, best) {
                     (Some((place, n)), Some(p)) if init::same_pose(&p, &place, BASIN_M, BASIN_RAD) => n + 1,
                     _ => 1,
@@ -482,13 +482,7 @@ impl<'m> Tracker<'m> {
             self.confirm_count = 0;
         } else if decided {
             self.agreed = None;
-            let (k, winner) = self.confirming[..self.confirm_count]
-                .iter()
-                .enumerate()
-                .filter(|(_, c)| c.alive)
-                .max_by(|a, b| (a.1.merit_sum / a.1.frames as f64).total_cmp(&(b.1.merit_sum / b.1.frames as f64)))
-                .map(|(k, c)| (k, *c))
-                .expect("one candidate is alive");
+            let (k, winner) = self.best_confirming().expect("one candidate is alive");
             let changed_mind = k != 0;
             if changed_mind {
                 self.stats.changed_mind += 1;
@@ -505,12 +499,14 @@ impl<'m> Tracker<'m> {
         result
     }
 
-    /// The live candidate with the best mean merit.
-    fn best_confirming(&self) -> Option<&Confirming> {
+    /// The live candidate with the best mean merit, and its index (0: the search's own best).
+    fn best_confirming(&self) -> Option<(usize, Confirming)> {
         self.confirming[..self.confirm_count]
             .iter()
-            .filter(|c| c.alive)
-            .max_by(|a, b| (a.merit_sum / a.frames as f64).total_cmp(&(b.merit_sum / b.frames as f64)))
+            .enumerate()
+            .filter(|(_, c)| c.alive)
+            .max_by(|a, b| (a.1.merit_sum / a.1.frames as f64).total_cmp(&(b.1.merit_sum / b.1.frames as f64)))
+            .map(|(k, c)| (k, *c))
     }
 
     /// Whether the best candidate so far beats every other outside its basin by the configured
