@@ -63,6 +63,9 @@ pub struct MaintenanceConfig {
     pub max_samples: u32,
     pub time_budget_ms: f64,
     pub constant_velocity_prior: bool,
+    /// The frame's final fit over its observed correspondences weighs them by Cauchy's loss
+    /// (`solver::robust`) instead of least squares (R_and_T only, not upright).
+    pub robust_final_fit: bool,
     pub inlier_angle_deg: f64,
     pub min_inliers: u32,
     pub lost_after_frames: u32,
@@ -206,6 +209,7 @@ impl Default for MaintenanceConfig {
             max_samples: 1000,
             time_budget_ms: 30.0,
             constant_velocity_prior: true,
+            robust_final_fit: true,
             inlier_angle_deg: 1.5,
             min_inliers: 8,
             lost_after_frames: 3,

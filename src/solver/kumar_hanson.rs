@@ -111,18 +111,33 @@ pub(crate) fn accumulate_line(
     h: &mut Matrix6<f64>,
     g: &mut Vector6<f64>,
 ) -> f64 {
+    accumulate_line_scaled(c, q, s, error, 1.0, h, g)
+}
+
+/// [`accumulate_line`] with the line's rows (and its share of the objective) scaled by `scale`:
+/// a weighted least-squares step.
+#[inline]
+pub(crate) fn accumulate_line_scaled(
+    c: &Correspondence,
+    q: &UnitQuaternion<f64>,
+    s: &Vector3<f64>,
+    error: LineError,
+    scale: f64,
+    h: &mut Matrix6<f64>,
+    g: &mut Vector6<f64>,
+) -> f64 {
     match line_residuals(c, q, s, error) {
         Some(res) => {
             let mut e = 0.0;
             for k in 0..2 {
-                let (r, j, w) = (res.r[k], &res.jacobian[k], res.weight[k]);
+                let (r, j, w) = (res.r[k], &res.jacobian[k], scale * res.weight[k]);
                 h.ger(w, j, j, 1.0);
                 g.axpy(w * r, j, 1.0);
                 e += w * r * r;
             }
             e
         }
-        None => 2.0,
+        None => 2.0 * scale,
     }
 }
 
@@ -445,6 +460,24 @@ pub(crate) fn refine(
             accumulate_line(l, q, s, error, h, g);
         }
     })
+}
+
+/// R_and_T's iteration (§3.1) from `guess` over `c`, line i's rows weighted by `w[i]` (weighted
+/// least squares; `w` as long as `c`). `None` as [`r_and_t_refine`].
+pub fn r_and_t_refine_weighted(c: &[Correspondence], w: &[f64], guess: &Pose, o: &SolverOptions) -> Option<Pose> {
+    if c.len() < 3 || w.len() != c.len() {
+        return None;
+    }
+    let (q, s) = unknowns_of(guess);
+    let scale = mean_distance(c, &q, &s);
+    let error = o.error;
+    iterate(q, s, scale, o.max_iterations, o.convergence_rad, |q, s, h, g| {
+        for (l, &wl) in c.iter().zip(w) {
+            accumulate_line_scaled(l, q, s, error, wl, h, g);
+        }
+    })
+    .ok()
+    .map(|r| pose_of(&r.q, &r.s))
 }
 
 /// How many of the best distinct R_then_T starts R_and_T refines when there is no guess.

@@ -117,15 +117,17 @@ pub mod horn;
 pub mod kumar_hanson;
 pub mod lms;
 pub mod points;
+pub mod robust;
 pub mod sampling;
 pub mod simplex;
 pub mod upright;
 
 pub use consensus::{ConsensusError, ConsensusOutcome, ConsensusSampler, SamplingBudget, StopReason};
 pub use covariance::{covariance, covariance_mixed};
-pub use kumar_hanson::{line_residuals, r_and_t, r_and_t_refine, r_then_t, LineResiduals};
+pub use kumar_hanson::{line_residuals, r_and_t, r_and_t_refine, r_and_t_refine_weighted, r_then_t, LineResiduals};
 pub use lms::{med_r_and_t, med_r_and_t_landmarks};
 pub use points::{r_and_t_mixed, PointObservation};
+pub use robust::r_and_t_cauchy;
 pub use sampling::sample_count;
 pub use simplex::{minimise_xi, minimise_xi_upright, xi_solve, SimplexOptions};
 pub use upright::refine_upright;

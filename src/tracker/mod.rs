@@ -177,6 +177,8 @@ pub struct Tracker<'m> {
     set_track: Vec<usize>,
     /// Per track: the edge matched this frame and its α.
     matched: Vec<Option<(u32, f64)>>,
+    /// The weights and residuals of the final robust fit (`solver::robust`).
+    robust_scratch: Vec<f64>,
     rng: SmallRng,
     state: TrackerState,
     hint: Option<SearchVolume>,
@@ -246,6 +248,7 @@ impl<'m> Tracker<'m> {
             set: Vec::with_capacity(capacity),
             set_track: Vec::with_capacity(capacity),
             matched: vec![None; capacity],
+            robust_scratch: vec![0.0; 2 * capacity],
             rng: SmallRng::seed_from_u64(seed),
             state: TrackerState::Initializing,
             hint,
