@@ -272,6 +272,8 @@ mod bench {
             let started = Instant::now();
             let mut outcome = None;
             let mut committed = None;
+            // Verbose: the commit carried by the initialiser's polish alone, frame to frame.
+            let mut chain: Option<omnitrack::geometry::Pose> = None;
             let mut elapsed_ms = f64::NAN;
             for k in 0..WINDOW + AFTER {
                 if committed.is_none() && k >= WINDOW {
@@ -317,6 +319,33 @@ mod bench {
                     }
                 }
                 if let Some(committed_at) = committed {
+                    if verbose {
+                        let err = r.pose.zip(g).map(|(p, g)| {
+                            (
+                                (p.translation.vector - g.translation.vector).norm() * 100.0,
+                                p.rotation.angle_to(&g.rotation).to_degrees(),
+                            )
+                        });
+                        if let Some(c) = chain.and_then(|p| tracker.polish(&p, edges)) {
+                            chain = Some(c.pose);
+                        }
+                        let chained = chain.zip(g).map(|(p, g)| {
+                            (
+                                (p.translation.vector - g.translation.vector).norm() * 100.0,
+                                p.rotation.angle_to(&g.rotation).to_degrees(),
+                            )
+                        });
+                        eprintln!(
+                            "    frame {}: {:?}, {:?} cm/°, {} inliers, explains {:.2}; polish chain {:?}; second opinions so far {}",
+                            start + k,
+                            r.state,
+                            err,
+                            r.inliers,
+                            r.explained,
+                            chained,
+                            tracker.stats().second_opinions
+                        );
+                    }
                     // Judged AFTER frames of tracking: a commit a little off that converges is
                     // right; one that settles somewhere else, or loses lock, is not.
                     if k >= committed_at + AFTER || r.state != TrackerState::Tracking {
@@ -352,6 +381,7 @@ mod bench {
                         );
                     }
                     committed = Some(k);
+                    chain = Some(p);
                     elapsed_ms = started.elapsed().as_secs_f64() * 1e3;
                 }
             }
