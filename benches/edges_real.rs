@@ -17,6 +17,8 @@
 //! - `--threshold G`, `--merge-deg A`, `--gap-deg A`, `--min-support F`, `--gap-evidence F`,
 //!   `--two-line X`: override `EdgeParams` (`gradient_threshold`, `merge_angle_rad`,
 //!   `merge_gap_rad`, `merge_min_support`, `merge_gap_evidence`, `two_line_excess`), for sweeps.
+//! - `--piece-nfa 0|1`, `--piece-trim 0|1`: the a-contrario test of the pieces shown, and their
+//!   trimming (`EdgeParams::piece_nfa`, `piece_trim`; both on by default).
 //!
 //! Besides the times it prints the mean phase times and counters per image
 //! (`EdgeDetector::sensor_stats`: pixel pass, chains, merging and selection).
@@ -38,7 +40,8 @@ mod bench {
 
     const USAGE: &str = "usage: cargo bench --bench edges_real -- --images DIR --out DIR \
 [--intrinsics fx,fy,cx,cy] [--passes N] [--max-edges N] [--min-length-deg D] [--threshold G] \
-[--merge-deg A] [--gap-deg A] [--min-support F] [--gap-evidence F] [--two-line X]";
+[--merge-deg A] [--gap-deg A] [--min-support F] [--gap-evidence F] [--two-line X] [--piece-nfa 0|1] \
+[--piece-trim 0|1]";
 
     fn fail(msg: &str) -> ! {
         eprintln!("edges_real bench: {msg}");
@@ -164,6 +167,12 @@ intrinsics = [{fx:?}, {fy:?}, {cx:?}, {cy:?}]\nrotation_wxyz = [1.0, 0.0, 0.0, 0
         }
         if let Some(x) = number("--two-line") {
             params.two_line_excess = x;
+        }
+        if let Some(x) = number("--piece-nfa") {
+            params.piece_nfa = x != 0.0;
+        }
+        if let Some(x) = number("--piece-trim") {
+            params.piece_trim = x != 0.0;
         }
         let mut detectors: HashMap<(u32, u32), (EdgeDetector, Rig)> = HashMap::new();
         for (_, si) in &images {

@@ -158,7 +158,8 @@ def run_omnitrack(images_dir, out_dir, cam, passes, extra):
 
 def read_omnitrack(out_dir, names):
     """(edges, pieces, sorted times): per image the edges' end points (k x 4), and the pieces the
-    image shows (the `pieces` column split at its gaps; the edge itself where it is empty)."""
+    image shows (the `pieces` column split at its gaps; the edge itself where it is empty; nothing
+    where it is `none`)."""
     import csv
 
     import numpy as np
@@ -177,6 +178,8 @@ def read_omnitrack(out_dir, names):
                 end_points = [float(x) for x in row[:4]]
                 e_rows.append(end_points)
                 groups = row[col].split(";") if col is not None and row[col] else []
+                if groups == ["none"]:
+                    continue  # the image shows no piece of this edge as a line
                 if groups:
                     p_rows.extend([float(x) for x in g.split()] for g in groups)
                 else:

@@ -24,6 +24,7 @@
 //! spread over a persistent pool of worker threads (the calling thread works too) fed through
 //! bounded crossbeam channels.
 
+mod contrario;
 mod gradient;
 mod hue;
 mod sensor;
@@ -80,6 +81,14 @@ pub struct Edge {
     /// [`Edge::pieces`].
     pub gaps: [[f32; 2]; MAX_GAPS],
     pub n_gaps: u8,
+    /// The pieces ([`Edge::pieces`]) that pass LSD's a-contrario test (rad from `ends[0]`, in
+    /// order; the first `n_shown`): along each, the image gradient is across the line at more
+    /// pixels than chance explains (number of false alarms below 1, [`EdgeParams::piece_nfa`]),
+    /// each trimmed to its first and last such pixel with [`EdgeParams::piece_trim`]. A piece
+    /// that fails is left out (the image does not show it as a line); none may pass. The edge
+    /// itself, its plane and its gaps do not depend on it. See [`Edge::shown`].
+    pub shown: [[f32; 2]; MAX_GAPS + 1],
+    pub n_shown: u8,
 }
 
 impl Edge {
@@ -97,6 +106,13 @@ impl Edge {
             let to = gaps.get(k).map_or(self.length_rad, |g| f64::from(g[0]));
             [from, to]
         })
+    }
+
+    /// The pieces the image shows as lines, meaningful by LSD's a-contrario test (see
+    /// [`Edge::shown`](Edge#structfield.shown)): a subset of [`Edge::pieces`], maybe trimmed;
+    /// empty when none is.
+    pub fn shown(&self) -> &[[f32; 2]] {
+        &self.shown[..usize::from(self.n_shown).min(MAX_GAPS + 1)]
     }
 
     /// The unit ray (rig frame, from the sensor's centre) `t` rad from `ends[0]` along the edge.
@@ -158,6 +174,14 @@ pub struct EdgeParams {
     /// tilted edge, and raises `lab` recall from 92.6 to 97.3 % (README). Below ~0.3 the pixel
     /// staircases of aliased images start to split single lines.
     pub two_line_excess: f64,
+    /// Validate each piece of an edge (the CSV's `pieces`, [`Edge::shown`]) a contrario, as LSD
+    /// does (Grompone von Gioi et al., IPOL 2012): keep it only where the number of pixels along
+    /// it whose gradient is across the line (within 22.5°) makes its number of false alarms
+    /// below 1. Off: every piece is shown. The edges themselves do not change.
+    pub piece_nfa: bool,
+    /// With `piece_nfa`, trim each piece to its first and last pixel whose gradient is across
+    /// the line before the test (which only lowers its number of false alarms).
+    pub piece_trim: bool,
 }
 
 impl Default for EdgeParams {
@@ -175,6 +199,8 @@ impl Default for EdgeParams {
             hue_samples_per_edge: 48,
             threads: 0,
             two_line_excess: 0.3,
+            piece_nfa: true,
+            piece_trim: true,
         }
     }
 }
@@ -419,9 +445,11 @@ impl Drop for EdgeDetector {
 }
 
 /// Header of the `omnitrack edges` CSV (INTERFACES.md), then our extra columns. `pieces` is
-/// empty for an edge the image shows whole; otherwise the pixel ends of the pieces it does show,
-/// from end 1 to end 2, as `u1 v1 u2 v2` groups separated by `;` (the edge's own ends are those
-/// of the whole span its plane was fitted over, across its [`Edge::gaps`]).
+/// empty for an edge the image shows whole (one piece, passing the a-contrario test untrimmed,
+/// [`Edge::shown`]); `none` where the image shows no piece of it as a line; otherwise the pixel
+/// ends of the pieces it does show, from end 1 to end 2, as `u1 v1 u2 v2` groups separated by
+/// `;` (the edge's own ends are those of the whole span its plane was fitted over, across its
+/// [`Edge::gaps`]).
 pub const EDGES_CSV_HEADER: &str = "u1,v1,u2,v2,hue_left_mean,hue_left_var,hue_right_mean,hue_right_var,\
 sensor,length_deg,strength,nx,ny,nz,hue_left_kept,hue_right_kept,pieces";
 
@@ -454,23 +482,25 @@ pub fn edges_csv(edges: &[Edge], rig: &Rig) -> String {
             h.left_kept,
             h.right_kept
         );
-        // The pieces, projected from their end rays; the outer ends are the edge's own.
-        if e.n_gaps > 0 {
+        // The pieces shown, projected from their end rays; the outer ends are the edge's own.
+        let whole = e.n_gaps == 0 && e.shown() == [[0.0, e.length_rad as f32]];
+        if e.shown().is_empty() {
+            s.push_str("none");
+        } else if !whole {
             let sensor = rig.sensors.get(usize::from(e.sensor));
-            let px = |t: f64, at_end: Option<usize>| -> Option<[f64; 2]> {
-                if let Some(k) = at_end {
-                    return Some([e.px[k].x, e.px[k].y]);
+            let px = |t: f32, end: usize| -> Option<[f64; 2]> {
+                if (end == 0 && t == 0.0) || (end == 1 && t == e.length_rad as f32) {
+                    return Some([e.px[end].x, e.px[end].y]);
                 }
                 let s = sensor?;
-                let ray = s.t_rig_sensor.rotation.inverse() * e.ray_at(t);
+                let ray = s.t_rig_sensor.rotation.inverse() * e.ray_at(f64::from(t));
                 s.lens.project(&ray).map(|p| [p.x, p.y])
             };
-            let n = e.gaps().len();
-            for (k, [from, to]) in e.pieces().enumerate() {
-                let a = px(from, (k == 0).then_some(0));
-                let b = px(to, (k == n).then_some(1));
-                if let (Some(a), Some(b)) = (a, b) {
-                    let sep = if k == 0 { "" } else { ";" };
+            let mut first = true;
+            for &[from, to] in e.shown() {
+                if let (Some(a), Some(b)) = (px(from, 0), px(to, 1)) {
+                    let sep = if first { "" } else { ";" };
+                    first = false;
                     let _ = write!(s, "{sep}{:.3} {:.3} {:.3} {:.3}", a[0], a[1], b[0], b[1]);
                 }
             }

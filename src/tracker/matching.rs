@@ -274,6 +274,8 @@ mod tests {
             rms_rad: 0.0,
             gaps: Default::default(),
             n_gaps: 0,
+            shown: Default::default(),
+            n_shown: 0,
         };
         let pred = Predicted::new(&seg, &pose, &centres);
         let gate = Gate {

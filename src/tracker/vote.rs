@@ -316,6 +316,8 @@ mod tests {
                     rms_rad: 0.0,
                     gaps: Default::default(),
                     n_gaps: 0,
+                    shown: Default::default(),
+                    n_shown: 0,
                 }
             })
             .collect()
