@@ -24,8 +24,8 @@
 //!    the papers) rather than least squares: lines a coarse model places a little wrong (trims,
 //!    walls drawn a few centimetres off) sit inside the inlier angle and pulled the pose with
 //!    their whole squared residual. Measured (README, "Tracker"): `lab` 1.62 → 1.26 cm,
-//!    `corridor` 0.99 → 0.78 cm, `handheld` 1.25 → 1.03 cm; the realistic `lab` over tracker
-//!    seeds 1–4, median 112 and 573 cm in two runs before, 37 and 16 cm after.
+//!    `corridor` 0.99 → 0.78 cm, `handheld` 1.25 → 1.00 cm; on the realistic world the worst
+//!    of six tracker seeds in `corridor` 28 → 9 cm, `lab` still cascading on some seeds.
 //! 6. Lines 12–13: VIS(T_{t+1}) updates S_{t+1}.
 //!
 //! Nothing here allocates: all buffers belong to the [`Tracker`].
