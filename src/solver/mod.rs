@@ -7,6 +7,9 @@
 //! optional pose guess, [`SolverOptions`]. Out: [`Solution`]: `T_world_rig`, its 6×6 covariance,
 //! the inliers used, ξ and the iteration count.
 //!
+//! Beyond the papers: [`robust::r_and_t_cauchy`], R_and_T by iteratively reweighted least
+//! squares with Cauchy's loss, for the tracker's final fit against a coarse model.
+//!
 //! Internally the unknown is `T_rig_world = (Q, s)`, so that an end point P of a segment seen by
 //! a sensor centred at c gives Kumar–Hanson's residual `n · (Q P + s − c)`, linear in s — their
 //! `N · (R p + T)` with the sensor offset added; a single camera at the rig origin is c = 0.
