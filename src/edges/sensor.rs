@@ -827,8 +827,10 @@ impl Workspace {
         if !length.is_finite() {
             return None;
         }
-        // One sample a pixel, at the centres of equal steps.
-        let samples = (length.round() as usize).max(1);
+        // One sample a pixel, at the centres of equal steps; never more than the image's
+        // perimeter twice over (the table's reach), so that the test's time is bounded whatever
+        // a lens makes of a stretch.
+        let samples = (length.round() as usize).clamp(1, 2 * (self.w + self.h));
         let dt = (t1 - t0) / samples as f64;
         let half = (0.5 * dt).sin_cos();
         // The turn between nodes, NFA_NODE steps = 2⁴ half steps: four doublings of the half.

@@ -22,8 +22,8 @@ use crate::geometry::{Correspondence, Pose};
 /// Cauchy's tuning constant for 95 % asymptotic efficiency under Gaussian noise (Holland and
 /// Welsch 1977).
 pub const CAUCHY_C: f64 = 2.385;
-/// The median absolute residual over σ for Gaussian noise (1 / Φ⁻¹(3/4)).
-const MAD_TO_SIGMA: f64 = 1.4826;
+/// σ over the median absolute residual for Gaussian noise (1 / Φ⁻¹(3/4)).
+pub const MAD_TO_SIGMA: f64 = 1.4826;
 /// Reweighting rounds at most; each is a weighted R_and_T to convergence.
 const ROUNDS: usize = 4;
 /// A round that moves the pose less than this (rad, and m over the lines' distance) ends it.

@@ -120,6 +120,7 @@ use crate::edges::Edge;
 use crate::geometry::{xi, Correspondence, Pose};
 use crate::model::Model;
 use crate::rig::{Rig, ViewMap};
+use crate::solver::robust::MAD_TO_SIGMA;
 use crate::solver::{minimise_xi, minimise_xi_upright, r_and_t_refine, refine_upright, SimplexOptions, SolverOptions};
 use crate::visibility::at_pose::{sample_point, PoseVisibility, SAMPLES};
 use crate::visibility::VisibilityTable;
@@ -1383,7 +1384,7 @@ impl<'m> Initialiser<'m> {
                 break;
             }
             let (_, median, _) = self.alphas.select_nth_unstable_by(n / 2, f64::total_cmp);
-            let limit = (2.5 * 1.4826 * *median).max(self.opts.inlier_alpha_rad);
+            let limit = (2.5 * MAD_TO_SIGMA * *median).max(self.opts.inlier_alpha_rad);
             let before = self.corr.len();
             self.corr.retain(|c| c.alpha(&pose) <= limit);
             if self.corr.len() == before {
