@@ -161,6 +161,21 @@ impl ConsensusSampler {
         rng: &mut SmallRng,
         fit: &mut dyn FnMut(&[Correspondence], &Pose) -> Option<Pose>,
     ) -> Result<ConsensusOutcome, ConsensusError> {
+        self.run_sized(self.lambda, c, guess, budget, rng, fit)
+    }
+
+    /// [`Self::run`] with samples of `lambda` correspondences (at most the λ the sampler was
+    /// built for): a set barely larger than λ leaves no outlier out of any sample, so a caller
+    /// with few correspondences samples fewer.
+    pub fn run_sized(
+        &mut self,
+        lambda: usize,
+        c: &[Correspondence],
+        guess: &Pose,
+        budget: &SamplingBudget,
+        rng: &mut SmallRng,
+        fit: &mut dyn FnMut(&[Correspondence], &Pose) -> Option<Pose>,
+    ) -> Result<ConsensusOutcome, ConsensusError> {
         let started = Instant::now();
         let n = c.len();
         if n > self.capacity {
@@ -169,7 +184,7 @@ impl ConsensusSampler {
                 got: n,
             });
         }
-        let lambda = self.lambda;
+        let lambda = lambda.clamp(1, self.lambda);
         if n < lambda {
             return Err(SolveError::TooFew { needed: lambda, got: n }.into());
         }
@@ -198,7 +213,7 @@ impl ConsensusSampler {
             for (s, &i) in self.sample.iter_mut().zip(order[..lambda].iter()) {
                 *s = c[i];
             }
-            let Some(pose) = fit(&self.sample, guess) else {
+            let Some(pose) = fit(&self.sample[..lambda], guess) else {
                 continue;
             };
             let score = truncated_score(order[lambda..].iter().map(|&i| &c[i]), &pose, cap2);

@@ -46,6 +46,9 @@ use std::time::{Duration, Instant};
 /// as much of VIS(T).
 const SUSPECT_MARGIN: f64 = 1.2;
 
+/// The smallest consensus sample: four lines over-determine a pose (three fix it, KH §4).
+const SMALLEST_SAMPLE: usize = 4;
+
 /// A solved pose this far (5 cm, or 0.035 rad ≈ 2°) from the constant-velocity prediction,
 /// beyond what smooth motion leaves between them, is checked against the polished prediction.
 const SECOND_OPINION_M: f64 = 0.05;
@@ -303,7 +306,14 @@ impl Tracker<'_> {
         }
         let match_time = started.elapsed();
         // 3. Robust pose from S̄.
-        let lambda = self.sampler.lambda();
+        // λ, or half the set when that is smaller (never below SMALLEST_SAMPLE): a sample of λ
+        // from a set of λ + 2 leaves at most two correspondences out, so a narrow view that holds
+        // ten would never leave its one wrong match out of any sample.
+        let lambda = self
+            .sampler
+            .lambda()
+            .min(self.set.len() / 2)
+            .max(SMALLEST_SAMPLE.min(self.sampler.lambda()));
         let mut samples = 0;
         let solved: Option<Pose> = if self.set.len() >= lambda + 2 {
             let s_t = sample_count(lambda, self.set.len(), mcfg.outlier_percent, mcfg.success_probability);
@@ -314,7 +324,10 @@ impl Tracker<'_> {
             };
             let solver = &self.solver;
             let mut f = |c: &[Correspondence], start: &Pose| fit(upright, method, solver, c, start);
-            match self.sampler.run(&self.set, predicted, &budget, &mut self.rng, &mut f) {
+            match self
+                .sampler
+                .run_sized(lambda, &self.set, predicted, &budget, &mut self.rng, &mut f)
+            {
                 Ok(out) => {
                     samples = out.samples;
                     Some(out.pose)
