@@ -5,8 +5,8 @@
 use nalgebra::{Isometry3, Point3, Translation3, Unit, UnitQuaternion, Vector3};
 use omnitrack::geometry::{Correspondence, EdgePlane, Pose};
 use omnitrack::solver::{
-    minimise_xi, minimise_xi_upright, sample_count, xi_solve, ConsensusError, ConsensusSampler, SamplingBudget,
-    SimplexOptions, SolveError, SolverOptions, StopReason,
+    minimise_xi, minimise_xi_upright, sample_count, xi_solve, ConsensusError, ConsensusSampler, SampleScore,
+    SamplingBudget, SimplexOptions, SolveError, SolverOptions, StopReason,
 };
 use omnitrack::Rig;
 use rand::rngs::SmallRng;
@@ -281,6 +281,7 @@ fn budget(max_samples: u64, time_budget: Duration) -> SamplingBudget {
         max_samples,
         time_budget,
         inlier_alpha_rad: 1.5f64.to_radians(),
+        score: SampleScore::Truncated,
     }
 }
 
@@ -386,6 +387,33 @@ fn consensus_with_smaller_samples_rejects_the_wrong_matches_of_a_small_set() {
             "seed {seed}: error {:.3}° / {t:.3} m",
             r.to_degrees()
         );
+    }
+}
+
+/// Kumar–Hanson's least median of squares as the sample score: the same scene as above, 30 %
+/// gross outliers, the pose found and the outliers flagged.
+#[test]
+fn consensus_by_least_median_of_squares_recovers_the_pose_through_30_percent_outliers() {
+    let s_t = sample_count(LAMBDA, 40, 30.0, 0.95);
+    let mut sampler = ConsensusSampler::new(64, LAMBDA, 1000);
+    for seed in [10, 11] {
+        let mut rng = SmallRng::seed_from_u64(seed);
+        let (c, outliers) = cluttered(&mut rng);
+        let guess = offset(&mut rng, &truth(), 1f64.to_radians(), 0.05);
+        let b = SamplingBudget {
+            score: SampleScore::Median,
+            ..budget(s_t, Duration::from_secs(600))
+        };
+        let out = sampler.run(&c, &guess, &b, &mut rng, &mut simplex_fit()).unwrap();
+        let (r, t) = errors(&out.pose, &truth());
+        let inliers = out.inliers(&sampler);
+        let flagged = outliers.iter().filter(|i| !inliers.contains(i)).count();
+        assert!(
+            r <= 0.5f64.to_radians() && t <= 0.05,
+            "seed {seed}: error {:.3}° / {t:.3} m",
+            r.to_degrees()
+        );
+        assert!(flagged >= 11, "seed {seed}: only {flagged} of 12 outliers flagged");
     }
 }
 

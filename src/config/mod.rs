@@ -66,6 +66,9 @@ pub struct MaintenanceConfig {
     /// The frame's final fit over its observed correspondences weighs them by Cauchy's loss
     /// (`solver::robust`) instead of least squares (R_and_T only, not upright).
     pub robust_final_fit: bool,
+    /// How the consensus scores a sample's pose (`truncated`: MSAC, `median`: least median of
+    /// squares).
+    pub consensus_score: crate::solver::SampleScore,
     pub inlier_angle_deg: f64,
     pub min_inliers: u32,
     pub lost_after_frames: u32,
@@ -210,6 +213,7 @@ impl Default for MaintenanceConfig {
             time_budget_ms: 30.0,
             constant_velocity_prior: true,
             robust_final_fit: true,
+            consensus_score: crate::solver::SampleScore::Median,
             inlier_angle_deg: 1.5,
             min_inliers: 8,
             lost_after_frames: 3,

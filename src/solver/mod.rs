@@ -125,7 +125,7 @@ pub mod sampling;
 pub mod simplex;
 pub mod upright;
 
-pub use consensus::{ConsensusError, ConsensusOutcome, ConsensusSampler, SamplingBudget, StopReason};
+pub use consensus::{ConsensusError, ConsensusOutcome, ConsensusSampler, SampleScore, SamplingBudget, StopReason};
 pub use covariance::{covariance, covariance_mixed};
 pub use kumar_hanson::{line_residuals, r_and_t, r_and_t_refine, r_and_t_refine_weighted, r_then_t, LineResiduals};
 pub use lms::{med_r_and_t, med_r_and_t_landmarks};

@@ -28,6 +28,10 @@
 //!    of six tracker seeds in `corridor` 28 → 9 cm, `lab` still cascading on some seeds.
 //! 6. Lines 12–13: VIS(T_{t+1}) updates S_{t+1}.
 //!
+//! Step 3 scores samples by `maintenance.consensus_score` (the median α² by default,
+//! `solver::consensus`), and a relocalisation keeps the last interval's motion for the next
+//! prediction (`relocalise`).
+//!
 //! Nothing here allocates: all buffers belong to the [`Tracker`].
 
 use super::matching::{best_edge, Gate, Predicted};
@@ -236,7 +240,19 @@ impl Tracker<'_> {
         });
         let best = choose(&standings, self.cfg.initialisation.clear_winner_ratio)?;
         self.stats.relocalisations += 1;
+        // The rig moves on through a relocalisation: the last interval's motion (rig frame)
+        // carries over, so that the next frame is predicted where the rig will be, not where it
+        // was (at 5 Hz a walking rig is 20 cm on, and the gates matched the wrong edges there).
+        let motion = match self.previous {
+            Some((prev, prev_t)) if prev_t < self.last_time => {
+                Some((prev.inverse() * self.pose, self.last_time - prev_t))
+            }
+            _ => None,
+        };
         let mut r = self.commit(&best.pose, edges, timestamp_ns);
+        if let Some((delta, dt)) = motion {
+            self.previous = Some((best.pose * delta.inverse(), timestamp_ns.saturating_sub(dt)));
+        }
         r.event = Some(TrackerEvent::Relocalised);
         Some(r)
     }
@@ -321,6 +337,7 @@ impl Tracker<'_> {
                 max_samples: s_t,
                 time_budget: Duration::from_secs_f64(mcfg.time_budget_ms / 1e3),
                 inlier_alpha_rad: inlier_rad,
+                score: mcfg.consensus_score,
             };
             let solver = &self.solver;
             let mut f = |c: &[Correspondence], start: &Pose| fit(upright, method, solver, c, start);
