@@ -43,11 +43,10 @@ use serde::{Deserialize, Serialize};
 use std::time::{Duration, Instant};
 
 /// How a sample's pose is scored over the correspondences left out of it (lowest wins).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum SampleScore {
     /// (1/m) Σ min(α², α_in²): MSAC's truncated squares (module doc).
-    #[default]
     Truncated,
     /// The median α²: Kumar–Hanson §4's least median of squares (Med_R_and_T's criterion,
     /// after Rousseeuw). No cap: where the edges are sharper than the inlier angle, a pose slid
