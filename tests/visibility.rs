@@ -13,6 +13,9 @@ use omnitrack::Model;
 struct Obj {
     text: String,
     vertices: usize,
+    /// When set, each polygon is wound one way or the other by this generator's next bit
+    /// instead of about its visible side (xorshift; winding carries no meaning).
+    flips: Option<u64>,
 }
 
 impl Obj {
@@ -28,7 +31,16 @@ impl Obj {
             );
         }
         let mut order: Vec<usize> = (0..corners.len()).collect();
-        if n.dot(&Vector3::from(visible)) < 0.0 {
+        let reverse = match &mut self.flips {
+            Some(x) => {
+                *x ^= *x << 13;
+                *x ^= *x >> 7;
+                *x ^= *x << 17;
+                *x & 1 == 1
+            }
+            None => n.dot(&Vector3::from(visible)) < 0.0,
+        };
+        if reverse {
             order.reverse();
         }
         let mut f = String::from("f");
@@ -139,9 +151,17 @@ fn closed_room_everything_visible() {
 /// Room A [0,4]×[0,4] and room B [4.3,8.3]×[0,3], joined through a 0.3 m thick wall by a door
 /// y ∈ [0.9, 2.1], z ∈ [0, 2.1].
 fn two_rooms() -> Obj {
+    two_rooms_wound(None)
+}
+
+/// [`two_rooms`], its faces wound at random by `flips` (see [`Obj::flips`]) when given.
+fn two_rooms_wound(flips: Option<u64>) -> Obj {
     let (x0, x1) = (4.0, 4.3);
     let (d0, d1, dh) = (0.9, 2.1, 2.1);
-    let mut obj = Obj::default();
+    let mut obj = Obj {
+        flips,
+        ..Obj::default()
+    };
     // Room A without its x = 4 wall.
     obj.rect(2, 0.0, [0.0, 0.0], [x0, 4.0], 1.0);
     obj.rect(2, H, [0.0, 0.0], [x0, 4.0], -1.0);
@@ -253,7 +273,7 @@ fn pillar_occludes_wall() {
     let mut obj = Obj::default();
     obj.room([0.0, 0.0, 0.0], [10.0, 5.0, H]);
     // A pillar [4.1,4.9]×[2.1,2.9], floor to ceiling, seen from outside; node (4.5, 2.5) lies
-    // in it, 0.4 m from its faces (excluded because it sees their backs).
+    // in it, 0.4 m from its faces (excluded: a space closed all round, 1.13 m across at most).
     obj.rect(0, 4.1, [2.1, 0.0], [2.9, H], -1.0);
     obj.rect(0, 4.9, [2.1, 0.0], [2.9, H], 1.0);
     obj.rect(1, 2.1, [0.0, 4.1], [H, 4.9], -1.0);
@@ -397,4 +417,109 @@ fn cli_build_and_query_entry_points() {
     assert!(run_build(&model_path, &table_path, Some(-1.0), &config).is_err());
     let err = run_query(&dir.path().join("missing.vis"), &parse_point("0,0,0").unwrap()).expect_err("missing");
     assert!(err.to_string().contains("missing.vis"), "{err}");
+}
+
+/// Every node and every set of a table, for comparing two builds.
+/// A node's position, faces and segments (each by its end points, to the micrometre).
+type NodeContents = (Point3<f64>, Vec<u32>, Vec<[[i64; 3]; 2]>);
+
+/// Segments are named by their end points (a face wound the other way lists its edges in the
+/// other order, so segment indices differ between the two models).
+fn contents(table: &VisibilityTable, model: &Model) -> Vec<NodeContents> {
+    let key = |p: &Point3<f64>| [p.x, p.y, p.z].map(|c| (c * 1e6).round() as i64);
+    (0..table.node_count() as u32)
+        .map(|n| {
+            let set = table.node_set(n);
+            let mut segments: Vec<[[i64; 3]; 2]> = set
+                .segments
+                .iter()
+                .map(|&s| {
+                    let seg = &model.segments[s as usize];
+                    let mut ends = [key(&seg.a), key(&seg.b)];
+                    ends.sort();
+                    ends
+                })
+                .collect();
+            segments.sort();
+            (table.node_position(n), set.faces.to_vec(), segments)
+        })
+        .collect()
+}
+
+/// Winding carries no meaning (INTERFACES.md): the same building with its faces wound at
+/// random, three draws, gives the same nodes and the same sets.
+#[test]
+fn winding_flipped_at_random_leaves_the_table_unchanged() {
+    let model = two_rooms().model();
+    let wound = contents(&build_table(&model, "two_rooms.obj", &options()), &model);
+    assert_eq!(wound.len(), (3 * 4 + 3 * 3) * 2);
+    for seed in [1u64, 0x9e37_79b9_7f4a_7c15, 12345] {
+        let model = two_rooms_wound(Some(seed)).model();
+        let flipped = contents(&build_table(&model, "two_rooms.obj", &options()), &model);
+        assert_eq!(flipped, wound, "seed {seed}");
+    }
+}
+
+/// A building drawn as another tool draws it: every wall one face, wound either way, an inner
+/// wall with a doorway, floor and ceiling one face each. Both rooms keep every node, and each
+/// sees the other only through the doorway.
+#[test]
+fn single_face_walls_wound_either_way_keep_their_rooms() {
+    let mut obj = Obj {
+        flips: Some(7),
+        ..Obj::default()
+    };
+    obj.rect(2, 0.0, [0.0, 0.0], [6.0, 3.0], 1.0);
+    obj.rect(2, H, [0.0, 0.0], [6.0, 3.0], -1.0);
+    obj.rect(0, 0.0, [0.0, 0.0], [3.0, H], 1.0);
+    obj.rect(0, 6.0, [0.0, 0.0], [3.0, H], -1.0);
+    obj.rect(1, 0.0, [0.0, 0.0], [H, 6.0], 1.0);
+    obj.rect(1, 3.0, [0.0, 0.0], [H, 6.0], -1.0);
+    // The inner wall at x = 3, a doorway y ∈ [1, 2] up to 2.1 m.
+    obj.poly(
+        &[
+            [3.0, 0.0, 0.0],
+            [3.0, 1.0, 0.0],
+            [3.0, 1.0, 2.1],
+            [3.0, 2.0, 2.1],
+            [3.0, 2.0, 0.0],
+            [3.0, 3.0, 0.0],
+            [3.0, 3.0, H],
+            [3.0, 0.0, H],
+        ],
+        [1.0, 0.0, 0.0],
+    );
+    let model = obj.model();
+    let table = build_table(&model, "single.obj", &options());
+    assert_eq!(table.node_count(), 6 * 3 * 2, "every node of both rooms is valid");
+    // From beside the inner wall, the far corner of the other room is hidden by it (the line
+    // of sight meets x = 3 at y = 0.86, short of the doorway), the doorway's jamb seen.
+    let set = table.query(&Point3::new(2.5, 0.5, 1.5)).expect("served");
+    assert_eq!(set.node_position, Point3::new(2.5, 0.5, 1.5));
+    let far_corner = segment(&model, [6.0, 3.0, 0.0], [6.0, 3.0, H]);
+    let jamb = segment(&model, [3.0, 1.0, 0.0], [3.0, 1.0, 2.1]);
+    assert!(!set.segments.contains(&far_corner));
+    assert!(set.segments.contains(&jamb));
+}
+
+/// A point inside a wall or a slab thicker than twice the clearance is not free space, whichever
+/// way the solid's faces are wound.
+#[test]
+fn the_inside_of_a_thick_solid_is_not_free() {
+    for flips in [None, Some(3u64)] {
+        let mut obj = Obj {
+            flips,
+            ..Obj::default()
+        };
+        // Two rooms either side of a 0.45 m wall (a closed solid), under one ceiling.
+        obj.room([0.0, 0.0, 0.0], [3.0, 3.0, H]);
+        obj.room([3.45, 0.0, 0.0], [6.45, 3.0, H]);
+        let model = obj.model();
+        let scene = Scene::new(&model);
+        assert!(scene.is_free(&Point3::new(1.5, 1.5, 1.5), 0.2));
+        assert!(!scene.is_free(&Point3::new(3.225, 1.5, 1.5), 0.2), "inside the wall");
+        assert!(!scene.is_free(&Point3::new(1.5, 1.5, -0.3), 0.2), "under the floor");
+        assert!(!scene.is_free(&Point3::new(1.5, 1.5, H + 0.4), 0.2), "on the roof");
+        assert!(!scene.is_free(&Point3::new(1.5, 8.0, 1.5), 0.2), "outside");
+    }
 }

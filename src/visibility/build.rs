@@ -2,16 +2,24 @@
 //! cube-map rasteriser (face ids + perspective-correct depth) per node, Koch–Teller's segment
 //! rule (Figure 9), optional merging with neighbour nodes, parallel over nodes with rayon.
 //!
-//! **Valid nodes** (free space inside the building). From the node, 26 rays (the directions
-//! of a 3×3×3 stencil) are cast against the model. The node is valid when
-//! 1. the rays straight down and straight up hit a face from its visible side (the floor below,
-//!    the ceiling above: the model's faces are counter-clockwise about their visible side);
-//! 2. at least 13 of the 26 rays hit a face (the others may leave through open doors and
+//! **Valid nodes** (free space inside the building, where a person could stand). From the
+//! node, 26 rays (the directions of a 3×3×3 stencil) are cast against the model. The node is
+//! valid when
+//! 1. the ray straight down meets a face (something to stand on);
+//! 2. at least 13 of the 26 rays meet a face (the others may leave through open doors and
 //!    windows, so rooms with openings keep their nodes, while a point outside the building
-//!    loses them: nothing below it, or most rays escape);
-//! 3. at most 10 % of the hits see a face from behind (a point inside a wall or a slab sees the
-//!    inside of the solid's faces);
+//!    loses them: most rays escape);
+//! 3. along each horizontal axis of the stencil the faces on either side are at least
+//!    0.5 m apart and along one of them at least 1.2 m, and the faces below and above at
+//!    least 1.2 m (the inside of a wall, a slab or a pillar is smaller than any room; a closed
+//!    box 1.2 m or more across is a room, since winding cannot say it is solid);
 //! 4. no face is nearer than `clearance_m` (exact point–triangle distance; default 0.2 m).
+//!
+//! Nothing reads the faces' winding (INTERFACES.md gives it no meaning): a wall may be one
+//! face seen from both sides, faces may be duplicated or overlap, and a model may have no
+//! faces outside its rooms. The rule before this one counted the faces seen "from behind",
+//! and kept 459 of 1,872 nodes of a building drawn with single-face walls wound either way
+//! (issue 20).
 //!
 //! **Per valid node**: all triangles whose bounding box comes within `max_range_m` are
 //! rasterised into six `res × res` cube faces (pixel centres, 1/z interpolated linearly in
@@ -41,6 +49,18 @@ use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 use std::path::Path;
 use std::time::Instant;
+
+/// Node validity (module doc): of the 26 stencil rays, at least this many must meet a face…
+const MIN_ENCLOSING_HITS: usize = 13;
+/// …the faces on both sides of every horizontal axis must be at least this far apart (m: a
+/// person's shoulders; a corridor or a closet is wider, the inside of a wall thinner)…
+const MIN_FREE_WIDTH_M: f64 = 0.5;
+/// …at least this far along one of those axes (m: a closet is longer; the inside of a pillar
+/// 0.8 m square, 1.13 m across its diagonal, is not)…
+const MIN_ROOM_SPAN_M: f64 = 1.2;
+/// …and the floor and ceiling this far (m: a slab or a ceiling void is thinner than a room is
+/// high).
+const MIN_FREE_HEIGHT_M: f64 = 1.2;
 
 /// How to build a table.
 #[derive(Debug, Clone, PartialEq)]
@@ -125,8 +145,6 @@ pub struct Scene<'m> {
     /// Per triangle: bounding box min, max.
     boxes: Vec<([f64; 3], [f64; 3])>,
     bvh: TriangleBvh,
-    /// Per face: unit normal.
-    normals: Vec<[f64; 3]>,
 }
 
 impl<'m> Scene<'m> {
@@ -165,17 +183,11 @@ impl<'m> Scene<'m> {
             .collect();
         let payload: Vec<u32> = tris.iter().map(|t| t.face).collect();
         let bvh = TriangleBvh::build(&f32t, &payload);
-        let normals = model
-            .faces
-            .iter()
-            .map(|f| [f.normal.x, f.normal.y, f.normal.z])
-            .collect();
         Scene {
             model,
             tris,
             boxes,
             bvh,
-            normals,
         }
     }
 
@@ -198,35 +210,50 @@ impl<'m> Scene<'m> {
         self.cast(a, &(d / len), len - 1e-4).is_none()
     }
 
-    /// The node-validity rule of the module doc.
+    /// The node-validity rule of the module doc: room for a person, read from where the
+    /// faces are, never from which way they are wound.
     pub fn is_free(&self, p: &Point3<f64>, clearance_m: f64) -> bool {
+        // Distance to the first face along each of the 26 stencil directions (∞: none).
+        let mut reach = [[[f64::INFINITY; 3]; 3]; 3];
         let mut hits = 0;
-        let mut back = 0;
-        for i in -1..=1i32 {
-            for j in -1..=1i32 {
-                for k in -1..=1i32 {
-                    if (i, j, k) == (0, 0, 0) {
+        for (i, plane) in reach.iter_mut().enumerate() {
+            for (j, row) in plane.iter_mut().enumerate() {
+                for (k, r) in row.iter_mut().enumerate() {
+                    if (i, j, k) == (1, 1, 1) {
                         continue;
                     }
-                    let d = Vector3::new(i as f64, j as f64, k as f64).normalize();
-                    let hit = self.cast(p, &d, 1e6);
-                    let front = hit.map(|(f, _)| {
-                        let n = self.normals[f as usize];
-                        n[0] * d.x + n[1] * d.y + n[2] * d.z < 0.0
-                    });
-                    if (i, j) == (0, 0) && front != Some(true) {
-                        return false; // floor below, ceiling above
-                    }
-                    if let Some(front) = front {
+                    let d = Vector3::new(i as f64 - 1.0, j as f64 - 1.0, k as f64 - 1.0).normalize();
+                    if let Some((_, t)) = self.cast(p, &d, 1e6) {
+                        *r = t;
                         hits += 1;
-                        if !front {
-                            back += 1;
-                        }
                     }
                 }
             }
         }
-        if hits < 13 || back * 10 > hits {
+        // 1. Something to stand on.
+        if reach[1][1][0].is_infinite() {
+            return false;
+        }
+        // 2. Inside the building's envelope.
+        if hits < MIN_ENCLOSING_HITS {
+            return false;
+        }
+        // 3. Wide and high enough for a person along every axis of the stencil that faces close
+        //    on both sides: the inside of a wall or a slab is thinner than any room.
+        //    A space closed all round and short along every axis (the inside of a pillar, or
+        //    a closed box) is not a room either: without winding the two cannot be told apart.
+        let mut longest: f64 = 0.0;
+        for (i, j, k) in [(2, 1, 1), (1, 2, 1), (2, 2, 1), (2, 0, 1)] {
+            let across = reach[i][j][k] + reach[2 - i][2 - j][2 - k];
+            if across < MIN_FREE_WIDTH_M {
+                return false;
+            }
+            longest = longest.max(across);
+        }
+        if longest < MIN_ROOM_SPAN_M {
+            return false;
+        }
+        if reach[1][1][2] + reach[1][1][0] < MIN_FREE_HEIGHT_M {
             return false;
         }
         let c = [p.x, p.y, p.z];
