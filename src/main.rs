@@ -411,17 +411,33 @@ fn run_tracker(a: RunArgs) -> Result<(), String> {
     /// Progress lines on standard error and, if asked, the TUM trajectory.
     struct RunSink {
         tum: Option<TumSink>,
+        /// Searches run, those that had no cell to search, and those widened to the nearest
+        /// valid nodes: why no pose came out, if none did.
+        searches: u64,
+        empty: u64,
+        widened: u64,
     }
     impl FrameSink for RunSink {
         fn frame(&mut self, r: &FrameRecord) -> Result<(), String> {
             match r.result.event {
-                Some(TrackerEvent::Searched(rep)) => eprintln!(
-                    "omnitrack: frame {}: searched {} of {} cells in {:.0} ms",
-                    r.sequence,
-                    rep.cells_searched,
-                    rep.cells_in_volume,
-                    rep.elapsed.as_secs_f64() * 1e3
-                ),
+                Some(TrackerEvent::Searched(rep)) => {
+                    self.searches += 1;
+                    self.empty += u64::from(rep.cells_in_volume == 0);
+                    if let Some(d) = rep.widened_to_m {
+                        self.widened += 1;
+                        eprintln!(
+                            "omnitrack: frame {}: no valid visibility node in the search volume; searched the nearest, {:.1} m about its centre",
+                            r.sequence, d
+                        );
+                    }
+                    eprintln!(
+                        "omnitrack: frame {}: searched {} of {} cells in {:.0} ms",
+                        r.sequence,
+                        rep.cells_searched,
+                        rep.cells_in_volume,
+                        rep.elapsed.as_secs_f64() * 1e3
+                    )
+                }
                 Some(TrackerEvent::Committed { candidates, .. }) => {
                     eprintln!(
                         "omnitrack: frame {}: tracking ({candidates} candidates weighed)",
@@ -472,6 +488,9 @@ fn run_tracker(a: RunArgs) -> Result<(), String> {
     eprintln!("omnitrack: {origin}");
     let mut sink = RunSink {
         tum: a.trajectory.as_deref().map(TumSink::create).transpose()?,
+        searches: 0,
+        empty: 0,
+        widened: 0,
     };
     let publish = (!a.no_publish).then_some(());
     let opts = PipelineOptions {
@@ -499,5 +518,26 @@ fn run_tracker(a: RunArgs) -> Result<(), String> {
         stats.relocalisations
     );
     eprintln!("omnitrack: {summary}");
+    if stats.tracked == 0 {
+        eprintln!(
+            "omnitrack: no pose: {}",
+            no_pose_reason(stats.frames, sink.searches, sink.empty, sink.widened)
+        );
+    }
     Ok(())
+}
+
+/// Why a run gave no pose, in one line, from what its searches reported.
+fn no_pose_reason(frames: u64, searches: u64, empty: u64, widened: u64) -> String {
+    if frames == 0 {
+        "no frame came from the source".to_string()
+    } else if searches == 0 {
+        "no search finished".to_string()
+    } else if empty == searches {
+        "the visibility table has no valid node (nowhere in the model has room for a person to stand: check the model's floors and scale, or rebuild the table)".to_string()
+    } else if widened == searches {
+        format!("the search volume holds no valid visibility node; {searches} searches of the nearest nodes found no pose that explains the frames clearly (check the --init hint)")
+    } else {
+        format!("{searches} searches found no pose that explains the frames clearly enough to commit (a wrong pose is refused: a model that differs from the building, or a hint far from the rig?)")
+    }
 }

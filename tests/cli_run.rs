@@ -74,3 +74,33 @@ fn a_short_replay_writes_a_tum_trajectory_near_the_truth() {
         assert!(d < 0.15, "{d} m off at {}", e.timestamp_ns);
     }
 }
+
+/// A hint whose volume holds no valid node (20 m above the lab) is searched out to the nearest
+/// nodes and says so; a run that gives no pose ends with one line saying why. One frame: a
+/// search's answers are confirmed on later frames, so none can commit.
+#[cfg(feature = "desk")]
+#[test]
+fn a_hint_with_no_valid_node_is_widened_and_a_run_without_a_pose_says_why() {
+    let lab = common::lab_recording(6);
+    let t0 = lab.truth[0].pose.translation.vector;
+    let init = format!("{},{},{},0.5", t0.x, t0.y, t0.z + 20.0);
+    let (code, _, stderr) = omnitrack(&[
+        "run",
+        "--model",
+        lab.rec.join("model.obj").to_str().unwrap(),
+        "--source",
+        &format!("replay:{}", lab.rec.display()),
+        "--init",
+        &init,
+        "--frames",
+        "1",
+        "--no-publish",
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    assert!(
+        stderr.contains("no valid visibility node in the search volume; searched the nearest"),
+        "{stderr}"
+    );
+    let last = last_line(&stderr);
+    assert!(last.starts_with("omnitrack: no pose: "), "{stderr}");
+}

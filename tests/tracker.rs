@@ -322,6 +322,43 @@ fn a_search_commits_no_pose_outside_the_volume_it_searched() {
     assert!(searched >= 1);
 }
 
+/// A hint whose volume holds no valid node (here above the lab's ceiling) is widened about its
+/// centre out to the nearest valid nodes, says so, and finds the truth below.
+#[test]
+fn a_search_volume_without_a_valid_node_searches_the_nearest_nodes() {
+    use omnitrack::tracker::{InitOptions, Initialiser};
+    use rand::SeedableRng;
+    let f = fixture();
+    let (rig, cfg, edges, truth) = first_frame(f);
+    let max_edges = rig.sensors.len() * cfg.edges.max_edges_per_sensor as usize;
+    let mut init = Initialiser::new(
+        &rig,
+        &f.model,
+        &f.table,
+        InitOptions::from_config(&cfg),
+        cfg.solver_options(),
+        max_edges,
+    );
+    let volume = SearchVolume {
+        centre: Point3::from(truth.translation.vector + Vector3::new(0.0, 0.0, 2.6)),
+        diameter_m: Some(1.0),
+    };
+    let mut rng = rand::rngs::SmallRng::seed_from_u64(5);
+    let (found, report) = init.run(&edges, &volume, &mut rng);
+    let widened = report.widened_to_m.expect("the volume was widened");
+    assert!(widened > 1.0 && report.cells_in_volume > 0, "{report:?}");
+    assert!(
+        found
+            .iter()
+            .any(|c| (c.pose.translation.vector - truth.translation.vector).norm() < 0.1
+                && c.pose.rotation.angle_to(&truth.rotation) < 1f64.to_radians()),
+        "{found:?}"
+    );
+    // A volume with valid nodes is searched as given.
+    let (_, report) = init.run(&edges, &hint(f), &mut rng);
+    assert_eq!(report.widened_to_m, None);
+}
+
 /// A search told where the rotation is (after a bad frame: the last good one and the turn the
 /// rig can have made since) keeps to it: with the prior on the truth it still finds the truth,
 /// with the prior on the truth's half-turn twin nothing near the truth comes out, although the

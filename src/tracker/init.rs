@@ -298,6 +298,9 @@ pub struct InitReport {
     /// climbs and polishes), and how many rotations it had.
     pub grid_elapsed: Duration,
     pub rotations: usize,
+    /// The volume held no valid node: the diameter (m) of the volume actually searched, about
+    /// the same centre, out to the nearest valid nodes (`None`: the volume as given).
+    pub widened_to_m: Option<f64>,
 }
 
 /// Most threads the whole-model search uses.
@@ -542,6 +545,25 @@ impl<'m> Initialiser<'m> {
         self.pool.clear();
         self.prepare_edges(edges);
         self.select_cells(volume);
+        // A volume that holds no valid node (a hint outside the building, in a wall, or in a
+        // part of the model with no room to stand) is widened about its centre to the nearest
+        // valid nodes, and the report says so: a search of nothing would repeat forever.
+        // The hint's own extent is kept beyond the gap: it says how far off the rig may be.
+        let widened = match (self.cells.is_empty(), volume.diameter_m) {
+            (true, Some(d)) => self.nearest_node_gap(&volume.centre).map(|gap| SearchVolume {
+                centre: volume.centre,
+                diameter_m: Some(2.0 * gap + d.max(self.table.header.spacing_m)),
+            }),
+            _ => None,
+        };
+        let volume = match &widened {
+            Some(w) => {
+                self.select_cells(w);
+                report.widened_to_m = w.diameter_m;
+                w
+            }
+            None => volume,
+        };
         report.cells_in_volume = self.cells.len();
         let mut rotations = [UnitQuaternion::identity(); MAX_ROTATIONS];
         let found = self.vanishing.rotations(edges, self.opts.max_tilt_rad, &mut rotations);
@@ -1045,6 +1067,25 @@ impl<'m> Initialiser<'m> {
             }
         }
         self.plan_cells.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+    }
+
+    /// How far (m) the nearest valid node's cell lies from `at` (the measure of
+    /// [`Self::select_cells`]), or `None` for a table without valid nodes.
+    fn nearest_node_gap(&self, at: &Point3<f64>) -> Option<f64> {
+        let h = &self.table.header;
+        let half = 0.5 * h.spacing_m;
+        let half_z = layer_half_height(&h.heights_m);
+        (0..self.table.node_count() as u32)
+            .map(|node| {
+                let d = at - self.table.node_position(node);
+                Vector3::new(
+                    (d.x.abs() - half).max(0.0),
+                    (d.y.abs() - half).max(0.0),
+                    (d.z.abs() - half_z).max(0.0),
+                )
+                .norm()
+            })
+            .min_by(f64::total_cmp)
     }
 
     /// The nodes whose cells meet the volume, nearest first (one layer when upright).

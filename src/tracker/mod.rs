@@ -153,6 +153,13 @@ const NARROW_VIEW_SHARE: f64 = 0.5;
 /// edge polishes a few centimetres either way.
 const VOLUME_SLACK_M: f64 = 0.1;
 
+/// Whether `pose` lies in `volume` (within [`VOLUME_SLACK_M`] of it).
+fn within(volume: &SearchVolume, pose: &Pose) -> bool {
+    volume
+        .diameter_m
+        .is_none_or(|d| (pose.translation.vector - volume.centre.coords).norm() <= 0.5 * d + VOLUME_SLACK_M)
+}
+
 /// A candidate under confirmation.
 #[derive(Debug, Clone, Copy)]
 struct Confirming {
@@ -377,6 +384,11 @@ impl<'m> Tracker<'m> {
             // predicts and `accept_support_fraction` of the frame's longest edges; when none
             // does, the next frame searches more broadly.
             let (candidates, report) = self.init.run(edges, &volume, &mut self.rng);
+            // A volume without a valid node was searched out to the nearest ones.
+            let volume = SearchVolume {
+                diameter_m: report.widened_to_m.or(volume.diameter_m),
+                ..volume
+            };
             let plausible = |c: &Candidate| turn_limit.is_none_or(|(r, limit)| c.pose.rotation.angle_to(&r) <= limit);
             // And it must be a clear winner: every other candidate of the search that is not in
             // its basin (the same place turned, or a step away) explains at most
@@ -392,11 +404,7 @@ impl<'m> Tracker<'m> {
             };
             // And it must lie in the volume searched (the polish may carry a start beyond it): a
             // hint says where the rig is. Candidates outside still count as rivals above.
-            let inside = |c: &Candidate| {
-                volume.diameter_m.is_none_or(|d| {
-                    (c.pose.translation.vector - volume.centre.coords).norm() <= 0.5 * d + VOLUME_SLACK_M
-                })
-            };
+            let inside = |c: &Candidate| within(&volume, &c.pose);
             let accepted = |c: &&Candidate| {
                 acceptable(&self.cfg, c) && plausible(c) && c.explained >= floor && inside(c) && clear(c)
             };
@@ -655,9 +663,27 @@ impl<'m> Tracker<'m> {
 
 #[cfg(test)]
 mod tests {
-    use super::NARROW_VIEW_SHARE;
+    use super::{within, SearchVolume, NARROW_VIEW_SHARE, VOLUME_SLACK_M};
+    use crate::geometry::Pose;
     use crate::rig::{Rig, ViewMap};
+    use nalgebra::Point3;
     use std::path::Path;
+
+    #[test]
+    fn a_pose_is_within_a_volume_up_to_the_slack_and_always_within_the_whole_model() {
+        let volume = SearchVolume {
+            centre: Point3::new(1.0, 2.0, 1.5),
+            diameter_m: Some(3.0),
+        };
+        let at = |x: f64| Pose::from_parts(nalgebra::Translation3::new(1.0 + x, 2.0, 1.5), Default::default());
+        assert!(within(&volume, &at(1.5 + 0.5 * VOLUME_SLACK_M)));
+        assert!(!within(&volume, &at(1.5 + 2.0 * VOLUME_SLACK_M)));
+        let whole = SearchVolume {
+            diameter_m: None,
+            ..volume
+        };
+        assert!(within(&whole, &at(1e3)));
+    }
 
     /// Only the one-pinhole example waits for searches to agree: the shipped rig and the other
     /// examples see enough of the sphere to tell twins apart on one frame.
