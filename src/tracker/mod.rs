@@ -582,6 +582,18 @@ impl<'m> Tracker<'m> {
         }
     }
 
+    /// Starts tracking at a known `pose`, as if a search had committed it: what maintenance
+    /// makes of a right start, apart from whether a search finds it (benchmarks, tests).
+    pub fn start_at(&mut self, pose: &Pose, edges: &[Edge], timestamp_ns: u64) -> FrameResult {
+        self.stats.frames += 1;
+        self.stats.tracked += 1;
+        self.confirm_count = 0;
+        self.agreed = None;
+        let result = self.commit(pose, edges, timestamp_ns);
+        self.last_time = timestamp_ns;
+        result
+    }
+
     /// Tracking starts at `pose`: S_0 is VIS(pose), the matched ones accepted.
     fn commit(&mut self, pose: &Pose, edges: &[Edge], timestamp_ns: u64) -> FrameResult {
         self.state = TrackerState::Tracking;
