@@ -1,6 +1,8 @@
 //! The prior visibility table (Koch–Teller §4.3): closed room, two rooms joined by a door, a
 //! pillar occluding a wall, nodes inside walls and outside the building excluded, the file
-//! round trip, the model-hash mismatch error and the query JSON.
+//! round trip, the model-hash mismatch error and the query JSON; and models as other tools draw
+//! them (issue 20): winding flipped at random, single-face walls, duplicated faces, two
+//! storeys.
 #![cfg(feature = "desk")]
 
 use nalgebra::{Point3, Vector3};
@@ -522,4 +524,58 @@ fn the_inside_of_a_thick_solid_is_not_free() {
         assert!(!scene.is_free(&Point3::new(1.5, 1.5, H + 0.4), 0.2), "on the roof");
         assert!(!scene.is_free(&Point3::new(1.5, 8.0, 1.5), 0.2), "outside");
     }
+}
+
+/// Every face written twice, the copy wound the other way (as exporters of two-sided walls
+/// write them): the same nodes and sets as the building drawn once.
+#[test]
+fn duplicated_faces_leave_the_table_unchanged() {
+    let once = two_rooms();
+    let mut twice = Obj {
+        text: once.text.clone(),
+        vertices: once.vertices,
+        flips: None,
+    };
+    // Each `f` line again, its vertices in the other order.
+    for line in once.text.lines().filter(|l| l.starts_with("f ")) {
+        let mut ids: Vec<&str> = line[2..].split_whitespace().collect();
+        ids.reverse();
+        twice.text.push_str(&format!("f {}\n", ids.join(" ")));
+    }
+    let (a, b) = (once.model(), twice.model());
+    assert_eq!(b.faces.len(), 2 * a.faces.len());
+    let (ta, tb) = (
+        build_table(&a, "once.obj", &options()),
+        build_table(&b, "twice.obj", &options()),
+    );
+    let strip = |c: Vec<NodeContents>| c.into_iter().map(|(p, _, s)| (p, s)).collect::<Vec<_>>();
+    assert_eq!(strip(contents(&tb, &b)), strip(contents(&ta, &a)));
+}
+
+/// Two storeys, one above the other with a 0.3 m slab between them: nodes on both floors, none
+/// in the slab.
+#[test]
+fn two_storeys_keep_both_floors_and_nothing_in_the_slab() {
+    let mut obj = Obj::default();
+    obj.room([0.0, 0.0, 0.0], [6.0, 4.0, H]);
+    obj.room([0.0, 0.0, H + 0.3], [6.0, 4.0, 2.0 * H + 0.3]);
+    let model = obj.model();
+    let table = build_table(
+        &model,
+        "storeys.obj",
+        &BuildOptions {
+            heights_m: vec![1.0, 1.5, H + 0.15, H + 0.3 + 1.0, H + 0.3 + 1.5],
+            ..options()
+        },
+    );
+    let on = |z: f64| {
+        (0..table.node_count() as u32)
+            .filter(|&n| (table.node_position(n).z - z).abs() < 1e-9)
+            .count()
+    };
+    for z in [1.0, 1.5, H + 1.3, H + 1.8] {
+        assert_eq!(on(z), 6 * 4, "layer {z}");
+    }
+    assert_eq!(on(H + 0.15), 0, "nodes in the slab");
+    assert_eq!(table.node_count(), 4 * 6 * 4);
 }
