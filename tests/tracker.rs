@@ -322,23 +322,26 @@ fn a_search_commits_no_pose_outside_the_volume_it_searched() {
     assert!(searched >= 1);
 }
 
+/// The initialiser of the lab fixture's model and table for `rig` and `cfg`.
+fn lab_initialiser<'a>(f: &'a LabRecording, rig: &Rig, cfg: &TrackerConfig) -> omnitrack::tracker::Initialiser<'a> {
+    omnitrack::tracker::Initialiser::new(
+        rig,
+        &f.model,
+        &f.table,
+        omnitrack::tracker::InitOptions::from_config(cfg),
+        cfg.solver_options(),
+        rig.sensors.len() * cfg.edges.max_edges_per_sensor as usize,
+    )
+}
+
 /// A hint whose volume holds no valid node (here above the lab's ceiling) is widened about its
 /// centre out to the nearest valid nodes, says so, and finds the truth below.
 #[test]
 fn a_search_volume_without_a_valid_node_searches_the_nearest_nodes() {
-    use omnitrack::tracker::{InitOptions, Initialiser};
     use rand::SeedableRng;
     let f = fixture();
     let (rig, cfg, edges, truth) = first_frame(f);
-    let max_edges = rig.sensors.len() * cfg.edges.max_edges_per_sensor as usize;
-    let mut init = Initialiser::new(
-        &rig,
-        &f.model,
-        &f.table,
-        InitOptions::from_config(&cfg),
-        cfg.solver_options(),
-        max_edges,
-    );
+    let mut init = lab_initialiser(f, &rig, &cfg);
     let volume = SearchVolume {
         centre: Point3::from(truth.translation.vector + Vector3::new(0.0, 0.0, 2.6)),
         diameter_m: Some(1.0),
@@ -383,22 +386,13 @@ fn first_frame(f: &LabRecording) -> (Rig, TrackerConfig, Vec<omnitrack::edges::E
 #[test]
 fn a_rotation_prior_and_a_tilt_limit_keep_the_search_to_plausible_rotations() {
     use nalgebra::UnitQuaternion;
-    use omnitrack::tracker::{InitOptions, Initialiser};
     use rand::SeedableRng;
     let f = fixture();
     let (rig, cfg, edges, truth) = first_frame(f);
-    let max_edges = rig.sensors.len() * cfg.edges.max_edges_per_sensor as usize;
     let initialiser = |max_tilt_deg: f64| {
         let mut c = cfg.clone();
         c.motion.max_tilt_deg = max_tilt_deg;
-        let mut init = Initialiser::new(
-            &rig,
-            &f.model,
-            &f.table,
-            InitOptions::from_config(&c),
-            c.solver_options(),
-            max_edges,
-        );
+        let mut init = lab_initialiser(f, &rig, &c);
         init.set_yaw_twins(false);
         init
     };
@@ -622,18 +616,9 @@ fn a_rig_of_two_fisheye_lenses_seeing_past_90_degrees_tracks_as_the_shipped_one(
 #[test]
 fn the_true_pose_draws_fewer_lines_across_plain_surfaces_than_a_wrong_one() {
     use nalgebra::{Translation3, UnitQuaternion};
-    use omnitrack::tracker::{InitOptions, Initialiser};
     let f = fixture();
     let (rig, cfg, edges, truth) = first_frame(f);
-    let max_edges = rig.sensors.len() * cfg.edges.max_edges_per_sensor as usize;
-    let mut init = Initialiser::new(
-        &rig,
-        &f.model,
-        &f.table,
-        InitOptions::from_config(&cfg),
-        cfg.solver_options(),
-        max_edges,
-    );
+    let mut init = lab_initialiser(f, &rig, &cfg);
     let at_truth = init.blank_share(&truth, &edges);
     // A quarter turn where the rig stands, and the truth 0.6 m aside: the building's lines are
     // drawn where the images show plain wall, floor and ceiling.
@@ -659,13 +644,6 @@ fn the_true_pose_draws_fewer_lines_across_plain_surfaces_than_a_wrong_one() {
     // Radius 0 turns it off.
     let mut off = cfg.clone();
     off.initialisation.blank_radius_deg = 0.0;
-    let mut init0 = Initialiser::new(
-        &rig,
-        &f.model,
-        &f.table,
-        InitOptions::from_config(&off),
-        off.solver_options(),
-        max_edges,
-    );
+    let mut init0 = lab_initialiser(f, &rig, &off);
     assert_eq!(init0.blank_share(&turned, &edges), 0.0);
 }

@@ -1069,51 +1069,43 @@ impl<'m> Initialiser<'m> {
         self.plan_cells.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
     }
 
-    /// How far (m) the nearest valid node's cell lies from `at` (the measure of
-    /// [`Self::select_cells`]), or `None` for a table without valid nodes.
-    fn nearest_node_gap(&self, at: &Point3<f64>) -> Option<f64> {
+    /// How far (m) `at` lies from `node`'s cell (0 inside it), or `None` for a node off the
+    /// known layer when upright (whose height is not searched).
+    fn cell_gap(&self, at: &Point3<f64>, node: u32) -> Option<f64> {
         let h = &self.table.header;
+        let p = self.table.node_position(node);
         let half = 0.5 * h.spacing_m;
-        let half_z = layer_half_height(&h.heights_m);
+        let dz = match self.opts.upright_height_m {
+            Some(z) => {
+                if (p.z - nearest_layer_z(h.origin[2], &h.heights_m, z)).abs() > 1e-6 {
+                    return None;
+                }
+                0.0
+            }
+            None => ((at.z - p.z).abs() - layer_half_height(&h.heights_m)).max(0.0),
+        };
+        let d = at - p;
+        Some(Vector3::new((d.x.abs() - half).max(0.0), (d.y.abs() - half).max(0.0), dz).norm())
+    }
+
+    /// How far (m) the nearest searchable node's cell lies from `at`, or `None` for a table
+    /// without one.
+    fn nearest_node_gap(&self, at: &Point3<f64>) -> Option<f64> {
         (0..self.table.node_count() as u32)
-            .map(|node| {
-                let d = at - self.table.node_position(node);
-                Vector3::new(
-                    (d.x.abs() - half).max(0.0),
-                    (d.y.abs() - half).max(0.0),
-                    (d.z.abs() - half_z).max(0.0),
-                )
-                .norm()
-            })
+            .filter_map(|node| self.cell_gap(at, node))
             .min_by(f64::total_cmp)
     }
 
     /// The nodes whose cells meet the volume, nearest first (one layer when upright).
     fn select_cells(&mut self, volume: &SearchVolume) {
         self.cells.clear();
-        let h = &self.table.header;
-        let half = 0.5 * h.spacing_m;
-        let half_z = layer_half_height(&h.heights_m);
-        let layer_z = self
-            .opts
-            .upright_height_m
-            .map(|z| nearest_layer_z(h.origin[2], &h.heights_m, z));
         for node in 0..self.table.node_count() as u32 {
-            let p = self.table.node_position(node);
-            if let Some(z) = layer_z {
-                if (p.z - z).abs() > 1e-6 {
-                    continue;
-                }
-            }
-            let d = volume.centre - p;
-            let dz = if self.opts.upright_height_m.is_some() {
-                0.0
-            } else {
-                (d.z.abs() - half_z).max(0.0)
+            let Some(gap) = self.cell_gap(&volume.centre, node) else {
+                continue;
             };
-            let gap = Vector3::new((d.x.abs() - half).max(0.0), (d.y.abs() - half).max(0.0), dz).norm();
             if volume.diameter_m.is_none_or(|dm| gap <= 0.5 * dm) && self.cells.len() < self.cells.capacity() {
-                self.cells.push((d.norm(), node));
+                let distance = (volume.centre - self.table.node_position(node)).norm();
+                self.cells.push((distance, node));
             }
         }
         self.cells.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
