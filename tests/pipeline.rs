@@ -18,7 +18,7 @@ use omnitrack::capture::{
     FrameSet, FrameSource, ImageFault, Pacing, ReplaySource, SensorImage, SourceError, SourceOptions, SourceStats,
 };
 use omnitrack::config::TrackerConfig;
-use omnitrack::publish::{PoseStatus, PoseSubscriber, StatusSample, StatusSubscriber};
+use omnitrack::publish::{PoseStatus, PoseSubscriber, SearchState, StatusSample, StatusSubscriber};
 use omnitrack::rig::Sensor;
 use omnitrack::runtime::pipeline::{
     inside_publish, live_sensors, run_pipeline, FrameSink, PipelineOptions, PipelineStage, PipelineThread, StopReason,
@@ -753,4 +753,43 @@ fn per_sensor_capture_assembles_frames_by_timestamp_and_survives_a_dead_sensor()
     assert!(summary.stage(PipelineStage::Capture).count >= 6 * FRAMES);
     // Timestamps of a frame are within the tolerance of each other.
     assert!(records.iter().all(|r| r.sequence == 0 || r.timestamp_ns > 0));
+}
+
+#[test]
+fn a_search_volume_without_a_valid_node_says_so_on_the_status() {
+    let _serial = serial();
+    let f = fixture();
+    let mut opts = options(f, "widened");
+    // Twenty metres above the lab: no valid node within the hint's 0.5 m.
+    let mut centre = f.hint.centre;
+    centre.z += 20.0;
+    opts.run.hint = Some(SearchVolume {
+        centre,
+        diameter_m: Some(0.5),
+    });
+    opts.run.max_frames = Some(1);
+    let mut cfg = TrackerConfig::default();
+    cfg.budgets.status_interval_ms = 20.0;
+    let status = StatusSubscriber::create(opts.status_service.as_deref().unwrap()).unwrap();
+    let done = Arc::new(AtomicBool::new(false));
+    let statuses = collect(move || status.receive().unwrap(), Arc::clone(&done));
+    let mut sink = Recorder {
+        records: Vec::new(),
+        tum: None,
+        stop_after: None,
+    };
+    let summary = run_pipeline(replay(&f.rec), &f.model, &f.table, &cfg, &opts, &mut sink).unwrap();
+    done.store(true, Ordering::Relaxed);
+    let statuses: Vec<StatusSample> = statuses.join().unwrap();
+    assert!(summary.frames_processed >= 1);
+    // The last status (sent at stop) tells why there is no pose: the volume was widened.
+    let last = statuses.last().expect("a status at stop");
+    assert_eq!(SearchState::try_from(last.search), Ok(SearchState::Widened), "{last:?}");
+    assert!(
+        last.search_widened_to_m > 0.5,
+        "widened to {} m",
+        last.search_widened_to_m
+    );
+    // Before any search the status says so.
+    assert_eq!(SearchState::try_from(statuses[0].search), Ok(SearchState::None));
 }

@@ -69,7 +69,9 @@ fn pose_sample_has_the_documented_c_layout() {
     assert_eq!(offset_of!(StatusSample, sequence), 8);
     assert_eq!(offset_of!(StatusSample, tracker_state), 16);
     assert_eq!(offset_of!(StatusSample, sensor_count), 17);
+    assert_eq!(offset_of!(StatusSample, search), 18);
     assert_eq!(offset_of!(StatusSample, frame_rate_hz), 20);
+    assert_eq!(offset_of!(StatusSample, search_widened_to_m), 84);
     assert_eq!(offset_of!(StatusSample, frames_dropped), 88);
     assert_eq!(offset_of!(StatusSample, stage_p50_us), 216);
     assert_eq!(offset_of!(StatusSample, stage_p99_us), 248);
@@ -84,7 +86,7 @@ fn type_names_are_the_interface_names() {
     );
     assert_eq!(
         unsafe { <StatusSample as ZeroCopySend>::type_name() },
-        "omnitrack.StatusSample.v1"
+        "omnitrack.StatusSample.v2"
     );
 }
 

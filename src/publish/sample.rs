@@ -159,6 +159,43 @@ impl PoseSample {
     }
 }
 
+/// What the tracker's last search for a pose made of its volume, as carried in
+/// [`StatusSample::search`]: why a tracker that publishes no pose has none.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[repr(u8)]
+pub enum SearchState {
+    /// No search since start (or the tracker has tracked since its last one).
+    None = 0,
+    /// The last search covered the volume it was given (the hint, or the whole model).
+    AsGiven = 1,
+    /// The volume held no valid visibility node: the last search went out to the nearest ones,
+    /// over [`StatusSample::search_widened_to_m`] about the volume's centre.
+    Widened = 2,
+    /// The last search had no cell at all to search (a model without valid nodes).
+    NoCells = 3,
+}
+
+impl From<SearchState> for u8 {
+    fn from(s: SearchState) -> u8 {
+        s as u8
+    }
+}
+
+impl TryFrom<u8> for SearchState {
+    /// The byte that is not a known search state.
+    type Error = u8;
+
+    fn try_from(v: u8) -> Result<Self, u8> {
+        match v {
+            0 => Ok(SearchState::None),
+            1 => Ok(SearchState::AsGiven),
+            2 => Ok(SearchState::Widened),
+            3 => Ok(SearchState::NoCells),
+            other => Err(other),
+        }
+    }
+}
+
 /// Most sensors a [`StatusSample`] reports on.
 pub const STATUS_MAX_SENSORS: usize = 16;
 /// Number of stage-timing slots in a [`StatusSample`] (see [`Stage`]).
@@ -219,14 +256,18 @@ impl Stage {
 /// | 0 | `timestamp_ns` | u64 |
 /// | 8 | `sequence` | u64 |
 /// | 16 | `tracker_state` | u8 ([`PoseStatus`]) |
-/// | 17 | `sensor_count` | u8 (then 2 bytes padding) |
+/// | 17 | `sensor_count` | u8 |
+/// | 18 | `search` | u8 ([`SearchState`], then 1 byte padding) |
 /// | 20 | `frame_rate_hz` | [f32; 16] |
-/// | 84 | (4 bytes padding) | |
+/// | 84 | `search_widened_to_m` | f32 |
+///
+/// v2 (2026-11-27) put the search's state in what was v1's padding: same size, new name, since
+/// a v1 writer leaves those bytes undefined.
 /// | 88 | `frames_dropped` | [u64; 16] |
 /// | 216 | `stage_p50_us` | [u32; 8] |
 /// | 248 | `stage_p99_us` | [u32; 8] |
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("omnitrack.StatusSample.v1")]
+#[type_name("omnitrack.StatusSample.v2")]
 #[repr(C)]
 pub struct StatusSample {
     /// When this status was taken, nanoseconds (same clock as [`PoseSample::timestamp_ns`]).
@@ -237,8 +278,13 @@ pub struct StatusSample {
     pub tracker_state: u8,
     /// How many of the per-sensor slots are in use (≤ [`STATUS_MAX_SENSORS`]).
     pub sensor_count: u8,
+    /// [`SearchState`] byte of the tracker's last search.
+    pub search: u8,
     /// Frames per second delivered by each sensor (slot = sensor index).
     pub frame_rate_hz: [f32; STATUS_MAX_SENSORS],
+    /// With [`SearchState::Widened`]: the diameter (m) of the volume actually searched, about
+    /// the given volume's centre; 0 otherwise.
+    pub search_widened_to_m: f32,
     /// Frames dropped per sensor since start (latest-frame-wins drops, counted, never silent).
     pub frames_dropped: [u64; STATUS_MAX_SENSORS],
     /// Median time per [`Stage`] slot, microseconds (0 = not measured).
@@ -254,7 +300,9 @@ impl Default for StatusSample {
             sequence: 0,
             tracker_state: PoseStatus::Initializing as u8,
             sensor_count: 0,
+            search: SearchState::None as u8,
             frame_rate_hz: [0.0; STATUS_MAX_SENSORS],
+            search_widened_to_m: 0.0,
             frames_dropped: [0; STATUS_MAX_SENSORS],
             stage_p50_us: [0; STATUS_STAGES],
             stage_p99_us: [0; STATUS_STAGES],

@@ -70,11 +70,11 @@ use crate::edges::EdgeDetector;
 use crate::geometry::Pose;
 use crate::model::Model;
 use crate::publish::{
-    PosePublisher, PoseSample, PoseStatus, StatusPublisher, StatusSample, POSE_SERVICE, STATUS_MAX_SENSORS,
-    STATUS_SERVICE, STATUS_STAGES,
+    PosePublisher, PoseSample, PoseStatus, SearchState, StatusPublisher, StatusSample, POSE_SERVICE,
+    STATUS_MAX_SENSORS, STATUS_SERVICE, STATUS_STAGES,
 };
 use crate::rig::Rig;
-use crate::tracker::{FrameResult, Tracker, TrackerState, TrackerStats};
+use crate::tracker::{FrameResult, Tracker, TrackerEvent, TrackerState, TrackerStats};
 use crate::visibility::VisibilityTable;
 use crossbeam::channel::{bounded, Receiver, RecvTimeoutError, SendTimeoutError, Sender, TrySendError};
 use stats::SensorCounters;
@@ -783,6 +783,9 @@ struct Processor<'a, 'o, 'm> {
     status_rates: Vec<f32>,
     status_at: Instant,
     status_overruns: [u64; 7],
+    /// What the last search made of its volume, and the widened diameter (m), for the status.
+    search: SearchState,
+    search_widened_to_m: f32,
 }
 
 impl Processor<'_, '_, '_> {
@@ -877,6 +880,17 @@ impl Processor<'_, '_, '_> {
         self.last_ts = record.timestamp_ns;
         self.processed += 1;
         let r = &record.result;
+        match (&r.event, r.pose.is_some()) {
+            (Some(TrackerEvent::Searched(rep)), _) => {
+                (self.search, self.search_widened_to_m) = match rep.widened_to_m {
+                    _ if rep.cells_in_volume == 0 => (SearchState::NoCells, 0.0),
+                    Some(d) => (SearchState::Widened, d as f32),
+                    None => (SearchState::AsGiven, 0.0),
+                }
+            }
+            (_, true) => (self.search, self.search_widened_to_m) = (SearchState::None, 0.0),
+            _ => {}
+        }
         if let Some(p) = &r.pose {
             self.last_pose = *p;
         }
@@ -947,6 +961,8 @@ impl Processor<'_, '_, '_> {
             sequence: self.status_published,
             tracker_state: self.last_state as u8,
             sensor_count: self.shared.sensors.len().min(STATUS_MAX_SENSORS) as u8,
+            search: self.search as u8,
+            search_widened_to_m: self.search_widened_to_m,
             ..StatusSample::default()
         };
         for (k, c) in self.shared.sensors.iter().enumerate() {
@@ -1177,6 +1193,8 @@ pub fn run_pipeline(
                     status_rates: vec![0.0; rig.sensors.len()],
                     status_at: Instant::now(),
                     status_overruns: [0; 7],
+                    search: SearchState::None,
+                    search_widened_to_m: 0.0,
                 };
                 let outcome = processor.run();
                 (outcome, publisher_error)
