@@ -7,6 +7,10 @@
 //! `omnitrack-desk render --rig R --model M.obj --trajectory T.tum --out DIR` renders a synthetic
 //! recording (INTERFACES.md layout) of the rig moving along the trajectory through the model.
 //!
+//! `omnitrack-desk model from-ifc FILE.ifc --out MODEL.obj [--storey NAME]` converts an IFC
+//! building (what architects deliver) into the coarse OBJ model through IfcOpenShell
+//! (`tools/ifc_to_obj.py`, in its own venv).
+//!
 //! `omnitrack-desk eval GT.tum EST.tum [--align] [--rpe-delta N] [--max-diff S]` compares an
 //! estimated trajectory with the ground truth (ATE and RPE, evo's definitions) and prints a table.
 //!
@@ -78,6 +82,11 @@ enum Command {
         #[command(flatten)]
         look: Look,
     },
+    /// Building models from other tools.
+    Model {
+        #[command(subcommand)]
+        command: ModelCommand,
+    },
     /// Compare an estimated trajectory with the ground truth: ATE and RPE (as evo_ape/evo_rpe).
     Eval {
         /// Ground truth, TUM format (T_world_rig).
@@ -96,6 +105,24 @@ enum Command {
         /// Print every statistic as JSON (metres and degrees) instead of the table.
         #[arg(long)]
         json: bool,
+    },
+}
+
+#[derive(Subcommand)]
+enum ModelCommand {
+    /// The coarse OBJ model of an IFC building: walls, slabs, roofs, doors, windows, stairs,
+    /// columns, beams and curtain walls, in metres, z up, in the IFC project's coordinates;
+    /// furniture and services left out. Runs IfcOpenShell (PyPI `ifcopenshell`), which it
+    /// installs into tools/.venv-ifc on first use.
+    FromIfc {
+        /// The IFC file (STEP, IFC2X3 or IFC4).
+        file: PathBuf,
+        /// Where to write the OBJ model.
+        #[arg(long, value_name = "MODEL.obj")]
+        out: PathBuf,
+        /// Keep only the elements of this building storey (its IFC name).
+        #[arg(long, value_name = "NAME")]
+        storey: Option<String>,
     },
 }
 
@@ -189,6 +216,9 @@ fn main() -> ExitCode {
 
 fn run(command: Command) -> Result<(), String> {
     match command {
+        Command::Model {
+            command: ModelCommand::FromIfc { file, out, storey },
+        } => from_ifc(&file, &out, storey.as_deref()),
         Command::Extrude { plan, out } => {
             let plan_name = plan.display().to_string();
             let text = std::fs::read_to_string(&plan).map_err(|e| format!("{plan_name}: cannot read: {e}"))?;
@@ -316,6 +346,54 @@ fn render(
         summary.images,
         summary.render_seconds + summary.write_seconds,
         summary.frames as f64 / summary.render_seconds.max(1e-9)
+    );
+    Ok(())
+}
+
+/// Model segments at least this long (m) are counted apart in the summary: the lines a 5-px edge
+/// can confirm from a few metres (README, "Models from IFC").
+const LONG_SEGMENT_M: f64 = 0.3;
+
+/// `model from-ifc`: `tools/ifc_to_obj.py` writes the OBJ through IfcOpenShell; the result is
+/// loaded back as the tracker will load it before it replaces `out`.
+fn from_ifc(file: &std::path::Path, out: &std::path::Path, storey: Option<&str>) -> Result<(), String> {
+    let script = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("ifc_to_obj.py");
+    let out_name = out.display().to_string();
+    let partial = out.with_extension("obj.partial");
+    let mut cmd = std::process::Command::new("python3");
+    cmd.arg(&script).arg(file).arg("--out").arg(&partial);
+    if let Some(name) = storey {
+        cmd.arg("--storey").arg(name);
+    }
+    let run = cmd
+        .output()
+        .map_err(|e| format!("cannot run python3 (IfcOpenShell needs it): {e}"))?;
+    let report = String::from_utf8_lossy(&run.stderr);
+    if !run.status.success() {
+        let _ = std::fs::remove_file(&partial);
+        // The script's error is its last line; anything above it is pip's progress.
+        let last = report
+            .lines()
+            .rev()
+            .find(|l| !l.trim().is_empty())
+            .unwrap_or("no message");
+        return Err(last.trim().to_string());
+    }
+    eprint!("{report}");
+    let model = Model::load(&partial).map_err(|e| {
+        let _ = std::fs::remove_file(&partial);
+        format!("{}: the converted model does not load: {e}", file.display())
+    })?;
+    std::fs::rename(&partial, out).map_err(|e| format!("{out_name}: cannot write: {e}"))?;
+    let long = model.segments.iter().filter(|s| s.length() >= LONG_SEGMENT_M).count();
+    let s = &model.stats;
+    eprintln!(
+        "{out_name}: {} faces, {} vertices, {} segments ({long} at least {LONG_SEGMENT_M} m long); loader: {} degenerate faces, {} welded vertices",
+        model.faces.len(),
+        model.vertices.len(),
+        model.segments.len(),
+        s.degenerate_faces,
+        s.welded_vertices
     );
     Ok(())
 }
