@@ -579,3 +579,32 @@ fn two_storeys_keep_both_floors_and_nothing_in_the_slab() {
     assert_eq!(on(H + 0.15), 0, "nodes in the slab");
     assert_eq!(table.node_count(), 4 * 6 * 4);
 }
+
+#[test]
+fn segments_shorter_than_the_minimum_enter_no_set() {
+    // A handle-sized plate 6 cm × 30 cm, 1 cm off the wall x = 0 of a plain room.
+    let mut obj = Obj::default();
+    obj.room([0.0, 0.0, 0.0], [4.0, 3.0, H]);
+    obj.rect(0, 0.01, [1.5, 1.0], [1.56, 1.3], 1.0);
+    let model = obj.model();
+    assert_eq!(model.segments.len(), 16);
+    let short = |s: &u32| model.segments[*s as usize].length() < 0.1;
+    assert_eq!((0..16u32).filter(short).count(), 2);
+    // Shipped: the two 6 cm edges are in no set, the 30 cm ones and the room's are.
+    let shipped = build_table(&model, "plate.obj", &options());
+    assert!((0.09..=0.11).contains(&options().min_segment_length_m));
+    let all = BuildOptions {
+        min_segment_length_m: 0.0,
+        ..options()
+    };
+    let every = build_table(&model, "plate.obj", &all);
+    let (mut kept, mut with_short) = (0, 0);
+    for n in 0..shipped.node_count() as u32 {
+        let set = shipped.node_set(n).segments;
+        assert!(!set.iter().any(short), "node {n} keeps a short segment");
+        kept = kept.max(set.len());
+        with_short = with_short.max(every.node_set(n).segments.iter().filter(|s| short(s)).count());
+    }
+    assert_eq!(kept, 14, "the room's 12 and the plate's two long edges");
+    assert_eq!(with_short, 2, "with no minimum the short edges are seen");
+}

@@ -87,6 +87,10 @@ pub struct VisibilityConfig {
     pub min_visible_pixels: u32,
     pub cube_map_resolution: u32,
     pub node_heights_m: Vec<f64>,
+    /// Model segments shorter than this (m) enter no visibility set, so the tracker never
+    /// matches or scores them: the handles, sash profiles and tessellated curves of a detailed
+    /// model (README, "Models from IFC").
+    pub min_segment_length_m: f64,
 }
 
 pub use crate::solver::{LineError, Method as SolverMethod};
@@ -225,6 +229,10 @@ impl Default for MaintenanceConfig {
     }
 }
 
+/// The default [`VisibilityConfig::min_segment_length_m`] (m): measured on KIT's FZK-Haus
+/// converted from IFC (README, "Models from IFC").
+pub const MIN_SEGMENT_LENGTH_M: f64 = 0.1;
+
 impl Default for VisibilityConfig {
     fn default() -> Self {
         Self {
@@ -232,6 +240,7 @@ impl Default for VisibilityConfig {
             min_visible_pixels: 2, // Koch–Teller §4.3
             cube_map_resolution: 256,
             node_heights_m: vec![1.0, 1.5, 2.0],
+            min_segment_length_m: MIN_SEGMENT_LENGTH_M,
         }
     }
 }
@@ -475,6 +484,12 @@ impl TrackerConfig {
         positive("visibility.node_spacing_m", v.node_spacing_m)?;
         at_least("visibility.min_visible_pixels", v.min_visible_pixels, 1)?;
         at_least("visibility.cube_map_resolution", v.cube_map_resolution, 8)?;
+        if !(v.min_segment_length_m.is_finite() && v.min_segment_length_m >= 0.0) {
+            return Err(format!(
+                "key 'visibility.min_segment_length_m': must be a finite length ≥ 0 (0 = every segment), found {}",
+                v.min_segment_length_m
+            ));
+        }
         if v.node_heights_m.is_empty() || v.node_heights_m.iter().any(|h| !h.is_finite()) {
             return Err("key 'visibility.node_heights_m': must be a non-empty list of finite heights".into());
         }

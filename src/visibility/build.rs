@@ -76,6 +76,8 @@ pub struct BuildOptions {
     pub clearance_m: f64,
     /// How a node's set is widened to cover its cell.
     pub merge: Merge,
+    /// Segments shorter than this (m) enter no set.
+    pub min_segment_length_m: f64,
     /// Show a progress bar on standard error.
     pub progress: bool,
 }
@@ -120,6 +122,7 @@ impl BuildOptions {
             max_range_m: DEFAULT_MAX_RANGE_M,
             clearance_m: 0.2,
             merge: Merge::None,
+            min_segment_length_m: c.min_segment_length_m,
             progress: false,
         }
     }
@@ -413,7 +416,8 @@ impl CubeMap {
             // Every segment within range is a candidate, not only those bounding a visible face
             // (the paper's rule): a segment can be visible while its faces cover no pixel centre
             // (a door jamb far down a corridor, the outer edge of a window seen through it).
-            let candidate = point_segment_dist2(e, [seg.a.x, seg.a.y, seg.a.z], [seg.b.x, seg.b.y, seg.b.z]) <= r2;
+            let candidate = seg.length() >= opts.min_segment_length_m
+                && point_segment_dist2(e, [seg.a.x, seg.a.y, seg.a.z], [seg.b.x, seg.b.y, seg.b.z]) <= r2;
             if candidate && self.segment_visible(scene, &e, seg, opts.min_visible_pixels) {
                 segments.push(si as u32);
             }
