@@ -67,6 +67,10 @@ fn bad_values_name_the_key() {
         ("[visibility]\nnode_spacing_m = -1\n", "key 'visibility.node_spacing_m'"),
         ("[visibility]\nnode_spacing_m = \"one\"\n", "invalid type"),
         (
+            "[visibility]\nmin_segment_length_m = -0.1\n",
+            "key 'visibility.min_segment_length_m': must be a finite length ≥ 0",
+        ),
+        (
             "[budgets]\nframe_ms = nan\n",
             "key 'budgets.frame_ms': must be a positive number",
         ),

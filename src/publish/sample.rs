@@ -260,12 +260,12 @@ impl Stage {
 /// | 18 | `search` | u8 ([`SearchState`], then 1 byte padding) |
 /// | 20 | `frame_rate_hz` | [f32; 16] |
 /// | 84 | `search_widened_to_m` | f32 |
-///
-/// v2 (2026-11-27) put the search's state in what was v1's padding: same size, new name, since
-/// a v1 writer leaves those bytes undefined.
 /// | 88 | `frames_dropped` | [u64; 16] |
 /// | 216 | `stage_p50_us` | [u32; 8] |
 /// | 248 | `stage_p99_us` | [u32; 8] |
+///
+/// v2 (2026-11-27) put the search's state in what was v1's padding: same size, new name, since
+/// a v1 writer leaves those bytes undefined.
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[type_name("omnitrack.StatusSample.v2")]
 #[repr(C)]

@@ -350,10 +350,6 @@ fn render(
     Ok(())
 }
 
-/// Model segments at least this long (m) are counted apart in the summary: the lines a 5-px edge
-/// can confirm from a few metres (README, "Models from IFC").
-const LONG_SEGMENT_M: f64 = 0.3;
-
 /// `model from-ifc`: `tools/ifc_to_obj.py` writes the OBJ through IfcOpenShell; the result is
 /// loaded back as the tracker will load it before it replaces `out`.
 fn from_ifc(file: &std::path::Path, out: &std::path::Path, storey: Option<&str>) -> Result<(), String> {
@@ -385,10 +381,12 @@ fn from_ifc(file: &std::path::Path, out: &std::path::Path, storey: Option<&str>)
         format!("{}: the converted model does not load: {e}", file.display())
     })?;
     std::fs::rename(&partial, out).map_err(|e| format!("{out_name}: cannot write: {e}"))?;
-    let long = model.segments.iter().filter(|s| s.length() >= LONG_SEGMENT_M).count();
+    // The segments the tracker will use (the shipped `[visibility] min_segment_length_m`).
+    let min = omnitrack::config::MIN_SEGMENT_LENGTH_M;
+    let long = model.segments.iter().filter(|s| s.length() >= min).count();
     let s = &model.stats;
     eprintln!(
-        "{out_name}: {} faces, {} vertices, {} segments ({long} at least {LONG_SEGMENT_M} m long); loader: {} degenerate faces, {} welded vertices",
+        "{out_name}: {} faces, {} vertices, {} segments ({long} at least {min} m long, which the tracker uses); loader: {} degenerate faces, {} welded vertices",
         model.faces.len(),
         model.vertices.len(),
         model.segments.len(),
