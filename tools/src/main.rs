@@ -124,6 +124,25 @@ enum ModelCommand {
         #[arg(long, value_name = "NAME")]
         storey: Option<String>,
     },
+    /// A random building nobody here drew (the generator of the buildings benchmark): L, U,
+    /// courtyard or rectangular outline, thin or thick walls, random winding, triangulated or
+    /// not, one or two storeys; the same seed gives the same building.
+    Random {
+        /// The building's seed.
+        seed: u64,
+        /// Where to write the OBJ model.
+        #[arg(long, value_name = "MODEL.obj")]
+        out: PathBuf,
+        /// Also write the walked ground storey as a GeoJSON floor plan.
+        #[arg(long, value_name = "PLAN.geojson")]
+        plan: Option<PathBuf>,
+        /// Also write a walk through the ground storey (TUM, T_world_rig) for `render`.
+        #[arg(long, value_name = "T.tum")]
+        walk: Option<PathBuf>,
+        /// Poses of the walk (at the building's frame rate).
+        #[arg(long, default_value_t = 150)]
+        frames: usize,
+    },
 }
 
 /// Appearance switches: each a level, 0 = off (defaults are moderate and realistic).
@@ -219,6 +238,31 @@ fn run(command: Command) -> Result<(), String> {
         Command::Model {
             command: ModelCommand::FromIfc { file, out, storey },
         } => from_ifc(&file, &out, storey.as_deref()),
+        Command::Model {
+            command:
+                ModelCommand::Random {
+                    seed,
+                    out,
+                    plan,
+                    walk,
+                    frames,
+                },
+        } => {
+            let b = omnitrack::desk::scenario::random::RandomBuilding::new(seed);
+            let out_name = out.display().to_string();
+            let model = Model::from_obj_str(&b.obj, &out_name).map_err(|e| e.to_string())?;
+            std::fs::write(&out, &b.obj).map_err(|e| format!("{out_name}: cannot write: {e}"))?;
+            if let Some(p) = plan {
+                std::fs::write(&p, &b.plan_geojson).map_err(|e| format!("{}: cannot write: {e}", p.display()))?;
+            }
+            if let Some(p) = walk {
+                let t = b.trajectory(frames, seed);
+                std::fs::write(&p, omnitrack::trajectory::to_tum_string(&t))
+                    .map_err(|e| format!("{}: cannot write: {e}", p.display()))?;
+            }
+            println!("{out_name}: {b}; {} segments", model.segments.len());
+            Ok(())
+        }
         Command::Extrude { plan, out } => {
             let plan_name = plan.display().to_string();
             let text = std::fs::read_to_string(&plan).map_err(|e| format!("{plan_name}: cannot read: {e}"))?;

@@ -15,6 +15,7 @@
 
 pub mod path;
 pub mod plans;
+pub mod random;
 
 pub use path::{check_path, doorways_passed, BODY_CLEARANCE_M};
 
@@ -158,62 +159,69 @@ impl Scenario {
     /// at timestamp 0: a random tour of the building chosen by `seed` (same seed, same
     /// trajectory). Any length works; the tour is as long as needed.
     pub fn trajectory(&self, frames: usize, seed: u64) -> Trajectory {
-        if frames == 0 {
-            return Trajectory::new();
-        }
         let plan = self.plan().expect("the built-in scenario plans parse");
-        let space = path::Space::new(&plan);
-        let period_ns = self.frame_period_ns();
-        let dt = period_ns as f64 * 1e-9;
-        let mut need = frames as f64 * dt * 1.6 + 10.0;
-        let samples = loop {
-            // Each attempt restarts the generator from the seed: the result depends on the seed only
-            // (and on `frames`, through how long a tour is drawn).
-            let mut rng = path::Rng::from_state(tour_stream(seed));
-            let tour = path::tour(&space, need, &mut rng);
-            let tour = path::ease_sharp_turns(&space, &tour);
-            let dense = path::smooth(&space, &tour);
-            let v = path::speeds(&dense, &mut rng);
-            if let Some(s) = path::walk(&dense, &v, frames, dt) {
-                break s;
-            }
-            need *= 2.0;
-        };
-        let mut rng = path::Rng::from_state(tour_stream(seed ^ 0x5eed_0f6d_0f00));
-        let phases: Vec<f64> = (0..8).map(|_| rng.range(0.0, TAU)).collect();
-        let mut yaw = samples[0].1;
-        samples
-            .iter()
-            .enumerate()
-            .map(|(k, &(p, heading))| {
-                if k > 0 {
-                    let err = wrap_angle(heading - yaw);
-                    yaw += err.clamp(-MAX_YAW_RATE * dt, MAX_YAW_RATE * dt);
-                }
-                let t = k as f64 * dt;
-                let (z, roll, pitch, yaw_offset) = match self.motion {
-                    Motion::Rolling3Dof { height_m } => (height_m, 0.0, 0.0, 0.0),
-                    Motion::HandHeld6Dof => {
-                        let s = |f: f64, i: usize| (TAU * f * t + phases[i]).sin();
-                        let deg = std::f64::consts::PI / 180.0;
-                        let z = 1.5 + 0.04 * s(1.8, 0);
-                        let pitch = 2.5 * deg * s(0.23, 1) + 1.0 * deg * s(1.8, 2);
-                        let roll = 2.0 * deg * s(0.9, 3) + 1.0 * deg * s(0.17, 4);
-                        let glance = 10.0 * deg * s(0.11, 5) + 4.0 * deg * s(0.29, 6);
-                        (z, roll, pitch, glance)
-                    }
-                };
-                let pose: Pose = Isometry3::from_parts(
-                    Translation3::new(p.x, p.y, z),
-                    UnitQuaternion::from_euler_angles(roll, pitch, wrap_angle(yaw + yaw_offset)),
-                );
-                Stamped {
-                    timestamp_ns: k as u64 * period_ns,
-                    pose,
-                }
-            })
-            .collect()
+        walk_through(&plan, self.frame_rate_hz, self.motion, frames, seed)
     }
+}
+
+/// A trajectory of exactly `frames` poses `T_world_rig` at `frame_rate_hz` through `plan`,
+/// starting at timestamp 0: a random tour of its rooms chosen by `seed`, moving as `motion` says
+/// (the scenarios' walks, and those of [`random`] buildings).
+pub fn walk_through(plan: &FloorPlan, frame_rate_hz: f64, motion: Motion, frames: usize, seed: u64) -> Trajectory {
+    if frames == 0 {
+        return Trajectory::new();
+    }
+    let space = path::Space::new(plan);
+    let period_ns = (1e9 / frame_rate_hz).round() as u64;
+    let dt = period_ns as f64 * 1e-9;
+    let mut need = frames as f64 * dt * 1.6 + 10.0;
+    let samples = loop {
+        // Each attempt restarts the generator from the seed: the result depends on the seed only
+        // (and on `frames`, through how long a tour is drawn).
+        let mut rng = path::Rng::from_state(tour_stream(seed));
+        let tour = path::tour(&space, need, &mut rng);
+        let tour = path::ease_sharp_turns(&space, &tour);
+        let dense = path::smooth(&space, &tour);
+        let v = path::speeds(&dense, &mut rng);
+        if let Some(s) = path::walk(&dense, &v, frames, dt) {
+            break s;
+        }
+        need *= 2.0;
+    };
+    let mut rng = path::Rng::from_state(tour_stream(seed ^ 0x5eed_0f6d_0f00));
+    let phases: Vec<f64> = (0..8).map(|_| rng.range(0.0, TAU)).collect();
+    let mut yaw = samples[0].1;
+    samples
+        .iter()
+        .enumerate()
+        .map(|(k, &(p, heading))| {
+            if k > 0 {
+                let err = wrap_angle(heading - yaw);
+                yaw += err.clamp(-MAX_YAW_RATE * dt, MAX_YAW_RATE * dt);
+            }
+            let t = k as f64 * dt;
+            let (z, roll, pitch, yaw_offset) = match motion {
+                Motion::Rolling3Dof { height_m } => (height_m, 0.0, 0.0, 0.0),
+                Motion::HandHeld6Dof => {
+                    let s = |f: f64, i: usize| (TAU * f * t + phases[i]).sin();
+                    let deg = std::f64::consts::PI / 180.0;
+                    let z = 1.5 + 0.04 * s(1.8, 0);
+                    let pitch = 2.5 * deg * s(0.23, 1) + 1.0 * deg * s(1.8, 2);
+                    let roll = 2.0 * deg * s(0.9, 3) + 1.0 * deg * s(0.17, 4);
+                    let glance = 10.0 * deg * s(0.11, 5) + 4.0 * deg * s(0.29, 6);
+                    (z, roll, pitch, glance)
+                }
+            };
+            let pose: Pose = Isometry3::from_parts(
+                Translation3::new(p.x, p.y, z),
+                UnitQuaternion::from_euler_angles(roll, pitch, wrap_angle(yaw + yaw_offset)),
+            );
+            Stamped {
+                timestamp_ns: k as u64 * period_ns,
+                pose,
+            }
+        })
+        .collect()
 }
 
 fn wrap_angle(a: f64) -> f64 {
