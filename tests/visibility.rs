@@ -341,6 +341,52 @@ fn file_round_trip_and_model_mismatch() {
 }
 
 #[test]
+fn a_flipped_bit_anywhere_is_refused_in_one_line() {
+    let model = two_rooms().model();
+    let bytes = build_table(&model, "two_rooms.obj", &options()).to_bytes();
+    // Every byte after the version (which is reported as a version), one bit each.
+    for at in (12..bytes.len()).step_by(7) {
+        let mut bad = bytes.clone();
+        bad[at] ^= 0x10;
+        let err = VisibilityTable::from_bytes(&bad, "x.vis").expect_err("damaged");
+        let msg = err.to_string();
+        assert!(msg.starts_with("x.vis: ") && !msg.contains('\n'), "{msg}");
+    }
+    let mut bad = bytes.clone();
+    let mid = bytes.len() / 2;
+    bad[mid] ^= 1;
+    let msg = VisibilityTable::from_bytes(&bad, "x.vis").unwrap_err().to_string();
+    assert!(msg.contains("checksum"), "{msg}");
+}
+
+#[test]
+fn a_cached_table_built_with_other_settings_is_rebuilt() {
+    use omnitrack::config::TrackerConfig;
+    use omnitrack::runtime::load_or_build_table;
+    let dir = tempfile::tempdir().expect("temp dir");
+    let model_path = dir.path().join("two_rooms.obj");
+    std::fs::write(&model_path, &two_rooms().text).unwrap();
+    let model = Model::load(&model_path).unwrap();
+    let mut cfg = TrackerConfig::default();
+    let (first, origin) = load_or_build_table(&model_path, &model, None, &cfg).unwrap();
+    assert!(origin.contains("built"), "{origin}");
+    let (again, origin) = load_or_build_table(&model_path, &model, None, &cfg).unwrap();
+    assert!(origin.contains("cached"), "{origin}");
+    assert_eq!(again, first);
+    cfg.visibility.min_segment_length_m = 5.0;
+    let (rebuilt, origin) = load_or_build_table(&model_path, &model, None, &cfg).unwrap();
+    assert!(
+        origin.contains("other settings") && origin.contains("min_segment_length_m"),
+        "{origin}"
+    );
+    assert_eq!(rebuilt.header.min_segment_length_m, 5.0);
+    assert_ne!(rebuilt, first);
+    cfg.visibility.node_spacing_m *= 2.0;
+    let (_, origin) = load_or_build_table(&model_path, &model, None, &cfg).unwrap();
+    assert!(origin.contains("node_spacing_m"), "{origin}");
+}
+
+#[test]
 fn query_json_lists_obj_faces_segments_and_vertices() {
     let mut obj = Obj::default();
     obj.room([0.0, 0.0, 0.0], [4.0, 3.0, H]);
@@ -607,4 +653,31 @@ fn segments_shorter_than_the_minimum_enter_no_set() {
     }
     assert_eq!(kept, 14, "the room's 12 and the plate's two long edges");
     assert_eq!(with_short, 2, "with no minimum the short edges are seen");
+}
+
+/// An open model: one room's floor and single-face walls, no ceiling and nothing outside it (a
+/// plan extruded without a roof, walls traced from a scan). Every node of the room is kept, and
+/// the room's corners are seen from its middle.
+#[test]
+fn an_open_model_without_a_ceiling_keeps_its_room() {
+    let mut obj = Obj {
+        flips: Some(11),
+        ..Obj::default()
+    };
+    obj.rect(2, 0.0, [0.0, 0.0], [6.0, 3.0], 1.0);
+    obj.rect(0, 0.0, [0.0, 0.0], [3.0, H], 1.0);
+    obj.rect(0, 6.0, [0.0, 0.0], [3.0, H], -1.0);
+    obj.rect(1, 0.0, [0.0, 0.0], [H, 6.0], 1.0);
+    obj.rect(1, 3.0, [0.0, 0.0], [H, 6.0], -1.0);
+    let model = obj.model();
+    let table = build_table(&model, "open.obj", &options());
+    assert_eq!(table.node_count(), 6 * 3 * 2, "every node of the room is valid");
+    let set = table.query(&Point3::new(3.0, 1.5, 1.5)).expect("served");
+    for corner in [[0.0, 0.0], [6.0, 0.0], [0.0, 3.0], [6.0, 3.0]] {
+        let s = segment(&model, [corner[0], corner[1], 0.0], [corner[0], corner[1], H]);
+        assert!(set.segments.contains(&s), "corner {corner:?}");
+    }
+    // Outside the walls is not free space, though nothing is there to stand under.
+    let scene = Scene::new(&model);
+    assert!(!scene.is_free(&Point3::new(3.0, 5.0, 1.5), 0.2));
 }

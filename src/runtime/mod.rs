@@ -112,7 +112,8 @@ pub fn track(
 }
 
 /// The visibility table for `model`: `explicit` if given (checked against the model); otherwise
-/// the cache beside the model (`MODEL.vis`) if it is current; otherwise built now (desk builds
+/// the cache beside the model (`MODEL.vis`) if it is current (this model, these `[visibility]`
+/// settings); otherwise built now (desk builds
 /// only) and cached there when the directory is writable. Returns the table and a line saying
 /// where it came from.
 pub fn load_or_build_table(
@@ -126,10 +127,18 @@ pub fn load_or_build_table(
         return Ok((t, format!("visibility table {}", path.display())));
     }
     let cache = cache_path(model_path);
-    if let Ok(t) = VisibilityTable::load(&cache, model) {
-        return Ok((t, format!("visibility table {} (cached)", cache.display())));
-    }
-    build_and_cache(model_path, model, &cache, cfg)
+    let stale = match VisibilityTable::load(&cache, model) {
+        Ok(t) => match t.header.differs_from(&cfg.visibility) {
+            None => return Ok((t, format!("visibility table {} (cached)", cache.display()))),
+            Some(why) => Some(why),
+        },
+        Err(_) => None,
+    };
+    let (table, origin) = build_and_cache(model_path, model, &cache, cfg)?;
+    Ok(match stale {
+        Some(why) => (table, format!("{origin} (the cached table had other settings: {why})")),
+        None => (table, origin),
+    })
 }
 
 /// `MODEL.obj` → `MODEL.vis`.

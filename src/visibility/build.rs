@@ -992,6 +992,8 @@ pub fn build_raw(model: &Model, model_path: &str, opts: &BuildOptions) -> (RawTa
         merge: opts.merge.code(),
         node_count: node_cell.len() as u32,
         lookup_subdivisions: m as u32,
+        clearance_m: opts.clearance_m,
+        min_segment_length_m: opts.min_segment_length_m,
     };
     let raw = RawTable {
         header,

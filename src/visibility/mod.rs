@@ -32,7 +32,10 @@
 //! hash of the model, model path, grid, spacing, heights, build settings), then the postcard
 //! body: per lookup cell its serving node, per node its set index, per segment its end-point
 //! vertex ids, and the deduplicated sets as delta-coded sorted id lists (vertex lists are
-//! derived on load). Loading against a different model is an error that says so.
+//! derived on load), then 8 bytes of FNV-1a checksum over everything before them. Loading
+//! against a different model, or a damaged file, is an error that says so. The header records
+//! every `[visibility]` setting the table was built with ([`TableHeader::differs_from`]), so a
+//! cached table built with other settings is rebuilt, not reused.
 //!
 //! **At the pose** ([`at_pose`], beyond the paper): the node's set refined by ray casting from
 //! the position itself, for scoring where the nearest node stands in another room.
@@ -49,7 +52,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 /// Bumped whenever the file layout changes.
-pub const FORMAT_VERSION: u32 = 1;
+pub const FORMAT_VERSION: u32 = 2;
 /// First bytes of every table file.
 pub const MAGIC: [u8; 8] = *b"OMNIVIS\n";
 /// `cell_node` entry of a cell with no valid node anywhere.
@@ -111,6 +114,50 @@ pub struct TableHeader {
     /// each served by the nearest valid node in line of sight of its centre (so that a position
     /// near a wall is not served by a node on the other side).
     pub lookup_subdivisions: u32,
+    /// Minimum distance from a valid node to any face (version 2).
+    pub clearance_m: f64,
+    /// Segments shorter than this entered no set (version 2).
+    pub min_segment_length_m: f64,
+}
+
+impl TableHeader {
+    /// The first `[visibility]` setting of `c` that this table was not built with, as
+    /// `name: table value, config value`; `None` when the table is what `c` would build.
+    pub fn differs_from(&self, c: &crate::config::VisibilityConfig) -> Option<String> {
+        let mut heights = c.node_heights_m.clone();
+        heights.sort_by(f64::total_cmp);
+        if self.spacing_m != c.node_spacing_m {
+            return Some(format!(
+                "node_spacing_m: table {}, config {}",
+                self.spacing_m, c.node_spacing_m
+            ));
+        }
+        if self.heights_m != heights {
+            return Some(format!(
+                "node_heights_m: table {:?}, config {:?}",
+                self.heights_m, heights
+            ));
+        }
+        if self.cube_map_resolution != c.cube_map_resolution {
+            return Some(format!(
+                "cube_map_resolution: table {}, config {}",
+                self.cube_map_resolution, c.cube_map_resolution
+            ));
+        }
+        if self.min_visible_pixels != c.min_visible_pixels {
+            return Some(format!(
+                "min_visible_pixels: table {}, config {}",
+                self.min_visible_pixels, c.min_visible_pixels
+            ));
+        }
+        if self.min_segment_length_m != c.min_segment_length_m {
+            return Some(format!(
+                "min_segment_length_m: table {}, config {}",
+                self.min_segment_length_m, c.min_segment_length_m
+            ));
+        }
+        None
+    }
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -185,6 +232,16 @@ pub fn model_hash(model: &Model) -> u64 {
         for &f in &s.faces {
             h.u64(f as u64);
         }
+    }
+    h.0
+}
+
+/// FNV-1a over bytes.
+fn checksum(bytes: &[u8]) -> u64 {
+    let mut h = Fnv::new();
+    for &b in bytes {
+        h.0 ^= b as u64;
+        h.0 = h.0.wrapping_mul(0x0000_0100_0000_01b3);
     }
     h.0
 }
@@ -377,11 +434,14 @@ impl VisibilityTable {
         body
     }
 
-    /// The file's bytes.
+    /// The file's bytes: magic, header, body, and the FNV-1a checksum of all before it (so a
+    /// damaged file is refused, not read as another table).
     pub fn to_bytes(&self) -> Vec<u8> {
         let mut out = MAGIC.to_vec();
         out.extend(postcard::to_stdvec(&self.header).expect("header serialises"));
         out.extend(postcard::to_stdvec(&self.body()).expect("body serialises"));
+        let sum = checksum(&out);
+        out.extend(sum.to_le_bytes());
         out
     }
 
@@ -405,6 +465,21 @@ impl VisibilityTable {
                 expected: FORMAT_VERSION,
             });
         }
+        // Everything after the version is checked before it is parsed.
+        let Some(split) = bytes.len().checked_sub(8).filter(|&n| n >= MAGIC.len()) else {
+            return Err(format("too short for its checksum".into()));
+        };
+        let (content, sum) = bytes.split_at(split);
+        let stored = u64::from_le_bytes(sum.try_into().expect("8 bytes"));
+        if checksum(content) != stored {
+            return Err(VisibilityError::Invalid {
+                file: file.to_string(),
+                message: "corrupt visibility table: the checksum does not match (the file is damaged or \
+                          truncated); rebuild it with `omnitrack visibility build`"
+                    .into(),
+            });
+        }
+        let rest = &content[MAGIC.len()..];
         let (header, rest) =
             postcard::take_from_bytes::<TableHeader>(rest).map_err(|e| format(format!("header: {e}")))?;
         let (body, rest) = postcard::take_from_bytes::<TableBody>(rest).map_err(|e| format(format!("body: {e}")))?;
