@@ -141,6 +141,109 @@ struct Tri {
     face: u32,
 }
 
+/// Side of a [`Bins`] cell, metres: small enough that a clearance test visits a cell or four,
+/// large enough that a node's 40 m window is a few hundred cells.
+const BIN_M: f64 = 5.0;
+/// At most this many cells per axis (a model kilometres across gets coarser cells, not gigabytes
+/// of empty ones).
+const MAX_BINS_PER_AXIS: f64 = 2048.0;
+
+/// Items (triangles, segments) binned by their x-y bounding boxes on a square grid, so that the
+/// work at one position visits only what lies near it: a table's build time grows with the
+/// model's area, not with its square (a 10⁵ m² campus, issue 20).
+struct Bins {
+    origin: [f64; 2],
+    cell: f64,
+    dims: [usize; 2],
+    /// Per cell, its items are `items[start[c]..start[c + 1]]`.
+    start: Vec<u32>,
+    items: Vec<u32>,
+    /// Per item, the cells its box covers: x0, y0, x1, y1 (inclusive).
+    ranges: Vec<[u32; 4]>,
+}
+
+impl Bins {
+    fn new(boxes: &[([f64; 3], [f64; 3])]) -> Bins {
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for (a, b) in boxes {
+            for k in 0..2 {
+                lo[k] = lo[k].min(a[k]);
+                hi[k] = hi[k].max(b[k]);
+            }
+        }
+        if boxes.is_empty() {
+            (lo, hi) = ([0.0; 2], [0.0; 2]);
+        }
+        let extent = (hi[0] - lo[0]).max(hi[1] - lo[1]);
+        let cell = BIN_M.max(extent / MAX_BINS_PER_AXIS);
+        let dims = [0, 1].map(|k| ((hi[k] - lo[k]) / cell).floor() as usize + 1);
+        let mut bins = Bins {
+            origin: lo,
+            cell,
+            dims,
+            start: Vec::new(),
+            items: Vec::new(),
+            ranges: Vec::with_capacity(boxes.len()),
+        };
+        let mut count = vec![0u32; dims[0] * dims[1] + 1];
+        for (a, b) in boxes {
+            let r = bins.cells([a[0], a[1]], [b[0], b[1]]);
+            for y in r[1]..=r[3] {
+                for x in r[0]..=r[2] {
+                    count[y as usize * dims[0] + x as usize + 1] += 1;
+                }
+            }
+            bins.ranges.push(r);
+        }
+        for c in 1..count.len() {
+            count[c] += count[c - 1];
+        }
+        let mut fill = count.clone();
+        bins.items = vec![0; *count.last().expect("at least one cell") as usize];
+        for (i, r) in bins.ranges.iter().enumerate() {
+            for y in r[1]..=r[3] {
+                for x in r[0]..=r[2] {
+                    let c = y as usize * dims[0] + x as usize;
+                    bins.items[fill[c] as usize] = i as u32;
+                    fill[c] += 1;
+                }
+            }
+        }
+        bins.start = count;
+        bins
+    }
+
+    /// The cells an x-y box covers, clamped to the grid: x0, y0, x1, y1.
+    fn cells(&self, lo: [f64; 2], hi: [f64; 2]) -> [u32; 4] {
+        let at = |v: f64, k: usize| {
+            (((v - self.origin[k]) / self.cell).floor().max(0.0) as usize).min(self.dims[k] - 1) as u32
+        };
+        [at(lo[0], 0), at(lo[1], 1), at(hi[0], 0), at(hi[1], 1)]
+    }
+
+    /// Appends to `out`, ascending and once each, the items whose boxes reach cells within `r`
+    /// of `p` in x and y (a superset of those within `r`; callers test exactly).
+    fn near(&self, p: [f64; 3], r: f64, out: &mut Vec<u32>) {
+        out.clear();
+        let q = self.cells([p[0] - r, p[1] - r], [p[0] + r, p[1] + r]);
+        for y in q[1]..=q[3] {
+            for x in q[0]..=q[2] {
+                let c = y as usize * self.dims[0] + x as usize;
+                for &i in &self.items[self.start[c] as usize..self.start[c + 1] as usize] {
+                    // An item in several cells of the window is taken in the first of them.
+                    let rg = self.ranges[i as usize];
+                    if x == rg[0].max(q[0]) && y == rg[1].max(q[1]) {
+                        out.push(i);
+                    }
+                }
+            }
+        }
+        // Index order, as a scan of every item would visit them: ties in the depth test then
+        // resolve as they always did, and the table is the same.
+        out.sort_unstable();
+    }
+}
+
 /// Everything the per-node work shares.
 pub struct Scene<'m> {
     model: &'m Model,
@@ -148,6 +251,8 @@ pub struct Scene<'m> {
     /// Per triangle: bounding box min, max.
     boxes: Vec<([f64; 3], [f64; 3])>,
     bvh: TriangleBvh,
+    tri_bins: Bins,
+    segment_bins: Bins,
 }
 
 impl<'m> Scene<'m> {
@@ -163,7 +268,7 @@ impl<'m> Scene<'m> {
                 }
             }
         }
-        let boxes = tris
+        let boxes: Vec<([f64; 3], [f64; 3])> = tris
             .iter()
             .map(|t| {
                 let mut lo = t.p[0];
@@ -186,11 +291,26 @@ impl<'m> Scene<'m> {
             .collect();
         let payload: Vec<u32> = tris.iter().map(|t| t.face).collect();
         let bvh = TriangleBvh::build(&f32t, &payload);
+        let tri_bins = Bins::new(&boxes);
+        let segment_boxes: Vec<([f64; 3], [f64; 3])> = model
+            .segments
+            .iter()
+            .map(|s| {
+                let (a, b) = (s.a.coords, s.b.coords);
+                (
+                    [a.x.min(b.x), a.y.min(b.y), a.z.min(b.z)],
+                    [a.x.max(b.x), a.y.max(b.y), a.z.max(b.z)],
+                )
+            })
+            .collect();
+        let segment_bins = Bins::new(&segment_boxes);
         Scene {
             model,
             tris,
             boxes,
             bvh,
+            tri_bins,
+            segment_bins,
         }
     }
 
@@ -261,12 +381,13 @@ impl<'m> Scene<'m> {
         }
         let c = [p.x, p.y, p.z];
         let r2 = clearance_m * clearance_m;
-        for (t, (lo, hi)) in self.tris.iter().zip(&self.boxes) {
-            if box_dist2(&c, lo, hi) < r2 && point_triangle_dist2(c, &t.p) < r2 {
-                return false;
-            }
-        }
-        true
+        NEAR_SCRATCH.with_borrow_mut(|near| {
+            self.tri_bins.near(c, clearance_m, near);
+            near.iter().all(|&i| {
+                let (t, (lo, hi)) = (&self.tris[i as usize], &self.boxes[i as usize]);
+                !(box_dist2(&c, lo, hi) < r2 && point_triangle_dist2(c, &t.p) < r2)
+            })
+        })
     }
 }
 
@@ -368,6 +489,13 @@ pub struct CubeMap {
     stamp: u32,
     poly: Vec<[f64; 3]>,
     clipped: Vec<[f64; 3]>,
+    /// Scratch: the triangles, then the segments, near the node.
+    near: Vec<u32>,
+}
+
+thread_local! {
+    /// Scratch of [`Scene::is_free`]'s clearance test, one per worker thread.
+    static NEAR_SCRATCH: std::cell::RefCell<Vec<u32>> = const { std::cell::RefCell::new(Vec::new()) };
 }
 
 impl CubeMap {
@@ -380,6 +508,7 @@ impl CubeMap {
             stamp: 0,
             poly: Vec::with_capacity(8),
             clipped: Vec::with_capacity(8),
+            near: Vec::new(),
         }
     }
 
@@ -389,7 +518,10 @@ impl CubeMap {
         self.id.fill(u32::MAX);
         let e = [eye.x, eye.y, eye.z];
         let r2 = opts.max_range_m * opts.max_range_m;
-        for (t, (lo, hi)) in scene.tris.iter().zip(&scene.boxes) {
+        let mut near = std::mem::take(&mut self.near);
+        scene.tri_bins.near(e, opts.max_range_m, &mut near);
+        for &i in &near {
+            let (t, (lo, hi)) = (&scene.tris[i as usize], &scene.boxes[i as usize]);
             if box_dist2(&e, lo, hi) > r2 {
                 continue;
             }
@@ -412,16 +544,19 @@ impl CubeMap {
         }
         faces.sort_unstable();
         let mut segments = Vec::new();
-        for (si, seg) in scene.model.segments.iter().enumerate() {
+        scene.segment_bins.near(e, opts.max_range_m, &mut near);
+        for &si in &near {
+            let seg = &scene.model.segments[si as usize];
             // Every segment within range is a candidate, not only those bounding a visible face
             // (the paper's rule): a segment can be visible while its faces cover no pixel centre
             // (a door jamb far down a corridor, the outer edge of a window seen through it).
             let candidate = seg.length() >= opts.min_segment_length_m
                 && point_segment_dist2(e, [seg.a.x, seg.a.y, seg.a.z], [seg.b.x, seg.b.y, seg.b.z]) <= r2;
             if candidate && self.segment_visible(scene, &e, seg, opts.min_visible_pixels) {
-                segments.push(si as u32);
+                segments.push(si);
             }
         }
+        self.near = near;
         (faces, segments)
     }
 
