@@ -35,6 +35,19 @@
 //! case, "every 10th frame replayed alone"), so the trial measures the search and not the
 //! maintenance of a moving narrow view.
 //!
+//! `--buildings A-B` tracks walks through random buildings nobody here drew instead
+//! (`desk::scenario::random`, seeds A to B: L, U, courtyard and rectangular outlines, single-face
+//! or thick walls, random winding, triangulated faces, two storeys with a stair hall; furniture
+//! and people in the images only). Per building: a walk of `--seconds S` (default 40) at the
+//! building's frame rate, rendered once; the recall of its visibility table's VIS(T) along the
+//! walk against brute-force ray casting (`desk::vis_truth`, every 10th pose); one tracking run
+//! from a 3 m volume round the first pose; and `--starts N` (default 10) initialisation trials
+//! as `--init-trials` runs them, spread over the walk (overlapping where the walk is short).
+//! `--pin L,thin,cart` pins draws of every building (`Choices::parse`: outline, walls, storeys,
+//! triangles, motion) and caches its recordings apart.
+//! Then one table row per building and a summary line: median ATE, fewest frames tracked, and the
+//! share of commits off the truth.
+//!
 //! Recordings are cached in `target/omnitrack-cache/` (or `$OMNITRACK_CACHE`).
 
 #[cfg(feature = "desk")]
@@ -79,6 +92,10 @@ mod bench {
         appearance: Option<String>,
         from_truth: bool,
         still: bool,
+        buildings: Vec<u64>,
+        pins: Option<String>,
+        seconds: f64,
+        starts: usize,
     }
 
     fn args() -> Args {
@@ -98,6 +115,10 @@ mod bench {
             appearance: None,
             from_truth: false,
             still: false,
+            buildings: vec![],
+            pins: None,
+            seconds: 40.0,
+            starts: 10,
         };
         let mut it = std::env::args().skip(1);
         while let Some(x) = it.next() {
@@ -132,6 +153,18 @@ mod bench {
                 }
                 "--from-truth" => a.from_truth = true,
                 "--still" => a.still = true,
+                "--buildings" => {
+                    let spec = it.next().expect("--buildings A-B");
+                    let (lo, hi) = spec.split_once('-').unwrap_or((spec.as_str(), spec.as_str()));
+                    let (lo, hi): (u64, u64) = (
+                        lo.parse().expect("--buildings A-B"),
+                        hi.parse().expect("--buildings A-B"),
+                    );
+                    a.buildings = (lo..=hi).collect();
+                }
+                "--pin" => a.pins = Some(it.next().expect("--pin L,thin,cart")),
+                "--seconds" => a.seconds = it.next().and_then(|s| s.parse().ok()).expect("--seconds S"),
+                "--starts" => a.starts = it.next().and_then(|s| s.parse().ok()).expect("--starts N"),
                 "--init-trials" => a.init_trials = it.next().and_then(|s| s.parse().ok()).expect("--init-trials N"),
                 _ => {}
             }
@@ -223,10 +256,27 @@ mod bench {
         println!();
     }
 
+    /// An initialisation trial gives up after this many frames without a commit…
+    const TRIAL_WINDOW: usize = 25;
+    /// …and is judged this many frames after its commit.
+    const TRIAL_AFTER: usize = 10;
+    const WINDOW_AND_AFTER: usize = TRIAL_WINDOW + TRIAL_AFTER;
+
+    /// What `init_trials` counted.
+    #[derive(Default, Clone, Copy)]
+    struct TrialSummary {
+        counted: usize,
+        right: usize,
+        /// Commits not right, and of them those more than 1 m or 10° off.
+        wrong: usize,
+        far: usize,
+        none: usize,
+    }
+
     /// The `--init-trials` mode (module doc).
     #[allow(clippy::too_many_arguments)]
     fn init_trials(
-        name: &ScenarioName,
+        name: &str,
         rig: &Rig,
         model: &Model,
         table: &omnitrack::visibility::VisibilityTable,
@@ -237,17 +287,16 @@ mod bench {
         verbose: bool,
         from_truth: bool,
         still: bool,
-    ) {
+        min_spacing: usize,
+    ) -> TrialSummary {
         use omnitrack::capture::{FrameSet, FrameSource};
         use omnitrack::edges::EdgeDetector;
         use omnitrack::tracker::{Tracker, TrackerState};
         use std::time::Instant;
-        // A trial gives up after this many frames without a commit…
-        const WINDOW: usize = 25;
-        // …and is judged this many frames after its commit.
-        const AFTER: usize = 10;
+        const WINDOW: usize = TRIAL_WINDOW;
+        const AFTER: usize = TRIAL_AFTER;
         let frames = source.frame_count();
-        let spacing = (frames.saturating_sub(WINDOW + AFTER) / trials.max(1)).max(WINDOW + AFTER);
+        let spacing = (frames.saturating_sub(WINDOW + AFTER) / trials.max(1)).max(min_spacing.max(1));
         let starts: Vec<usize> = (0..trials)
             .map(|k| k * spacing)
             .filter(|&s| s + WINDOW + AFTER <= frames)
@@ -266,9 +315,9 @@ mod bench {
         let (mut times_ms, mut frames_to_commit) = (Vec::new(), Vec::new());
         let mut index = 0usize;
         for (trial, &start) in starts.iter().enumerate() {
-            while index < start {
-                source.next_frame(&mut frame).unwrap();
-                index += 1;
+            if index != start {
+                source.seek(start);
+                index = start;
             }
             let t0 = truth[start].pose;
             let angle = trial as f64 * 2.399; // golden angle: directions spread evenly
@@ -475,6 +524,401 @@ mod bench {
         for (start, dp, dr) in &wrong {
             println!("  wrong: from frame {start}, {:.1} cm, {:.1}°", dp * 100.0, dr);
         }
+        TrialSummary {
+            counted: starts.len() - blind,
+            right,
+            wrong: wrong.len(),
+            far,
+            none,
+        }
+    }
+
+    /// What one tracking run over a recording gave.
+    struct RunOutcome {
+        frames: u64,
+        tracked: u64,
+        ate_pos_cm: f64,
+        ate_rot_deg: f64,
+        commits: usize,
+        wrong_commits: usize,
+    }
+
+    /// Tracks a whole recording once from `hint`, prints its table row and the lines under it.
+    #[allow(clippy::too_many_arguments)]
+    fn run_once(
+        row: &str,
+        name: &str,
+        dir: &Path,
+        model: &Model,
+        table: &omnitrack::visibility::VisibilityTable,
+        cfg: &TrackerConfig,
+        truth: &[Stamped],
+        hint: Option<SearchVolume>,
+        tracker_seed: u64,
+        verbose: bool,
+    ) -> Option<RunOutcome> {
+        let mut source = ReplaySource::open(dir, Pacing::AsFastAsPossible).unwrap();
+        let opts = RunOptions {
+            hint,
+            seed: tracker_seed,
+            max_frames: None,
+        };
+        let mut estimate: Vec<Stamped> = Vec::new();
+        let mut pos_err = Vec::new();
+        let mut rot_err = Vec::new();
+        let mut latency = Vec::new();
+        let mut busy = Duration::ZERO;
+        // Commits (initial or after a loss), those > 30 cm or 3° off the truth, and frames
+        // whose pose is that far off: a tracker may say "no pose", not give a wrong one.
+        let (mut commits, mut wrong_commits, mut wrong_frames) = (0usize, 0usize, 0usize);
+        let (mut relocs, mut wrong_relocs) = (0usize, 0usize);
+        let stats = track(&mut source, model, table, cfg, &opts, &mut |r, tracker| {
+            busy += r.frame_time;
+            latency.push(r.frame_time.as_secs_f64() * 1e3);
+            if let Some(TrackerEvent::Searched(rep)) = r.result.event {
+                if verbose {
+                    eprintln!(
+                        "  search: {}/{} cells, {} triplet matches, {} samples, {:.0} ms (grid under {} rotations {:.0} ms){}",
+                        rep.cells_searched,
+                        rep.cells_in_volume,
+                        rep.triplet_matches,
+                        rep.samples,
+                        rep.elapsed.as_secs_f64() * 1e3,
+                        rep.rotations,
+                        rep.grid_elapsed.as_secs_f64() * 1e3,
+                        if rep.timed_out { " (timed out)" } else { "" }
+                    );
+                }
+            }
+            let gt = truth
+                .iter()
+                .find(|s| s.timestamp_ns.abs_diff(r.timestamp_ns) < 1_000_000);
+            if verbose {
+                if let Some(g) = gt {
+                    for (p, score, frames, alive) in tracker.candidates() {
+                        eprintln!(
+                            "    candidate {:6.1} cm {:6.2}° score {:.2e} over {frames} frames{}",
+                            (p.translation.vector - g.pose.translation.vector).norm() * 100.0,
+                            p.rotation.angle_to(&g.pose.rotation).to_degrees(),
+                            score,
+                            if alive { "" } else { " (dropped)" }
+                        );
+                    }
+                }
+            }
+            if let Some(p) = &r.result.pose {
+                estimate.push(Stamped {
+                    timestamp_ns: r.timestamp_ns,
+                    pose: *p,
+                });
+            }
+            let err = match (&r.result.pose, gt) {
+                (Some(p), Some(g)) => {
+                    let dp = (p.translation.vector - g.pose.translation.vector).norm();
+                    let dr = p.rotation.angle_to(&g.pose.rotation).to_degrees();
+                    pos_err.push(dp);
+                    rot_err.push(dr);
+                    Some((dp, dr))
+                }
+                _ => None,
+            };
+            let wrong = err.is_some_and(|(dp, dr)| dp > 0.3 || dr > 3.0);
+            wrong_frames += usize::from(wrong);
+            match r.result.event {
+                Some(TrackerEvent::Committed { .. }) => {
+                    commits += 1;
+                    wrong_commits += usize::from(wrong);
+                }
+                Some(TrackerEvent::Relocalised) => {
+                    relocs += 1;
+                    wrong_relocs += usize::from(wrong);
+                }
+                _ => {}
+            }
+            if verbose {
+                let r2 = &r.result;
+                eprintln!(
+                    "{:4} {:?} {} σ {:5.1} cm expl {:.2} inl {:3} u/p/a {:?} samples {:4} edges {:4} match {:.2} solve {:.2} ms{}",
+                    r.sequence,
+                    r2.state,
+                    match err {
+                        Some((dp, dr)) => format!("{:6.1} cm {:5.2}°", dp * 100.0, dr),
+                        None => "      --         ".into(),
+                    },
+                    largest_sigma(&r2.covariance, 0) * 100.0,
+                    r2.explained,
+                    r2.inliers,
+                    r2.states,
+                    r2.samples,
+                    r.edges,
+                    r2.match_time.as_secs_f64() * 1e3,
+                    r2.solve_time.as_secs_f64() * 1e3,
+                    match r2.event {
+                        Some(TrackerEvent::Committed {
+                            candidates,
+                            changed_mind,
+                        }) => format!(" committed ({candidates} candidates, changed mind: {changed_mind})"),
+                        Some(TrackerEvent::LostLock) => " LOST".into(),
+                        Some(TrackerEvent::Relocalised) => " relocalised".into(),
+                        _ => String::new(),
+                    }
+                );
+            }
+            Ok(())
+        })
+        .unwrap();
+        let init_ms = stats.first_search.map_or(f64::NAN, |d| d.as_secs_f64() * 1e3);
+        // The table's ATE is desk::eval's (the same numbers as `evo_ape tum`, checked by
+        // tools/check_evo.py); the estimate is written beside the recording for evo itself.
+        let est_path = dir.join("estimate.tum");
+        std::fs::write(&est_path, omnitrack::trajectory::to_tum_string(&estimate)).unwrap();
+        if estimate.is_empty() {
+            println!("| {row} | {} | 0.0 % | no pose on any frame | | | | | |", stats.frames);
+            return None;
+        }
+        let ev =
+            omnitrack::desk::eval::evaluate(truth, &estimate, &omnitrack::desk::eval::EvalOptions::default()).unwrap();
+        eprintln!(
+            "{name}: evo_ape tum {} {} (ATE {:.4} m RMSE over {} poses)",
+            dir.join("groundtruth.tum").display(),
+            est_path.display(),
+            ev.ate.translation_m.rmse,
+            ev.ate.translation_m.count
+        );
+        let (pos_err, rot_err): (Vec<f64>, Vec<f64>) = ev
+            .ate
+            .per_pose
+            .iter()
+            .map(|e| (e.translation_m, e.rotation_deg))
+            .unzip();
+        let rmse = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64).sqrt();
+        let max = |v: &[f64]| v.iter().cloned().fold(0.0, f64::max);
+        latency.sort_by(f64::total_cmp);
+        println!(
+            "| {row} | {} | {:.1} % | {} ({}) | {:.2} / {:.1} | {:.3} / {:.2} | {:.0} | {:.1} / {:.1} / {:.1} | {:.1} |",
+            stats.frames,
+            100.0 * stats.tracked as f64 / stats.frames.max(1) as f64,
+            stats.reinitialisations,
+            stats.relocalisations,
+            rmse(&pos_err) * 100.0,
+            max(&pos_err) * 100.0,
+            rmse(&rot_err),
+            max(&rot_err),
+            init_ms,
+            percentile(&latency, 0.5),
+            percentile(&latency, 0.99),
+            latency.last().copied().unwrap_or(f64::NAN),
+            stats.frames as f64 / busy.as_secs_f64(),
+        );
+        eprintln!(
+            "{name}: {} solves far from the prediction replaced by a second opinion",
+            stats.second_opinions
+        );
+        eprintln!(
+            "{name}: {commits} commits ({wrong_commits} wrong: > 30 cm or 3° off the truth), {relocs} relocalisations \
+    ({wrong_relocs} wrong); {wrong_frames} frames with a pose that far off"
+        );
+        Some(RunOutcome {
+            frames: stats.frames,
+            tracked: stats.tracked,
+            ate_pos_cm: rmse(&pos_err) * 100.0,
+            ate_rot_deg: rmse(&rot_err),
+            commits,
+            wrong_commits,
+        })
+    }
+
+    /// The `--buildings` mode (module doc): per random building, a rendered walk, its visibility
+    /// table's recall along the walk, one tracking run and initialisation trials; then the table
+    /// over all of them.
+    fn buildings(a: &Args, rig: &Rig, label: &str, options: &RecordingOptions) {
+        use omnitrack::desk::recording::cached_building;
+        use omnitrack::desk::scenario::random::{Choices, RandomBuilding};
+        use omnitrack::desk::vis_truth::{recall, Recall};
+        let pins = match &a.pins {
+            Some(spec) => Choices::parse(spec).unwrap_or_else(|e| {
+                eprintln!("--pin: {e}");
+                std::process::exit(2);
+            }),
+            None => Choices::default(),
+        };
+        // Pinned buildings are other buildings: cached apart.
+        let label = match &a.pins {
+            Some(spec) => format!("{label}-pin-{}", spec.replace(',', "-")),
+            None => label.to_string(),
+        };
+        let label = label.as_str();
+        use omnitrack::visibility::build::Scene;
+        struct Row {
+            name: String,
+            kind: String,
+            segments: usize,
+            nodes: u32,
+            recall: Recall,
+            run: Option<RunOutcome>,
+            trials: TrialSummary,
+        }
+        let mut rows = Vec::new();
+        for &seed in &a.buildings {
+            let b = RandomBuilding::generate(seed, &pins);
+            let name = b.name();
+            let frames = (a.seconds * b.frame_rate_hz).round() as usize;
+            eprintln!("{name}: {b}");
+            let (dir, made) = cached_building(&cache_root(), &b, frames, label, rig, options, |d, t| {
+                eprint!("\rrendering {name}: {d}/{t}")
+            })
+            .unwrap();
+            if made {
+                eprintln!();
+            }
+            let model_path = dir.join("model.obj");
+            let model = Model::load(&model_path).unwrap();
+            let cfg = match &a.config {
+                Some(p) => TrackerConfig::load(p).unwrap(),
+                None => TrackerConfig::default(),
+            };
+            let (table, origin) = load_or_build_table(&model_path, &model, None, &cfg).unwrap();
+            eprintln!("{name}: {origin}");
+            let mut source = ReplaySource::open(&dir, Pacing::AsFastAsPossible).unwrap();
+            let truth: Vec<Stamped> = source.ground_truth().unwrap().to_vec();
+            // VIS(T) against brute force at every 10th pose of the walk.
+            let scene = Scene::new(&model);
+            let eyes: Vec<Point3<f64>> = truth
+                .iter()
+                .step_by(10)
+                .map(|s| Point3::from(s.pose.translation.vector))
+                .collect();
+            let rec = recall(&table, &scene, &model, &eyes);
+            eprintln!(
+                "{name}: VIS(T) recall {:.1} % of segments wider than 2° ({:.1} % of all visible), precision {:.1} %, at {} poses of the walk",
+                rec.big_percent(),
+                rec.all_percent(),
+                rec.precision_percent(),
+                eyes.len()
+            );
+            let hint = Some(SearchVolume {
+                centre: Point3::from(truth[0].pose.translation.vector),
+                diameter_m: Some(cfg.initialisation.search_diameter_m),
+            });
+            let run = run_once(
+                &name,
+                &name,
+                &dir,
+                &model,
+                &table,
+                &cfg,
+                &truth,
+                hint,
+                a.tracker_seeds[0],
+                a.verbose,
+            );
+            let trials = if a.starts > 0 {
+                init_trials(
+                    &name,
+                    rig,
+                    &model,
+                    &table,
+                    &cfg,
+                    &mut source,
+                    &truth,
+                    a.starts,
+                    a.verbose,
+                    false,
+                    false,
+                    1,
+                )
+            } else {
+                TrialSummary::default()
+            };
+            let kind = format!(
+                "{:?}, {}, {}{}{}",
+                b.outline,
+                match b.walls {
+                    omnitrack::desk::scenario::random::WallStyle::Thin => "thin",
+                    omnitrack::desk::scenario::random::WallStyle::Thick => "thick",
+                    omnitrack::desk::scenario::random::WallStyle::ThickOutside => "thick outside",
+                },
+                if b.storeys > 1 { "2 storeys, " } else { "" },
+                if b.triangulated { "triangles, " } else { "" },
+                match b.motion {
+                    Motion::Rolling3Dof { .. } => "cart",
+                    Motion::HandHeld6Dof => "hand-held",
+                }
+            );
+            rows.push(Row {
+                name,
+                kind,
+                segments: model.segments.len(),
+                nodes: table.header.node_count,
+                recall: rec,
+                run,
+                trials,
+            });
+        }
+        println!();
+        println!(
+            "| building | kind | segments | nodes | VIS recall > 2° | tracked | ATE pos / rot RMSE (cm / °) | run commits (wrong) | starts: right / off (> 1 m or 10°) / none |"
+        );
+        println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- |");
+        let (mut ate_p, mut ate_r, mut tracked) = (Vec::new(), Vec::new(), Vec::new());
+        let (mut inits, mut wrong_inits, mut far_inits) = (0usize, 0usize, 0usize);
+        for r in &rows {
+            let t = &r.trials;
+            let run = match &r.run {
+                Some(o) => {
+                    let pct = 100.0 * o.tracked as f64 / o.frames.max(1) as f64;
+                    tracked.push(pct);
+                    ate_p.push(o.ate_pos_cm);
+                    ate_r.push(o.ate_rot_deg);
+                    inits += o.commits;
+                    wrong_inits += o.wrong_commits;
+                    format!(
+                        "{pct:.1} % | {:.2} / {:.3} | {} ({})",
+                        o.ate_pos_cm, o.ate_rot_deg, o.commits, o.wrong_commits
+                    )
+                }
+                None => {
+                    tracked.push(0.0);
+                    "0 % | no pose | 0 (0)".to_string()
+                }
+            };
+            inits += t.right + t.wrong;
+            wrong_inits += t.wrong;
+            far_inits += t.far;
+            println!(
+                "| {} | {} | {} | {} | {:.1} % | {run} | {} / {} ({}) / {} of {} |",
+                r.name,
+                r.kind,
+                r.segments,
+                r.nodes,
+                r.recall.big_percent(),
+                t.right,
+                t.wrong,
+                t.far,
+                t.none,
+                t.counted
+            );
+        }
+        ate_p.sort_by(f64::total_cmp);
+        ate_r.sort_by(f64::total_cmp);
+        tracked.sort_by(f64::total_cmp);
+        let recall_all: Recall = rows.iter().fold(Recall::default(), |mut s, r| {
+            s.visible_big += r.recall.visible_big;
+            s.held_big += r.recall.held_big;
+            s
+        });
+        println!();
+        println!(
+            "{} buildings: median ATE {:.2} cm / {:.3}°; fewest frames tracked {:.1} %; VIS recall > 2° {:.1} % overall; \
+             {inits} commits (run commits and trial commits), {wrong_inits} of them off the truth ({:.1} %; run: > 30 cm or 3°, trials: > 10 cm or 1°), \
+             {far_inits} trial commits more than 1 m or 10° off",
+            rows.len(),
+            percentile(&ate_p, 0.5),
+            percentile(&ate_r, 0.5),
+            tracked.first().copied().unwrap_or(f64::NAN),
+            recall_all.big_percent(),
+            100.0 * wrong_inits as f64 / inits.max(1) as f64
+        );
     }
 
     pub fn main() {
@@ -509,6 +953,10 @@ mod bench {
             "| scenario | frames | tracked | re-inits (relocalised) | ATE pos RMSE / max (cm) | ATE rot RMSE / max (°) | init (ms) | frame p50 / p99 / max (ms) | frames/s |"
         );
         println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- |");
+        if !a.buildings.is_empty() {
+            buildings(&a, &rig, &label, &options);
+            return;
+        }
         if a.figure15 {
             figure15(&rig);
         }
@@ -547,7 +995,7 @@ mod bench {
             let truth: Vec<Stamped> = source.ground_truth().unwrap().to_vec();
             if a.init_trials > 0 {
                 init_trials(
-                    name,
+                    name.as_str(),
                     &rig,
                     &model,
                     &table,
@@ -558,6 +1006,8 @@ mod bench {
                     a.verbose,
                     a.from_truth,
                     a.still,
+                    // Trials of the scenarios do not overlap (issue 19's protocol).
+                    WINDOW_AND_AFTER,
                 );
                 continue;
             }
@@ -570,174 +1020,24 @@ mod bench {
                 } else {
                     name.to_string()
                 };
-                source = ReplaySource::open(&dir, Pacing::AsFastAsPossible).unwrap();
                 let hint = a.hint.then(|| SearchVolume {
                     centre: Point3::from(truth[0].pose.translation.vector),
                     diameter_m: Some(cfg.initialisation.search_diameter_m),
                 });
-                let opts = RunOptions {
+                if let Some(out) = run_once(
+                    &row,
+                    name.as_str(),
+                    &dir,
+                    &model,
+                    &table,
+                    &cfg,
+                    &truth,
                     hint,
-                    seed: tracker_seed,
-                    max_frames: None,
-                };
-                let mut estimate: Vec<Stamped> = Vec::new();
-                let mut pos_err = Vec::new();
-                let mut rot_err = Vec::new();
-                let mut latency = Vec::new();
-                let mut busy = Duration::ZERO;
-                // Commits (initial or after a loss), those > 30 cm or 3° off the truth, and frames
-                // whose pose is that far off: a tracker may say "no pose", not give a wrong one.
-                let (mut commits, mut wrong_commits, mut wrong_frames) = (0usize, 0usize, 0usize);
-                let (mut relocs, mut wrong_relocs) = (0usize, 0usize);
-                let verbose = a.verbose;
-                let stats = track(&mut source, &model, &table, &cfg, &opts, &mut |r, tracker| {
-                    busy += r.frame_time;
-                    latency.push(r.frame_time.as_secs_f64() * 1e3);
-                    if let Some(TrackerEvent::Searched(rep)) = r.result.event {
-                        if verbose {
-                            eprintln!(
-                                "  search: {}/{} cells, {} triplet matches, {} samples, {:.0} ms (grid under {} rotations {:.0} ms){}",
-                                rep.cells_searched,
-                                rep.cells_in_volume,
-                                rep.triplet_matches,
-                                rep.samples,
-                                rep.elapsed.as_secs_f64() * 1e3,
-                                rep.rotations,
-                                rep.grid_elapsed.as_secs_f64() * 1e3,
-                                if rep.timed_out { " (timed out)" } else { "" }
-                            );
-                        }
-                    }
-                    let gt = truth
-                        .iter()
-                        .find(|s| s.timestamp_ns.abs_diff(r.timestamp_ns) < 1_000_000);
-                    if verbose {
-                        if let Some(g) = gt {
-                            for (p, score, frames, alive) in tracker.candidates() {
-                                eprintln!(
-                                    "    candidate {:6.1} cm {:6.2}° score {:.2e} over {frames} frames{}",
-                                    (p.translation.vector - g.pose.translation.vector).norm() * 100.0,
-                                    p.rotation.angle_to(&g.pose.rotation).to_degrees(),
-                                    score,
-                                    if alive { "" } else { " (dropped)" }
-                                );
-                            }
-                        }
-                    }
-                    if let Some(p) = &r.result.pose {
-                        estimate.push(Stamped {
-                            timestamp_ns: r.timestamp_ns,
-                            pose: *p,
-                        });
-                    }
-                    let err = match (&r.result.pose, gt) {
-                        (Some(p), Some(g)) => {
-                            let dp = (p.translation.vector - g.pose.translation.vector).norm();
-                            let dr = p.rotation.angle_to(&g.pose.rotation).to_degrees();
-                            pos_err.push(dp);
-                            rot_err.push(dr);
-                            Some((dp, dr))
-                        }
-                        _ => None,
-                    };
-                    let wrong = err.is_some_and(|(dp, dr)| dp > 0.3 || dr > 3.0);
-                    wrong_frames += usize::from(wrong);
-                    match r.result.event {
-                        Some(TrackerEvent::Committed { .. }) => {
-                            commits += 1;
-                            wrong_commits += usize::from(wrong);
-                        }
-                        Some(TrackerEvent::Relocalised) => {
-                            relocs += 1;
-                            wrong_relocs += usize::from(wrong);
-                        }
-                        _ => {}
-                    }
-                    if verbose {
-                        let r2 = &r.result;
-                        eprintln!(
-                            "{:4} {:?} {} σ {:5.1} cm expl {:.2} inl {:3} u/p/a {:?} samples {:4} edges {:4} match {:.2} solve {:.2} ms{}",
-                            r.sequence,
-                            r2.state,
-                            match err {
-                                Some((dp, dr)) => format!("{:6.1} cm {:5.2}°", dp * 100.0, dr),
-                                None => "      --         ".into(),
-                            },
-                            largest_sigma(&r2.covariance, 0) * 100.0,
-                            r2.explained,
-                            r2.inliers,
-                            r2.states,
-                            r2.samples,
-                            r.edges,
-                            r2.match_time.as_secs_f64() * 1e3,
-                            r2.solve_time.as_secs_f64() * 1e3,
-                            match r2.event {
-                                Some(TrackerEvent::Committed {
-                                    candidates,
-                                    changed_mind,
-                                }) => format!(" committed ({candidates} candidates, changed mind: {changed_mind})"),
-                                Some(TrackerEvent::LostLock) => " LOST".into(),
-                                Some(TrackerEvent::Relocalised) => " relocalised".into(),
-                                _ => String::new(),
-                            }
-                        );
-                    }
-                    Ok(())
-                })
-                .unwrap();
-                let init_ms = stats.first_search.map_or(f64::NAN, |d| d.as_secs_f64() * 1e3);
-                // The table's ATE is desk::eval's (the same numbers as `evo_ape tum`, checked by
-                // tools/check_evo.py); the estimate is written beside the recording for evo itself.
-                let est_path = dir.join("estimate.tum");
-                std::fs::write(&est_path, omnitrack::trajectory::to_tum_string(&estimate)).unwrap();
-                if estimate.is_empty() {
-                    println!("| {row} | {frames} | 0.0 % | no pose on any frame | | | | | |");
-                    continue;
+                    tracker_seed,
+                    a.verbose,
+                ) {
+                    per_seed.push(out.ate_pos_cm);
                 }
-                let ev =
-                    omnitrack::desk::eval::evaluate(&truth, &estimate, &omnitrack::desk::eval::EvalOptions::default())
-                        .unwrap();
-                eprintln!(
-                    "{name}: evo_ape tum {} {} (ATE {:.4} m RMSE over {} poses)",
-                    dir.join("groundtruth.tum").display(),
-                    est_path.display(),
-                    ev.ate.translation_m.rmse,
-                    ev.ate.translation_m.count
-                );
-                let (pos_err, rot_err): (Vec<f64>, Vec<f64>) = ev
-                    .ate
-                    .per_pose
-                    .iter()
-                    .map(|e| (e.translation_m, e.rotation_deg))
-                    .unzip();
-                let rmse = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64).sqrt();
-                let max = |v: &[f64]| v.iter().cloned().fold(0.0, f64::max);
-                per_seed.push(rmse(&pos_err) * 100.0);
-                latency.sort_by(f64::total_cmp);
-                println!(
-                    "| {row} | {} | {:.1} % | {} ({}) | {:.2} / {:.1} | {:.3} / {:.2} | {:.0} | {:.1} / {:.1} / {:.1} | {:.1} |",
-                    stats.frames,
-                    100.0 * stats.tracked as f64 / stats.frames.max(1) as f64,
-                    stats.reinitialisations,
-                    stats.relocalisations,
-                    rmse(&pos_err) * 100.0,
-                    max(&pos_err) * 100.0,
-                    rmse(&rot_err),
-                    max(&rot_err),
-                    init_ms,
-                    percentile(&latency, 0.5),
-                    percentile(&latency, 0.99),
-                    latency.last().copied().unwrap_or(f64::NAN),
-                    stats.frames as f64 / busy.as_secs_f64(),
-                );
-                eprintln!(
-                    "{name}: {} solves far from the prediction replaced by a second opinion",
-                    stats.second_opinions
-                );
-                eprintln!(
-                    "{name}: {commits} commits ({wrong_commits} wrong: > 30 cm or 3° off the truth), {relocs} relocalisations \
-    ({wrong_relocs} wrong); {wrong_frames} frames with a pose that far off"
-                );
             }
             if per_seed.len() > 1 {
                 per_seed.sort_by(f64::total_cmp);

@@ -2,7 +2,7 @@
 //! build time on 2 threads, table size, and recall / precision of VIS(T) at the nearest node
 //! against brute-force ray casting from 1,000 random camera positions in free space.
 //!
-//! Brute force: a segment is visible from a position if any sample point along it (samples at
+//! Brute force (`omnitrack::desk::vis_truth`): a segment is visible from a position if any sample point along it (samples at
 //! most 0.5° apart as seen from the position, at most 2,000 per segment) within the table's
 //! range is unoccluded (a ray from the position stops short of it by 1 mm without hitting a
 //! face). Its visible extent is the angle subtended by runs of consecutive unoccluded samples.
@@ -13,6 +13,12 @@
 //! when they are free space (the node rule with 0.2 m clearance). Build time is wall time on a
 //! 2-thread rayon pool, with the process CPU time beside it (other load on the machine inflates
 //! the wall time, not the CPU time).
+//!
+//! `VIS_CAMPUS_M2=25000,100000` measures scale instead: campuses of random buildings
+//! (`desk::scenario::random::campus`, 16 × 12 bays each) of about those floor areas, built with
+//! the shipped settings on 2 threads; it prints build time, CPU time, peak resident memory of the
+//! process (it only grows, so rows are in ascending area) and table size (`VIS_PROGRESS=1` shows
+//! the build's progress bar).
 //!
 //! Run: `cargo bench --bench visibility` (needs the `desk` feature). Environment:
 //! `VIS_RES=64,256` cube-map resolutions; `VIS_MERGE=0,1` (0 none, 1 neighbour merging, 2
@@ -28,8 +34,9 @@
 
 #[cfg(feature = "desk")]
 mod bench {
-    use nalgebra::{Point3, Vector3};
+    use nalgebra::Point3;
     use omnitrack::desk::scenario::{Scenario, ScenarioName};
+    use omnitrack::desk::vis_truth::visible_segments;
     use omnitrack::visibility::build::{build_raw, BuildOptions, Merge, Scene};
     use omnitrack::visibility::VisibilityTable;
     use omnitrack::Model;
@@ -61,47 +68,61 @@ mod bench {
         (ticks(11) + ticks(12)) / 100.0
     }
 
-    /// Per segment: (visible at all, visible extent in radians).
-    fn brute_force(scene: &Scene, model: &Model, eye: &Point3<f64>, range: f64) -> Vec<(bool, f64)> {
-        let step_rad = 0.5f64.to_radians();
-        model
-            .segments
-            .iter()
-            .map(|s| {
-                let ab = s.b - s.a;
-                let len = ab.norm();
-                // Nearest distance for a quick range reject.
-                let t = ((eye - s.a).dot(&ab) / (len * len)).clamp(0.0, 1.0);
-                let near = (s.a + ab * t - eye).norm();
-                if near > range {
-                    return (false, 0.0);
-                }
-                let n = ((len / (near.max(0.05) * step_rad)).ceil() as usize).clamp(1, 2000);
-                let mut any = false;
-                let mut extent = 0.0;
-                let mut prev: Option<Vector3<f64>> = None;
-                for k in 0..=n {
-                    let p = s.a + ab * (k as f64 / n as f64);
-                    let d = p - eye;
-                    let dist = d.norm();
-                    let visible =
-                        dist <= range && dist > 1e-6 && scene.clear_line(eye, &(eye + d * (1.0 - 1e-3 / dist)));
-                    if visible {
-                        any = true;
-                        if let Some(q) = prev {
-                            extent += q.angle(&d);
-                        }
-                        prev = Some(d);
-                    } else {
-                        prev = None;
-                    }
-                }
-                (any, extent)
+    /// Peak resident memory of this process so far, bytes (0 where /proc is missing).
+    fn peak_rss_bytes() -> u64 {
+        std::fs::read_to_string("/proc/self/status")
+            .ok()
+            .and_then(|s| {
+                s.lines()
+                    .find_map(|l| l.strip_prefix("VmHWM:"))
+                    .and_then(|v| v.trim().trim_end_matches("kB").trim().parse::<u64>().ok())
             })
-            .collect()
+            .map_or(0, |kb| kb * 1024)
+    }
+
+    /// `VIS_CAMPUS_M2=A,B,…`: campuses of random buildings of about these floor areas; the
+    /// shipped table settings on 2 threads; build time, memory and size against area.
+    fn campus_scale(areas: &[f64]) {
+        use omnitrack::desk::scenario::random::campus;
+        // 16 × 12 bays of 3–6.5 m: about 3,500 m² of rooms per building on average.
+        const BAYS: [usize; 2] = [16, 12];
+        const PER_BUILDING_M2: f64 = 3500.0;
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(2)
+            .build()
+            .expect("rayon pool");
+        println!("| floor area (m²) | buildings | segments | valid nodes | build (s, 2 threads) | CPU (s) | peak RSS (MB) | table (MB) |");
+        println!("| --- | --- | --- | --- | --- | --- | --- | --- |");
+        for &area in areas {
+            let count = (area / PER_BUILDING_M2).ceil().max(1.0) as usize;
+            let c = campus(1, count, BAYS, 15.0);
+            let model = Model::from_obj_str(&c.obj, "campus.obj").expect("the campus loads");
+            let mut opts = BuildOptions::from_config(&omnitrack::config::TrackerConfig::default().visibility);
+            opts.progress = std::env::var_os("VIS_PROGRESS").is_some();
+            let t = Instant::now();
+            let cpu0 = cpu_seconds();
+            let (raw, stats) = pool.install(|| build_raw(&model, "campus.obj", &opts));
+            let table = VisibilityTable::from_raw(raw);
+            let bytes = table.to_bytes().len();
+            println!(
+                "| {:.0} | {count} | {} | {} | {:.1} | {:.1} | {:.0} | {:.1} |",
+                c.floor_area_m2,
+                model.segments.len(),
+                stats.nodes,
+                t.elapsed().as_secs_f64(),
+                cpu_seconds() - cpu0,
+                peak_rss_bytes() as f64 / 1e6,
+                bytes as f64 / 1e6
+            );
+        }
     }
 
     pub fn main() {
+        let campus: Vec<f64> = list("VIS_CAMPUS_M2", "");
+        if !campus.is_empty() {
+            campus_scale(&campus);
+            return;
+        }
         let scenario = Scenario::get(ScenarioName::Corridor);
         let obj = scenario.model_obj().expect("corridor plan extrudes");
         let model = Model::from_obj_str(&obj, "corridor.obj").expect("corridor model loads");
@@ -160,8 +181,11 @@ mod bench {
             }
         }
         let t = Instant::now();
-        let truth: Vec<Vec<(bool, f64)>> =
-            pool.install(|| eyes.par_iter().map(|e| brute_force(&scene, &model, e, range)).collect());
+        let truth: Vec<Vec<(bool, f64)>> = pool.install(|| {
+            eyes.par_iter()
+                .map(|e| visible_segments(&scene, &model, e, range))
+                .collect()
+        });
         let visible_mean =
             truth.iter().map(|v| v.iter().filter(|x| x.0).count()).sum::<usize>() as f64 / positions as f64;
         println!(

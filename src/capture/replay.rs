@@ -199,6 +199,12 @@ impl ReplaySource {
         self.clock = None;
     }
 
+    /// Goes on from frame `frame` (the last frame's end if past it); the real-time clock restarts.
+    pub fn seek(&mut self, frame: usize) {
+        self.next = frame.min(self.frames.len());
+        self.clock = None;
+    }
+
     /// Sleeps until the recorded time of a frame, relative to the first delivered frame.
     fn pace(&mut self, timestamp_ns: u64) {
         if self.pacing != Pacing::RealTime {

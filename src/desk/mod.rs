@@ -10,3 +10,4 @@ pub mod pictures;
 pub mod recording;
 pub mod render;
 pub mod scenario;
+pub mod vis_truth;

@@ -173,15 +173,44 @@ pub fn cached_scenario(
     progress: impl FnMut(usize, usize),
 ) -> Result<(PathBuf, bool), RecordingError> {
     let dir = root.join(format!("{}-{frames}f-seed{seed}-{label}", scenario.name));
+    cached(&dir, rig, options, progress, || {
+        let obj = scenario
+            .model_obj()
+            .map_err(|e| err(&dir, format!("cannot extrude the scenario's plan: {e}")))?;
+        Ok((obj, scenario.trajectory(frames, seed)))
+    })
+}
+
+/// A rendered walk through a random building ([`crate::desk::scenario::random`]), cached like
+/// [`cached_scenario`] in `root/building-SEED-FRAMESf-LABEL`; the walk's seed is the building's.
+pub fn cached_building(
+    root: &Path,
+    building: &crate::desk::scenario::random::RandomBuilding,
+    frames: usize,
+    label: &str,
+    rig: &Rig,
+    options: &RecordingOptions,
+    progress: impl FnMut(usize, usize),
+) -> Result<(PathBuf, bool), RecordingError> {
+    let dir = root.join(format!("{}-{frames}f-{label}", building.name()));
+    cached(&dir, rig, options, progress, || {
+        Ok((building.obj.clone(), building.trajectory(frames, building.seed)))
+    })
+}
+
+fn cached(
+    dir: &Path,
+    rig: &Rig,
+    options: &RecordingOptions,
+    progress: impl FnMut(usize, usize),
+    make: impl FnOnce() -> Result<(String, Trajectory), RecordingError>,
+) -> Result<(PathBuf, bool), RecordingError> {
     let marker = dir.join("complete");
     if marker.exists() {
-        return Ok((dir, false));
+        return Ok((dir.to_path_buf(), false));
     }
-    let obj = scenario
-        .model_obj()
-        .map_err(|e| err(&dir, format!("cannot extrude the scenario's plan: {e}")))?;
-    let trajectory = scenario.trajectory(frames, seed);
-    write_recording(&dir, rig, &obj, &trajectory, options, progress)?;
+    let (obj, trajectory) = make()?;
+    write_recording(dir, rig, &obj, &trajectory, options, progress)?;
     write_file(&marker, b"")?;
-    Ok((dir, true))
+    Ok((dir.to_path_buf(), true))
 }
