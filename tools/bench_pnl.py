@@ -98,7 +98,8 @@ def ensure_venv_and_reexec() -> None:
                 f"Python {v} on {platform.machine()} {platform.system()}, run this script with a "
                 f"Python that has one (e.g. `python3.11 tools/bench_pnl.py`) after deleting {VENV}."
             )
-    os.execv(str(py), [str(py), str(Path(__file__).resolve()), *sys.argv[1:]])
+    # The script that was run (bench_pnl.py itself, or a benchmark that imports it).
+    os.execv(str(py), [str(py), str(Path(sys.argv[0]).resolve()), *sys.argv[1:]])
 
 
 # --------------------------------------------------------------------------------------------
@@ -185,7 +186,7 @@ def run_poselib(trials, max_seconds: float):
     import numpy as np
     import poselib
 
-    cam = {"model": "PINHOLE", "width": WIDTH, "height": HEIGHT, "params": [FOCAL, FOCAL, CX, CY]}
+    default_cam = {"model": "PINHOLE", "width": WIDTH, "height": HEIGHT, "params": [FOCAL, FOCAL, CX, CY]}
     p2 = np.zeros((0, 2))
     p3 = np.zeros((0, 3))
     out = []
@@ -200,6 +201,7 @@ def run_poselib(trials, max_seconds: float):
         ransac = dict(POSELIB_RANSAC, seed=int(tr["seed"] % (2**31)))
         t0 = time.perf_counter_ns()
         try:
+            cam = tr.get("cam", default_cam)
             pose, info = poselib.estimate_absolute_pose_pnpl(p2, p3, uv1, uv2, X1, X2, cam, ransac, {})
             ok = True
         except Exception as e:  # noqa: BLE001 - any failure of the library is a failure
@@ -215,6 +217,22 @@ def run_poselib(trials, max_seconds: float):
     return out
 
 
+def shipped_solver_args() -> list[str]:
+    """The runner flags that make it run what `omnitrack pose` runs: firmware_config/tracker.toml's
+    [solver] error, lms_outlier_fraction and lms_success_probability."""
+    import tomllib
+
+    cfg = tomllib.loads((REPO / "firmware_config" / "tracker.toml").read_text())["solver"]
+    return [
+        "--error",
+        cfg["error"],
+        "--epsilon",
+        str(cfg["lms_outlier_fraction"]),
+        "--success",
+        str(cfg["lms_success_probability"]),
+    ]
+
+
 def build_runner() -> None:
     print("[bench] cargo build --release -p omnitrack-tools --bin pnl_bench", flush=True)
     r = subprocess.run(["cargo", "build", "--release", "-p", "omnitrack-tools", "--bin", "pnl_bench"], cwd=REPO)
@@ -225,7 +243,7 @@ def build_runner() -> None:
         )
 
 
-def run_ours(trials, method: str, runner: Path, max_seconds: float):
+def run_ours(trials, method: str, runner: Path, max_seconds: float, extra=()):
     import numpy as np
 
     with tempfile.TemporaryDirectory(prefix="bench_pnl_") as d:
@@ -233,11 +251,13 @@ def run_ours(trials, method: str, runner: Path, max_seconds: float):
         with inp.open("w") as f:
             for tr in trials:
                 lines = np.hstack([tr["uv1"], tr["uv2"], tr["X1"], tr["X2"]])
-                rec = {"id": tr["id"], "seed": tr["seed"], "K": [FOCAL, FOCAL, CX, CY], "lines": lines.tolist()}
+                k = tr.get("K", [FOCAL, FOCAL, CX, CY])
+                rec = {"id": tr["id"], "seed": tr["seed"], "K": k, "lines": lines.tolist()}
                 f.write(json.dumps(rec) + "\n")
         try:
             r = subprocess.run(
-                [str(runner), "--input", str(inp), "--output", str(outp), "--method", method], timeout=max_seconds
+                [str(runner), "--input", str(inp), "--output", str(outp), "--method", method, *extra],
+                timeout=max_seconds,
             )
         except subprocess.TimeoutExpired:
             sys.exit(
@@ -337,6 +357,11 @@ def main() -> None:
         "--max-seconds", type=float, default=420.0, help="give up on a method that takes longer than this (default 420)"
     )
     ap.add_argument("--no-md", action="store_true", help="do not write tools/bench_pnl_results.md")
+    ap.add_argument(
+        "--runner-settings",
+        action="store_true",
+        help="run ours with the runner's own Med_R_and_T settings instead of firmware_config/tracker.toml's",
+    )
     args = ap.parse_args()
     if not in_bench_venv():
         ensure_venv_and_reexec()
@@ -366,7 +391,9 @@ def main() -> None:
 
     t0 = time.time()
     print(f"[bench] ours ({args.method}) ...", flush=True)
-    ours = run_ours(trials, args.method, runner, args.max_seconds)
+    extra = [] if args.runner_settings else shipped_solver_args()
+    print(f"[bench] our settings: {' '.join(extra) if extra else 'the runner defaults'}", flush=True)
+    ours = run_ours(trials, args.method, runner, args.max_seconds, extra=extra)
     t_ours = time.time() - t0
     t0 = time.time()
     print(f"[bench] PoseLib {poselib.__version__ if hasattr(poselib, '__version__') else ''} ...", flush=True)

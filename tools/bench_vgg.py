@@ -1,0 +1,253 @@
+#!/usr/bin/env python3
+"""Line pose on real data: omnitrack against PoseLib on the Oxford VGG multiview line sequences.
+
+    python3 tools/bench_vgg.py DATA_DIR                 # shipped solver settings, E2 and E3
+    python3 tools/bench_vgg.py DATA_DIR --draws 20      # 20 outlier draws per view at 30 %
+
+DATA_DIR is the `oxford_data` directory of GitHub `petrhruby97/efficient_absolute` (model_house,
+corridor, merton1-3, library, wadham: the VGG group's hand-matched 2D lines, their reconstructed
+3D lines and every view's 3x4 camera matrix). It is not in this repository; get it with
+`git clone --depth 1 https://github.com/petrhruby97/efficient_absolute` and pass
+`efficient_absolute/oxford_data`.
+
+What it does:
+ 1. Reuses tools/bench_pnl.py's venv (numpy, PoseLib from PyPI) and Rust runner
+    (tools/src/bin/pnl_bench.rs), built in release.
+ 2. Per view: decomposes P = K [R | t] (RQ). model_house and corridor are reconstructions in a
+    left-handed frame (det R = -1): the world is mirrored in z for the whole sequence, which
+    leaves every image unchanged. Their K has skew, which PoseLib's pinhole cannot take: every
+    2D end point is mapped through K^-1 and back through a skew-free K' (f = (fx + fy) / 2, the
+    same principal point), an exact homography of the image, so both methods see the same lines.
+ 3. A correspondence is a 3D line of the sequence and its matched 2D line in the view
+    (`nview-lines`). At 30 % outliers, round(0.3 n) of a view's 2D lines are replaced by random
+    segments inside the image's extent (`--draws` draws per view, seeded).
+ 4. Runs PoseLib's estimate_absolute_pose_pnpl (lines only, max_epipolar_error 4 px as in
+    bench_pnl.py) and ours on identical correspondences: `--method lms` with the settings of
+    firmware_config/tracker.toml (what `omnitrack pose --method lms` runs), once per line error
+    in `--errors` (default e2,e3).
+ 5. Prints per sequence and outlier level: views, lines per view, median rotation error (deg),
+    median camera-centre error (in the reconstruction's units, and as % of the median distance
+    from the camera to its lines) and failures (no pose, rotation error > 5 deg or centre error
+    > 10 % of that distance) for each method.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+import tomllib
+from pathlib import Path
+
+TOOLS = Path(__file__).resolve().parent
+sys.path.insert(0, str(TOOLS))
+import bench_pnl  # noqa: E402  (the venv, the runner and PoseLib's call are shared)
+
+SEQUENCES = {
+    # name: (2D prefix, P files directory, P prefix, views)
+    "model_house": ("2D/house.", "3D", "house.", [f"{i:03d}" for i in range(10)]),
+    "corridor": ("2D/bt.", "3D", "bt.", [f"{i:03d}" for i in range(11)]),
+    "merton1": ("2D/", "2D", "", ["001", "002", "003"]),
+    "merton2": ("2D/", "2D", "", ["001", "002", "003"]),
+    "merton3": ("2D/", "2D", "", ["001", "002", "003"]),
+    "library": ("2D/", "2D", "", ["001", "002", "003"]),
+    "wadham": ("2D/", "2D", "", ["001", "002", "003", "004", "005"]),
+}
+ROT_FAIL_DEG, CENTRE_FAIL_FRAC = 5.0, 0.10
+
+
+def read_rows(path: Path):
+    rows = []
+    for line in path.read_text().splitlines():
+        parts = line.split()
+        if parts:
+            rows.append(parts)
+    return rows
+
+
+def rq(m):
+    """M = K R with K upper triangular, positive diagonal."""
+    import numpy as np
+
+    flip = np.flipud(np.eye(3))
+    q, r = np.linalg.qr((flip @ m).T)
+    k = flip @ r.T @ flip
+    rot = flip @ q.T
+    d = np.diag(np.sign(np.diag(k)))
+    return k @ d, d @ rot
+
+
+def load_sequence(root: Path, name: str):
+    """Views as dicts: K' (skew-free), R_cw, t_cw, lines (u1 v1 u2 v2 X1 Y1 Z1 X2 Y2 Z2), extent."""
+    import numpy as np
+
+    lines_prefix, p_dir, p_prefix, views = SEQUENCES[name]
+    d = root / name
+    l3d_name = {"model_house": "3D/house.l3d", "corridor": "3D/bt.l3d"}.get(name, "3D/l3d")
+    l3d = np.array([[float(x) for x in r[:6]] for r in read_rows(d / l3d_name)])
+    nview = read_rows(d / (lines_prefix + "nview-lines"))
+    ps = []
+    for v in views:
+        p = np.array([[float(x) for x in r[:4]] for r in read_rows(d / p_dir / f"{p_prefix}{v}.P")])
+        # Scale sign: the 3D lines lie in front of the camera.
+        ends = np.vstack([l3d[:, :3], l3d[:, 3:]])
+        depth = (np.hstack([ends, np.ones((len(ends), 1))]) @ p.T)[:, 2]
+        if np.median(depth) < 0:
+            p = -p
+        ps.append(p)
+    k0, r0 = rq(ps[0][:, :3])
+    mirror = np.linalg.det(r0) < 0
+    s = np.diag([1.0, 1.0, -1.0]) if mirror else np.eye(3)
+    if mirror:
+        l3d = np.hstack([l3d[:, :3] @ s, l3d[:, 3:] @ s])
+    out = []
+    for vi, (v, p) in enumerate(zip(views, ps)):
+        m = p[:, :3] @ s
+        k, r = rq(m)
+        if np.linalg.det(r) < 0:
+            raise SystemExit(f"{name} view {v}: handedness differs from the first view")
+        # P = lam K [R | t] with K[2, 2] = 1.
+        lam = k[2, 2]
+        k = k / lam
+        t = np.linalg.solve(k, p[:, 3]) / lam
+        f = (k[0, 0] + k[1, 1]) / 2.0
+        kp = np.array([[f, 0.0, k[0, 2]], [0.0, f, k[1, 2]], [0.0, 0.0, 1.0]])
+        to_kp = kp @ np.linalg.inv(k)
+        rows2d = [[float(x) for x in r[:4]] for r in read_rows(d / (lines_prefix + f"{v}.lines"))]
+        lines = []
+        for j, match in enumerate(nview):
+            if vi >= len(match) or match[vi] in ("*", "-1"):
+                continue
+            i = int(match[vi])
+            u1, v1, u2, v2 = rows2d[i]
+            a = to_kp @ np.array([u1, v1, 1.0])
+            b = to_kp @ np.array([u2, v2, 1.0])
+            lines.append([a[0] / a[2], a[1] / a[2], b[0] / b[2], b[1] / b[2], *l3d[j]])
+        lines = np.array(lines)
+        all2d = np.array(rows2d)
+        extent = (float(all2d[:, [0, 2]].max()), float(all2d[:, [1, 3]].max()))
+        out.append({"view": v, "K": [f, f, float(k[0, 2]), float(k[1, 2])], "R_cw": r, "t_cw": t,
+                    "lines": lines, "extent": extent})
+    return out, mirror
+
+
+def shipped_solver():
+    cfg = tomllib.loads((TOOLS.parent / "firmware_config" / "tracker.toml").read_text())["solver"]
+    return cfg["lms_outlier_fraction"], cfg["lms_success_probability"]
+
+
+def check_truth(views, name):
+    """Reprojection of the 3D end points against the matched 2D segments' lines (px): the
+    decomposition is right when this is small."""
+    import numpy as np
+
+    errs = []
+    for v in views:
+        f, _, cx, cy = v["K"]
+        k = np.array([[f, 0, cx], [0, f, cy], [0, 0, 1.0]])
+        for l in v["lines"]:
+            h = np.cross([l[0], l[1], 1.0], [l[2], l[3], 1.0])
+            h /= np.linalg.norm(h[:2])
+            for x in (l[4:7], l[7:10]):
+                p = k @ (v["R_cw"] @ x + v["t_cw"])
+                errs.append(abs(h @ (p / p[2])))
+    return float(np.median(errs))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("data", type=Path, help="the oxford_data directory")
+    ap.add_argument("--draws", type=int, default=10, help="outlier draws per view at 30 %% (default 10)")
+    ap.add_argument("--errors", default="e2,e3", help="our line errors to run (default e2,e3)")
+    ap.add_argument("--seed", type=int, default=20261127)
+    ap.add_argument("--runner", type=Path, default=None, help="use this pnl_bench binary, skip the build")
+    args = ap.parse_args()
+    if not bench_pnl.in_bench_venv():
+        bench_pnl.ensure_venv_and_reexec()
+    import numpy as np
+
+    if not args.data.is_dir():
+        sys.exit(f"{args.data}: not a directory (pass efficient_absolute/oxford_data)")
+    if args.runner is None:
+        bench_pnl.build_runner()
+    runner = args.runner or bench_pnl.RUNNER
+    eps, success = shipped_solver()
+    rng = np.random.default_rng(args.seed)
+    trials, groups = [], []
+    for name in SEQUENCES:
+        views, mirror = load_sequence(args.data, name)
+        print(f"[vgg] {name}: {len(views)} views, {np.mean([len(v['lines']) for v in views]):.0f} lines per view, "
+              f"{'mirrored (left-handed), ' if mirror else ''}median end-point line distance at the truth "
+              f"{check_truth(views, name):.2f} px", flush=True)
+        for outliers in (0.0, 0.3):
+            start = len(trials)
+            for v in views:
+                for _ in range(1 if outliers == 0 else args.draws):
+                    lines = v["lines"].copy()
+                    n_out = int(round(outliers * len(lines)))
+                    for i in rng.choice(len(lines), size=n_out, replace=False) if n_out else []:
+                        w, h = v["extent"]
+                        while True:
+                            a, b = rng.uniform([0, 0], [w, h]), rng.uniform([0, 0], [w, h])
+                            if np.linalg.norm(a - b) >= bench_pnl.MIN_LEN_PX:
+                                break
+                        lines[i, :4] = [a[0], a[1], b[0], b[1]]
+                    centre = -v["R_cw"].T @ v["t_cw"]
+                    mids = (lines[:, 4:7] + lines[:, 7:10]) / 2.0
+                    trials.append({
+                        "id": len(trials), "seed": int(rng.integers(0, 2**63 - 1)), "K": v["K"],
+                        "uv1": lines[:, 0:2], "uv2": lines[:, 2:4], "X1": lines[:, 4:7], "X2": lines[:, 7:10],
+                        "R_cw": v["R_cw"], "t_cw": v["t_cw"], "centre": centre,
+                        "scale": float(np.median(np.linalg.norm(mids - centre, axis=1))),
+                        "cam": {"model": "PINHOLE", "width": int(math.ceil(v["extent"][0])),
+                                "height": int(math.ceil(v["extent"][1])), "params": v["K"]},
+                    })
+            groups.append((name, outliers, start, len(trials)))
+    methods = [("PoseLib", None)] + [(f"ours lms {e}", e) for e in args.errors.split(",") if e]
+    results = {}
+    for label, error in methods:
+        t0 = time.time()
+        if error is None:
+            results[label] = bench_pnl.run_poselib(trials, 600.0)
+        else:
+            shipped = bench_pnl.shipped_solver_args()
+            # The shipped settings, with the line error of this column.
+            extra = shipped[2:] + ["--error", error]
+            results[label] = bench_pnl.run_ours(trials, "lms", runner, 600.0, extra=extra)
+        print(f"[vgg] {label}: {time.time() - t0:.1f} s", flush=True)
+
+    def stats(res, lo, hi):
+        rot, cen, fail = [], [], 0
+        for tr, r in zip(trials[lo:hi], res[lo:hi]):
+            if not r["ok"]:
+                rot.append(math.inf)
+                cen.append(math.inf)
+                fail += 1
+                continue
+            re = bench_pnl.rot_err_deg(r["R"], tr["R_cw"])
+            c = -r["R"].T @ r["t"]
+            ce = float(np.linalg.norm(c - tr["centre"]))
+            rot.append(re)
+            cen.append(ce)
+            if re > ROT_FAIL_DEG or ce > CENTRE_FAIL_FRAC * tr["scale"]:
+                fail += 1
+        scale = float(np.median([t["scale"] for t in trials[lo:hi]]))
+        return float(np.median(rot)), float(np.median(cen)), 100.0 * float(np.median(cen)) / scale, fail
+
+    print()
+    print(f"Shipped Med_R_and_T settings: lms_outlier_fraction {eps}, lms_success_probability {success}.")
+    print()
+    head = "| sequence | outliers | trials |" + "".join(f" {m} rot° / centre (%) / fails |" for m, _ in methods)
+    print(head)
+    print("|" + " --- |" * (3 + len(methods)))
+    for name, outliers, lo, hi in groups:
+        cells = []
+        for label, _ in methods:
+            r, c, pct, fail = stats(results[label], lo, hi)
+            cells.append(f" {r:.3f} / {c:.4f} ({pct:.2f} %) / {fail} |")
+        print(f"| {name} | {outliers * 100:.0f} % | {hi - lo} |" + "".join(cells))
+
+
+if __name__ == "__main__":
+    main()
