@@ -346,10 +346,9 @@ impl Mesh {
 
 /// A door or window drawn on one bay's wall.
 struct Opening {
-    /// The bay's wall: grid line (horizontal = along x) and its ends.
-    a: P2,
-    b: P2,
-    /// Along the bay's wall from `a`.
+    /// Index of the bay's wall.
+    wall: usize,
+    /// Along the bay's wall from its start.
     s0: f64,
     s1: f64,
     z0: f64,
@@ -546,8 +545,7 @@ impl RandomBuilding {
                 let width = snap(rng.range(0.95, 1.2));
                 let s0 = snap(rng.range(OPENING_MARGIN_M, len - OPENING_MARGIN_M - width));
                 openings.push(Opening {
-                    a: bw.a,
-                    b: bw.b,
+                    wall: w,
                     s0,
                     s1: s0 + width,
                     z0: 0.0,
@@ -578,8 +576,9 @@ impl RandomBuilding {
             };
             let blocks = |(a, b): (P2, P2)| {
                 openings.iter().filter(|o| o.door).any(|o| {
-                    let u = (o.b - o.a) / (o.b - o.a).norm();
-                    let c = o.a + u * ((o.s0 + o.s1) / 2.0);
+                    let bw = &bay_walls[o.wall];
+                    let u = (bw.b - bw.a) / (bw.b - bw.a).norm();
+                    let c = bw.a + u * ((o.s0 + o.s1) / 2.0);
                     let ab = b - a;
                     let t = ((c - a).dot(&ab) / ab.norm_squared()).clamp(0.0, 1.0);
                     (a + ab * t - c).norm() < STAIR_WIDTH_M / 2.0 + 0.9
@@ -592,8 +591,8 @@ impl RandomBuilding {
             }
         }
         let storeys = if hall.is_some() { 2 } else { 1 };
-        // Windows in exterior bays, on every storey; none where the hall's stair runs.
-        for bw in &bay_walls {
+        // Windows in exterior bays, on every storey; none in the hall's ground storey.
+        for (w, bw) in bay_walls.iter().enumerate() {
             if bw.rooms.0.is_some() && bw.rooms.1.is_some() {
                 continue;
             }
@@ -611,8 +610,7 @@ impl RandomBuilding {
                     continue;
                 }
                 openings.push(Opening {
-                    a: bw.a,
-                    b: bw.b,
+                    wall: w,
                     s0,
                     s1: s0 + width,
                     z0: base + sill,
@@ -627,11 +625,8 @@ impl RandomBuilding {
                 .iter()
                 .filter(|o| o.door)
                 .filter(|o| {
-                    let w = bay_walls
-                        .iter()
-                        .find(|bw| bw.a == o.a && bw.b == o.b)
-                        .expect("every door is on a bay wall");
-                    w.rooms.0 != Some(hk) && w.rooms.1 != Some(hk)
+                    let rooms = bay_walls[o.wall].rooms;
+                    rooms.0 != Some(hk) && rooms.1 != Some(hk)
                 })
                 .map(|o| Opening {
                     z0: o.z0 + top_of_ground,
@@ -661,19 +656,17 @@ impl RandomBuilding {
             ka.partial_cmp(&kb).expect("finite coordinates")
         });
         let exterior = |bw: &BayWall| bw.rooms.0.is_none() || bw.rooms.1.is_none();
-        let mut members: Vec<Vec<usize>> = Vec::new();
+        // Per bay wall, its run; per run, whether it is exterior.
+        let mut run_of = vec![0usize; bay_walls.len()];
+        let mut run_exterior: Vec<bool> = Vec::new();
         for &w in &order {
             let bw = &bay_walls[w];
             let t = if exterior(bw) { t_out } else { t_in };
             let extends = runs.last().is_some_and(|r: &Run| {
                 (r.b - bw.a).norm() < 1e-9 && r.thickness == t && (horizontal(bw) == (r.a.y == r.b.y))
-            }) && members
-                .last()
-                .is_some_and(|m| exterior(&bay_walls[m[0]]) == exterior(bw));
+            }) && run_exterior.last() == Some(&exterior(bw));
             if extends {
-                let r = runs.last_mut().expect("checked");
-                r.b = bw.b;
-                members.last_mut().expect("checked").push(w);
+                runs.last_mut().expect("checked").b = bw.b;
             } else {
                 runs.push(Run {
                     a: bw.a,
@@ -682,17 +675,13 @@ impl RandomBuilding {
                     holes: Vec::new(),
                     doors: Vec::new(),
                 });
-                members.push(vec![w]);
+                run_exterior.push(exterior(bw));
             }
+            run_of[w] = runs.len() - 1;
         }
         for o in &openings {
-            let (k, _) = members
-                .iter()
-                .enumerate()
-                .find(|(_, m)| m.iter().any(|&w| bay_walls[w].a == o.a && bay_walls[w].b == o.b))
-                .expect("every opening is on a run");
-            let r = &mut runs[k];
-            let offset = (o.a - r.a).norm();
+            let r = &mut runs[run_of[o.wall]];
+            let offset = (bay_walls[o.wall].a - r.a).norm();
             r.holes.push(Hole {
                 s0: offset + o.s0,
                 s1: offset + o.s1,
