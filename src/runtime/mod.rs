@@ -134,7 +134,14 @@ pub fn load_or_build_table(
         },
         Err(_) => None,
     };
-    let (table, origin) = build_and_cache(model_path, model, &cache, cfg)?;
+    let (table, origin) = build_and_cache(model_path, model, &cache, cfg).map_err(|e| match (&stale, e) {
+        // A device build cannot rebuild: say why the table beside the model was not used.
+        (Some(why), VisibilityError::Invalid { file, message }) => VisibilityError::Invalid {
+            file,
+            message: format!("{message} (the cached table was built with other settings: {why})"),
+        },
+        (_, e) => e,
+    })?;
     Ok(match stale {
         Some(why) => (table, format!("{origin} (the cached table had other settings: {why})")),
         None => (table, origin),
