@@ -37,7 +37,6 @@ import argparse
 import math
 import sys
 import time
-import tomllib
 from pathlib import Path
 
 TOOLS = Path(__file__).resolve().parent
@@ -132,12 +131,7 @@ def load_sequence(root: Path, name: str):
     return out, mirror
 
 
-def shipped_solver():
-    cfg = tomllib.loads((TOOLS.parent / "firmware_config" / "tracker.toml").read_text())["solver"]
-    return cfg["lms_outlier_fraction"], cfg["lms_success_probability"]
-
-
-def check_truth(views, name):
+def check_truth(views):
     """Reprojection of the 3D end points against the matched 2D segments' lines (px): the
     decomposition is right when this is small."""
     import numpy as np
@@ -172,14 +166,14 @@ def main() -> None:
     if args.runner is None:
         bench_pnl.build_runner()
     runner = args.runner or bench_pnl.RUNNER
-    eps, success = shipped_solver()
+    shipped = bench_pnl.shipped_solver_args()
     rng = np.random.default_rng(args.seed)
     trials, groups = [], []
     for name in SEQUENCES:
         views, mirror = load_sequence(args.data, name)
         print(f"[vgg] {name}: {len(views)} views, {np.mean([len(v['lines']) for v in views]):.0f} lines per view, "
               f"{'mirrored (left-handed), ' if mirror else ''}median end-point line distance at the truth "
-              f"{check_truth(views, name):.2f} px", flush=True)
+              f"{check_truth(views):.2f} px", flush=True)
         for outliers in (0.0, 0.3):
             start = len(trials)
             for v in views:
@@ -211,9 +205,9 @@ def main() -> None:
         if error is None:
             results[label] = bench_pnl.run_poselib(trials, 600.0)
         else:
-            shipped = bench_pnl.shipped_solver_args()
-            # The shipped settings, with the line error of this column.
-            extra = shipped[2:] + ["--error", error]
+            # The shipped settings, with the line error of this column instead of the shipped one.
+            i = shipped.index("--error")
+            extra = shipped[:i] + shipped[i + 2 :] + ["--error", error]
             results[label] = bench_pnl.run_ours(trials, "lms", runner, 600.0, extra=extra)
         print(f"[vgg] {label}: {time.time() - t0:.1f} s", flush=True)
 
@@ -236,7 +230,7 @@ def main() -> None:
         return float(np.median(rot)), float(np.median(cen)), 100.0 * float(np.median(cen)) / scale, fail
 
     print()
-    print(f"Shipped Med_R_and_T settings: lms_outlier_fraction {eps}, lms_success_probability {success}.")
+    print(f"Shipped Med_R_and_T settings: {' '.join(shipped)} (the error as in each column).")
     print()
     head = "| sequence | outliers | trials |" + "".join(f" {m} rot° / centre (%) / fails |" for m, _ in methods)
     print(head)
