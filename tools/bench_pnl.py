@@ -219,7 +219,7 @@ def run_poselib(trials, max_seconds: float):
 
 def shipped_solver_args() -> list[str]:
     """The runner flags that make it run what `omnitrack pose` runs: firmware_config/tracker.toml's
-    [solver] error, lms_outlier_fraction and lms_success_probability."""
+    [solver] error, lms_outlier_fraction, lms_success_probability and lms_outlier_threshold."""
     import tomllib
 
     cfg = tomllib.loads((REPO / "firmware_config" / "tracker.toml").read_text())["solver"]
@@ -230,6 +230,8 @@ def shipped_solver_args() -> list[str]:
         str(cfg["lms_outlier_fraction"]),
         "--success",
         str(cfg["lms_success_probability"]),
+        "--threshold",
+        str(cfg["lms_outlier_threshold"]),
     ]
 
 

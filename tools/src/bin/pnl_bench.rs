@@ -68,6 +68,9 @@ struct Cli {
     /// error PoseLib minimises; the benchmark found it the more accurate of E1/E2.
     #[arg(long, default_value = "e2")]
     error: String,
+    /// Med_R_and_T's inlier gate, σ per end point (tracker.toml's `lms_outlier_threshold`).
+    #[arg(long, default_value_t = 2.5)]
+    threshold: f64,
 }
 
 fn f(v: &Value) -> Result<f64, String> {
@@ -113,6 +116,7 @@ fn run(cli: &Cli) -> Result<(), String> {
     let options = SolverOptions {
         lms_outlier_fraction: cli.epsilon,
         lms_success_probability: cli.success,
+        lms_outlier_threshold: cli.threshold,
         error: match cli.error.as_str() {
             "e1" => LineError::E1,
             "e2" => LineError::E2,
