@@ -6,7 +6,7 @@
 #![cfg(feature = "desk")]
 
 use nalgebra::{Point3, Vector3};
-use omnitrack::visibility::build::{build_table, BuildOptions, Merge, Scene};
+use omnitrack::visibility::build::{build_raw, build_table, BuildOptions, CubeMap, Merge, Scene};
 use omnitrack::visibility::{query_json, VisibilityError, VisibilityTable};
 use omnitrack::Model;
 
@@ -572,22 +572,30 @@ fn the_inside_of_a_thick_solid_is_not_free() {
     }
 }
 
-/// Every face written twice, the copy wound the other way (as exporters of two-sided walls
-/// write them): the same nodes and sets as the building drawn once.
-#[test]
-fn duplicated_faces_leave_the_table_unchanged() {
-    let once = two_rooms();
+/// `once` with each `f` line written again after all of them, its vertices in the other order
+/// when `reversed`.
+fn written_twice(once: &Obj, reversed: bool) -> Obj {
     let mut twice = Obj {
         text: once.text.clone(),
         vertices: once.vertices,
         flips: None,
     };
-    // Each `f` line again, its vertices in the other order.
     for line in once.text.lines().filter(|l| l.starts_with("f ")) {
         let mut ids: Vec<&str> = line[2..].split_whitespace().collect();
-        ids.reverse();
+        if reversed {
+            ids.reverse();
+        }
         twice.text.push_str(&format!("f {}\n", ids.join(" ")));
     }
+    twice
+}
+
+/// Every face written twice, the copy wound the other way (as exporters of two-sided walls
+/// write them): the same nodes and sets as the building drawn once.
+#[test]
+fn duplicated_faces_leave_the_table_unchanged() {
+    let once = two_rooms();
+    let twice = written_twice(&once, true);
     let (a, b) = (once.model(), twice.model());
     assert_eq!(b.faces.len(), 2 * a.faces.len());
     let (ta, tb) = (
@@ -596,6 +604,79 @@ fn duplicated_faces_leave_the_table_unchanged() {
     );
     let strip = |c: Vec<NodeContents>| c.into_iter().map(|(p, _, s)| (p, s)).collect::<Vec<_>>();
     assert_eq!(strip(contents(&tb, &b)), strip(contents(&ta, &a)));
+}
+
+/// Every face written twice the same way: at each pixel the two copies are at exactly the same
+/// depth, and the render shows the first (smaller id) everywhere, as drawing in file order would,
+/// although the build draws nearest first.
+#[test]
+fn coincident_faces_show_the_smaller_face_id() {
+    let once = two_rooms();
+    let twice = written_twice(&once, false);
+    let (a, b) = (once.model(), twice.model());
+    let n = a.faces.len() as u32;
+    assert_eq!(b.faces.len() as u32, 2 * n);
+    let scene = Scene::new(&b);
+    let mut cube = CubeMap::new(64, b.faces.len());
+    for eye in [[1.0, 1.0, 1.5], [2.5, 3.0, 1.0], [6.0, 1.5, 1.5]] {
+        let (faces, _) = cube.visibility(&scene, &Point3::from(eye), &options());
+        assert!(!faces.is_empty());
+        assert!(faces.iter().all(|&f| f < n), "a copy shows from {eye:?}: {faces:?}");
+        let shown = (0..6).flat_map(|f| (0..64).flat_map(move |y| (0..64).map(move |x| (f, x, y))));
+        for (f, x, y) in shown {
+            let id = cube.id_at(f, x, y);
+            assert!(
+                id == u32::MAX || id < n,
+                "pixel {f} {x} {y} from {eye:?} shows copy {id}"
+            );
+        }
+    }
+}
+
+/// Lookup cells beyond two node cells of any node (here the 30 m between two rooms) map to a
+/// node at the smallest distance, found by a search over every node.
+#[test]
+fn far_lookup_cells_take_a_nearest_node() {
+    let mut obj = Obj::default();
+    obj.room([0.0, 0.0, 0.0], [3.0, 3.0, H]);
+    obj.room([33.0, 8.0, 0.0], [36.0, 11.0, H]);
+    let model = obj.model();
+    let (raw, _) = build_raw(&model, "two.obj", &options());
+    let h = &raw.header;
+    let m = h.lookup_subdivisions as usize;
+    let (nx, ny) = (h.dims[0] as usize, h.dims[1] as usize);
+    let (lx, ly) = (nx * m, ny * m);
+    let node_pos = |n: u32| {
+        let c = raw.node_cell[n as usize] as usize;
+        let (i, j, k) = (c % nx, (c / nx) % ny, c / (nx * ny));
+        Point3::new(
+            h.origin[0] + i as f64 * h.spacing_m,
+            h.origin[1] + j as f64 * h.spacing_m,
+            h.origin[2] + h.heights_m[k],
+        )
+    };
+    assert!(raw.node_cell.len() > 4);
+    let mut far = 0;
+    for (lc, &chosen) in raw.cell_node.iter().enumerate() {
+        let (li, lj, k) = (lc % lx, (lc / lx) % ly, lc / (lx * ly));
+        let p = Point3::new(
+            h.origin[0] - 0.5 * h.spacing_m + (li as f64 + 0.5) * h.spacing_m / m as f64,
+            h.origin[1] - 0.5 * h.spacing_m + (lj as f64 + 0.5) * h.spacing_m / m as f64,
+            h.origin[2] + h.heights_m[k],
+        );
+        let best = (0..raw.node_cell.len() as u32)
+            .map(|n| (node_pos(n) - p).norm())
+            .fold(f64::INFINITY, f64::min);
+        if best > 3.0 * h.spacing_m {
+            far += 1;
+            assert!(
+                ((node_pos(chosen) - p).norm() - best).abs() < 1e-9,
+                "lookup cell {lc} at {p:?}: node {chosen} at {:.3} m, nearest {best:.3} m",
+                (node_pos(chosen) - p).norm()
+            );
+        }
+    }
+    assert!(far > 1000, "{far} far lookup cells");
 }
 
 /// Two storeys, one above the other with a 0.3 m slab between them: nodes on both floors, none
