@@ -28,9 +28,10 @@
 //! misses and false positives; `VIS_DEBUG=999` lists the > 2° misses of the first 200
 //! positions. Prints figures; asserts nothing.
 //!
-//! Measured (2 cores, 1,000 positions, range 40 m; recall of segments > 2° / precision):
-//! res 64: 8.7 s, 2.4 MB, 97.2 % / 87.7 %; with neighbour merging 9.8 s, 2.9 MB, 99.6 % /
-//! 73.1 %; res 128: 14.9 s, 97.4 % / 90.6 %; res 256: 32.1 s, 2.6 MB, 97.4 % / 92.6 %.
+//! Measured 2026-11-27 (2 cores, 1,000 positions, range 40 m; recall of segments > 2° /
+//! precision): res 64: 9.2 s, 2.4 MB, 97.3 % / 87.7 %; with neighbour merging 10.0 s, 2.9 MB,
+//! 99.6 % / 72.9 %; res 128: 15.9 s, 97.5 % / 90.7 %; res 256: 31.5 s, 2.6 MB, 97.5 % / 92.6 %.
+//! Campus: 97,794 m² in 493 s, 708 MB peak (README, Prior visibility table).
 
 #[cfg(feature = "desk")]
 mod bench {
