@@ -6,7 +6,7 @@
 //! frames is six times a 30 Hz camera's, and a dropped frame means 0.4 s of walking). Three runs:
 //! as fast as the replay decodes, lossless (throughput: capture waits for the tracker); and paced
 //! like a 30 Hz camera with the latest frame winning (the device policy; the target: ≥ 30
-//! frames/s on 2 cores, p99 latency < 33 ms, DESIGN.md), once with the wearer standing still
+//! frames/s on 2 cores, p99 latency < 33 ms, docs/design.md), once with the wearer standing still
 //! until tracking starts (frame 0 repeated, then the walk), once walking from the first frame
 //! (the frames that go by during the initialisation search are dropped, and the tracker must
 //! catch up with the motion they held: that row measures the tracker's recovery as much as the
@@ -312,7 +312,7 @@ mod bench {
         let p99 = percentile(&paced.latency, 0.99);
         println!();
         println!(
-            "Target (DESIGN.md): ≥ 30 frames/s, p99 latency < 33 ms on 2 cores — paced run: {rate:.1} frames/s ({}), p99 {p99:.1} ms ({}); \
+            "Target (docs/design.md): ≥ 30 frames/s, p99 latency < 33 ms on 2 cores — paced run: {rate:.1} frames/s ({}), p99 {p99:.1} ms ({}); \
              unpaced throughput {:.1} frames/s.",
             if rate >= 29.5 { "met" } else { "NOT met" },
             if p99 < 33.0 { "met" } else { "NOT met" },

@@ -1,4 +1,4 @@
-//! Pose publish → subscriber receive latency over iceoryx2 shared memory (issue 8 / DESIGN.md
+//! Pose publish → subscriber receive latency over iceoryx2 shared memory (issue 8 / docs/design.md
 //! target: p99 < 50 µs): p50/p99/max over 100,000 samples, subscriber in another process.
 //!
 //! By default the bench re-executes itself (`std::env::current_exe()`) with the hidden arguments

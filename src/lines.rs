@@ -1,4 +1,4 @@
-//! The lines CSV of `omnitrack pose` (INTERFACES.md): one image edge and its model segment a row,
+//! The lines CSV of `omnitrack pose` (docs/interfaces.md): one image edge and its model segment a row,
 //! `sensor,u1,v1,u2,v2,x1,y1,z1,x2,y2,z2` — pixel end points in sensor `sensor` of the rig and
 //! the segment's world end points.
 //!

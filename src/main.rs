@@ -1,4 +1,4 @@
-//! `omnitrack`: the device binary's command line (INTERFACES.md, "Command line").
+//! `omnitrack`: the device binary's command line (docs/interfaces.md, "Command line").
 //!
 //! Standard output carries only documented output (CSV, JSON, TUM); messages go to standard
 //! error; every failure is one line and a non-zero exit, never a panic.
@@ -54,7 +54,7 @@ enum Command {
         #[arg(long, value_name = "tracker.toml")]
         config: Option<PathBuf>,
     },
-    /// Prints the detected edges of one sensor image as CSV (INTERFACES.md).
+    /// Prints the detected edges of one sensor image as CSV (docs/interfaces.md).
     Edges {
         #[arg(long, value_name = "RIG.toml")]
         rig: PathBuf,
@@ -290,7 +290,7 @@ fn run(command: Command) -> Result<(), String> {
     }
 }
 
-/// `tx,ty,tz,qw,qx,qy,qz` (INTERFACES.md order) to a pose.
+/// `tx,ty,tz,qw,qx,qy,qz` (the order of docs/interfaces.md) to a pose.
 fn parse_guess(text: &str) -> Result<omnitrack::Pose, String> {
     let v: Vec<f64> = text
         .split(',')
@@ -316,7 +316,7 @@ fn json_number(x: f64) -> String {
     }
 }
 
-/// The JSON object INTERFACES.md specifies for `omnitrack pose`.
+/// The JSON object docs/interfaces.md specifies for `omnitrack pose`.
 fn pose_json(s: &solver::Solution) -> String {
     let list = |xs: &mut dyn Iterator<Item = f64>| xs.map(json_number).collect::<Vec<_>>().join(",");
     let t = s.pose.translation.vector;
@@ -340,7 +340,7 @@ fn lens_name(lens: &omnitrack::geometry::Lens) -> &'static str {
     }
 }
 
-/// `omnitrack run` (INTERFACES.md).
+/// `omnitrack run` (docs/interfaces.md).
 #[derive(clap::Args)]
 struct RunArgs {
     /// The rig (a replay recording's own rig.toml is used when this is omitted).
@@ -375,8 +375,8 @@ struct RunArgs {
     realtime: bool,
 }
 
-/// `--init x,y,z[,radius_m]` (INTERFACES.md): the search volume's centre and radius; without a
-/// radius, the configured diameter.
+/// `--init x,y,z[,radius_m]` (docs/interfaces.md): the search volume's centre and radius; without
+/// a radius, the configured diameter.
 fn parse_init(text: &str, default_diameter: f64) -> Result<omnitrack::tracker::SearchVolume, String> {
     let v: Vec<f64> = text
         .split(',')

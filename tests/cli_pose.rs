@@ -1,4 +1,4 @@
-//! `omnitrack pose` as a black box: rig TOML + lines CSV in, the JSON of INTERFACES.md out.
+//! `omnitrack pose` as a black box: rig TOML + lines CSV in, the JSON of docs/interfaces.md out.
 
 mod common;
 

@@ -1,5 +1,5 @@
 //! `omnitrack run` as a black box: bad arguments and inputs are one line and a non-zero exit,
-//! and a short replay writes a TUM trajectory (INTERFACES.md, "Command line").
+//! and a short replay writes a TUM trajectory (docs/interfaces.md, "Command line").
 
 mod common;
 

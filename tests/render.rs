@@ -1,7 +1,7 @@
 //! The desk renderer against geometry: corners of a room land on colour boundaries where the
 //! lens model says they project, the BVH agrees with brute force, ear clipping covers non-convex
-//! faces, recordings have the INTERFACES.md layout, renders are deterministic, and several rays
-//! per pixel blend colours across boundaries only.
+//! faces, recordings have the layout of docs/interfaces.md, renders are deterministic, and
+//! several rays per pixel blend colours across boundaries only.
 #![cfg(feature = "desk")]
 
 use nalgebra::{Isometry3, Point2, Point3, Translation3, UnitQuaternion, Vector3};

@@ -494,7 +494,7 @@ fn contents(table: &VisibilityTable, model: &Model) -> Vec<NodeContents> {
         .collect()
 }
 
-/// Winding carries no meaning (INTERFACES.md): the same building with its faces wound at
+/// Winding carries no meaning (docs/interfaces.md, "Building model"): the same building with its faces wound at
 /// random, three draws, gives the same nodes and the same sets.
 #[test]
 fn winding_flipped_at_random_leaves_the_table_unchanged() {

@@ -1,6 +1,6 @@
 //! The mock camera: replays a recording from disk as if it came from the rig.
 //!
-//! In: a recording directory (INTERFACES.md, "Recording"):
+//! In: a recording directory (docs/interfaces.md, "Recording"):
 //!
 //! ```text
 //! REC/rig.toml             the rig the recording was made with (required)

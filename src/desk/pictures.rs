@@ -624,7 +624,7 @@ pub fn omni_view(
             let (w, h) = images[k].dimensions();
             let tile = root.clone().shrink((x0 as i32, y0 as i32), (w as i32, h as i32));
             for run in sensor_runs {
-                // Pixel centres sit at integers (INTERFACES.md), as plotters' pixel grid does.
+                // Pixel centres sit at integers (docs/interfaces.md), as plotters' pixel grid does.
                 let pts: Vec<(i32, i32)> = run.iter().map(|p| (p.0.round() as i32, p.1.round() as i32)).collect();
                 tile.draw(&PathElement::new(pts, line))?;
             }

@@ -1,5 +1,5 @@
 //! Synthetic recordings: a rig moving along a known trajectory through a building model,
-//! written in the recording layout of INTERFACES.md so that replay reads it like a real one.
+//! written in the recording layout of docs/interfaces.md so that replay reads it like a real one.
 //!
 //! In: a rig, the model's OBJ text, a trajectory (`T_world_rig` per frame) and
 //! [`RecordingOptions`]. Out: `REC/rig.toml`, `REC/frames.csv`, `REC/sensorK/NNNNNN.png`,

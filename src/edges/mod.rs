@@ -444,7 +444,7 @@ impl Drop for EdgeDetector {
     }
 }
 
-/// Header of the `omnitrack edges` CSV (INTERFACES.md), then our extra columns. `pieces` is
+/// Header of the `omnitrack edges` CSV (docs/interfaces.md), then our extra columns. `pieces` is
 /// empty for an edge the image shows whole (one piece, passing the a-contrario test untrimmed,
 /// [`Edge::shown`]); `none` where the image shows no piece of it as a line; otherwise the pixel
 /// ends of the pieces it does show, from end 1 to end 2, as `u1 v1 u2 v2` groups separated by

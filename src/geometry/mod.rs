@@ -1,7 +1,8 @@
 //! The maths everything else stands on: poses, quaternions in our file order, lenses.
 //!
 //! In: numbers. Out: nalgebra types. This module imports nothing of capture, runtime, publishing
-//! or I/O (DESIGN.md's dependency rule), so the solvers and tests can use it anywhere.
+//! or I/O (the dependency rules of docs/design.md, "Layers"), so the solvers and tests can use it
+//! anywhere.
 
 pub mod lens;
 pub mod observation;

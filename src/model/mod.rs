@@ -1,7 +1,7 @@
 //! The building model: vertices, planar faces, and the model segments the tracker matches.
 //!
-//! In: a Wavefront OBJ (INTERFACES.md: `v`, `f`, `l`; `o`/`g`/`usemtl` kept as labels; metres,
-//! z up). Out: a [`Model`] whose [`Segment`]s are the boundaries of its surfaces — the lines
+//! In: a Wavefront OBJ (docs/interfaces.md, "Building model": `v`, `f`, `l`; `o`/`g`/`usemtl`
+//! kept as labels; metres, z up). Out: a [`Model`] whose [`Segment`]s are the boundaries of its surfaces — the lines
 //! where the surface is not flat (creases, corners, free borders) — plus the free `l` segments.
 //! A triangulation diagonal or a seam between coplanar faces is not a segment; collinear pieces
 //! of one straight boundary are one segment; an edge shared by several faces appears once and

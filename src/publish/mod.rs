@@ -2,7 +2,7 @@
 //!
 //! In: a [`PoseSample`] per frame (built from the tracker's `T_world_rig`, its covariance and
 //! counters with [`PoseSample::from_pose`]) and now and then a [`StatusSample`]. Out: the
-//! publish–subscribe services `omnitrack/pose` and `omnitrack/status` (INTERFACES.md, "Pose
+//! publish–subscribe services `omnitrack/pose` and `omnitrack/status` (docs/interfaces.md, "Pose
 //! service"). The publisher knows the pose message only: nothing of frames, edges or the tracker.
 //!
 //! Each service keeps a history of one sample, so a subscriber that starts late gets the latest
@@ -50,7 +50,7 @@ use iceoryx2::service::port_factory::{event as event_factory, publish_subscribe 
 pub use listen::{format_pose_line, listen};
 pub use sample::{PoseSample, PoseStatus, SearchState, Stage, StatusSample, STATUS_MAX_SENSORS, STATUS_STAGES};
 
-/// Name of the pose service (INTERFACES.md).
+/// Name of the pose service (docs/interfaces.md).
 pub const POSE_SERVICE: &str = "omnitrack/pose";
 /// Name of the status service.
 pub const STATUS_SERVICE: &str = "omnitrack/status";

@@ -60,8 +60,8 @@ impl std::fmt::Display for PoseStatus {
     }
 }
 
-/// One pose of the rig, `T_world_rig`, as published on `omnitrack/pose` (INTERFACES.md, "Pose
-/// service"). C layout, 384 bytes, alignment 8:
+/// One pose of the rig, `T_world_rig`, as published on `omnitrack/pose` (docs/interfaces.md,
+/// "Pose service"). C layout, 384 bytes, alignment 8:
 ///
 /// | offset | field | type |
 /// | --- | --- | --- |

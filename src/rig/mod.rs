@@ -1,6 +1,6 @@
 //! The rig: N sensors, each a lens, an image size and a mounting `T_rig_sensor`.
 //!
-//! In: the rig TOML of INTERFACES.md (`firmware_config/*.toml`, `REC/rig.toml`).
+//! In: the rig TOML of docs/interfaces.md, "Rig file" (`firmware_config/*.toml`, `REC/rig.toml`).
 //! Out: a validated [`Rig`]; every error is one line naming the file, the sensor and the key.
 //!
 //! The TOML is walked by hand rather than through serde derive so that each message can say which
@@ -181,8 +181,8 @@ impl Rig {
         Ok(Rig { name, sensors, usb })
     }
 
-    /// The rig as TOML in the INTERFACES.md format, with every number written so that it reads
-    /// back bit-for-bit.
+    /// The rig as TOML in the format of docs/interfaces.md ("Rig file"), with every number written
+    /// so that it reads back bit-for-bit.
     pub fn to_toml_string(&self) -> String {
         let mut out = String::new();
         let _ = writeln!(out, "name = {}", Value::String(self.name.clone()));

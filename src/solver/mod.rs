@@ -91,7 +91,7 @@ pub struct Solution {
     /// `T_world_rig`.
     pub pose: Pose,
     /// 6×6 covariance, row-major over (tx, ty, tz, rx, ry, rz): the rig position in the world and
-    /// the rotation as a small-angle vector in the world frame (INTERFACES.md, pose message).
+    /// the rotation as a small-angle vector in the world frame (docs/interfaces.md, "Pose service").
     pub covariance: Matrix6<f64>,
     /// Indices (into the input) of the correspondences the final fit used.
     pub inliers: Vec<usize>,

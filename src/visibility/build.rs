@@ -15,7 +15,7 @@
 //!    box 1.2 m or more across is a room, since winding cannot say it is solid);
 //! 4. no face is nearer than `clearance_m` (exact point–triangle distance; default 0.2 m).
 //!
-//! Nothing reads the faces' winding (INTERFACES.md gives it no meaning): a wall may be one
+//! Nothing reads the faces' winding (docs/interfaces.md, "Building model", gives it no meaning): a wall may be one
 //! face seen from both sides, faces may be duplicated or overlap, and a model may have no
 //! faces outside its rooms. The rule before this one counted the faces seen "from behind",
 //! and kept 459 of 1,872 nodes of a building drawn with single-face walls wound either way

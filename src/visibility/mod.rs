@@ -639,7 +639,7 @@ fn push_point(out: &mut String, p: &Point3<f64>) {
     out.push(']');
 }
 
-/// The JSON of `omnitrack visibility query` (INTERFACES.md): `{"node_m":[x,y,z],"faces":[OBJ
+/// The JSON of `omnitrack visibility query` (docs/interfaces.md): `{"node_m":[x,y,z],"faces":[OBJ
 /// face numbers],"segments":[[x1,y1,z1,x2,y2,z2],...],"vertices":[[x,y,z],...]}` for the node
 /// serving `at`. Faces are 1-based OBJ face numbers in file order (a non-planar record split
 /// into several faces appears once). A table without valid nodes gives `"node_m":null` and

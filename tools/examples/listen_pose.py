@@ -2,7 +2,7 @@
 """Example consumer of omnitrack poses in Python, over iceoryx2 shared memory (zero-copy).
 
 Defines the C struct `PoseSample` field for field as `omnitrack::publish::PoseSample`
-(INTERFACES.md, "Pose service"), with the same iceoryx2 type name `omnitrack.PoseSample.v1`,
+(docs/interfaces.md, "Pose service"), with the same iceoryx2 type name `omnitrack.PoseSample.v1`,
 subscribes to the publish-subscribe service `omnitrack/pose` and prints each sample.
 
 Set up the bindings once (PyPI package `iceoryx2`, same version as the Rust crate):

@@ -5,7 +5,8 @@
 //! faces, vertices and model segments the tracker will see in it.
 //!
 //! `omnitrack-desk render --rig R --model M.obj --trajectory T.tum --out DIR` renders a synthetic
-//! recording (INTERFACES.md layout) of the rig moving along the trajectory through the model.
+//! recording (the layout of docs/interfaces.md, "Recording") of the rig moving along the
+//! trajectory through the model.
 //!
 //! `omnitrack-desk model from-ifc FILE.ifc --out MODEL.obj [--storey NAME]` converts an IFC
 //! building (what architects deliver) into the coarse OBJ model through IfcOpenShell

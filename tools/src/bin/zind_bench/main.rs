@@ -9,7 +9,8 @@
 //! README says how to get the public sample tour; its terms are academic and non-commercial, so
 //! none of it is ever committed). Out (under `--out`, default `target/zind`): the coarse model
 //! built from the room layouts (`plan.geojson`, `model.obj`), one recording per rig and
-//! panorama (INTERFACES.md layout: every frame is the same instant, replayable by
+//! panorama (the layout of docs/interfaces.md, "Recording": every frame is the same instant,
+//! replayable by
 //! `omnitrack run`), overlays of the model at the annotated pose, `results.csv`, and on stdout
 //! one table per rig:
 //!
