@@ -31,20 +31,25 @@ enum Command {
     Run(RunArgs),
     /// Validates a rig, and optionally a model and a tracker config, and summarises them.
     Check {
-        #[arg(long)]
+        /// The rig file to validate.
+        #[arg(long, value_name = "RIG.toml")]
         rig: Option<PathBuf>,
-        #[arg(long)]
+        /// A building model (OBJ) to load, with its faces and segments summarised.
+        #[arg(long, value_name = "MODEL.obj")]
         model: Option<PathBuf>,
-        #[arg(long)]
+        /// A tracker config to validate against the rig.
+        #[arg(long, value_name = "tracker.toml")]
         config: Option<PathBuf>,
     },
     /// Solves one pose T_world_rig from line correspondences and prints it as JSON.
     Pose {
+        /// The rig whose sensors the lines' image end points belong to.
         #[arg(long, value_name = "RIG.toml")]
         rig: PathBuf,
         /// CSV with header sensor,u1,v1,u2,v2,x1,y1,z1,x2,y2,z2.
         #[arg(long, value_name = "FILE.csv")]
         lines: PathBuf,
+        /// Solver: Kumar–Hanson's R_and_T, R_then_T or Med_R_and_T (lms), or the ξ simplex (xi).
         #[arg(long, value_enum, default_value = "r_and_t")]
         method: MethodArg,
         /// Starting pose tx,ty,tz,qw,qx,qy,qz (without it the solvers search rotation space).
@@ -56,13 +61,16 @@ enum Command {
     },
     /// Prints the detected edges of one sensor image as CSV (docs/interfaces.md).
     Edges {
+        /// The rig the image comes from (its sensor's lens and size).
         #[arg(long, value_name = "RIG.toml")]
         rig: PathBuf,
+        /// The sensor's id in the rig.
         #[arg(long)]
         sensor: usize,
         /// Tracker config whose [edges] section to use (default: the papers' values).
         #[arg(long, value_name = "tracker.toml")]
         config: Option<PathBuf>,
+        /// The sensor image (PNG or JPEG).
         #[arg(value_name = "IMAGE.png")]
         image: PathBuf,
     },
@@ -80,7 +88,8 @@ enum Command {
     /// Prints the model segments of an OBJ as CSV: x1,y1,z1,x2,y2,z2,faces (OBJ face numbers,
     /// space-separated; empty for a free `l` segment).
     Segments {
-        #[arg(long)]
+        /// The building model.
+        #[arg(long, value_name = "MODEL.obj")]
         model: PathBuf,
     },
 }
@@ -89,8 +98,10 @@ enum Command {
 enum VisibilityCommand {
     /// Builds the table of visible faces, segments and vertices per node (progress on stderr).
     Build {
+        /// The building model.
         #[arg(long, value_name = "MODEL.obj")]
         model: PathBuf,
+        /// Where to write the table.
         #[arg(long, value_name = "TABLE.vis")]
         out: PathBuf,
         /// Node spacing in metres (default: [visibility] node_spacing_m of tracker.toml, 1 m).
@@ -99,8 +110,10 @@ enum VisibilityCommand {
     },
     /// Prints the visibility set serving a position as one line of JSON.
     Query {
+        /// The table, as `visibility build` wrote it.
         #[arg(long, value_name = "TABLE.vis")]
         visibility: PathBuf,
+        /// The position in world coordinates, metres.
         #[arg(long, value_name = "x,y,z", allow_hyphen_values = true)]
         at: String,
     },
@@ -119,7 +132,7 @@ enum MethodArg {
 }
 
 fn main() -> ExitCode {
-    let cli = Cli::parse();
+    let cli: Cli = omnitrack::runtime::cli::parse_or_exit("omnitrack", "omnitrack demo");
     match run(cli.command) {
         Ok(()) => ExitCode::SUCCESS,
         Err(message) => {
@@ -346,6 +359,7 @@ struct RunArgs {
     /// The rig (a replay recording's own rig.toml is used when this is omitted).
     #[arg(long, value_name = "RIG.toml")]
     rig: Option<PathBuf>,
+    /// The building model (OBJ, metres, z up).
     #[arg(long, value_name = "MODEL.obj")]
     model: PathBuf,
     /// Prior visibility table (default: MODEL.vis beside the model, built if absent).

@@ -42,6 +42,31 @@ fn bad_arguments_and_inputs_are_one_line_errors() {
     }
 }
 
+/// clap's usage errors are one line too (its own report spans the problem, a tip and the usage);
+/// `--help` still prints the whole help on stdout.
+#[test]
+fn usage_errors_are_one_line() {
+    for (args, expected) in [
+        (vec!["run", "--bogus"], "'--bogus'"),
+        (vec!["run"], "--model"),
+        (vec!["pose"], "--lines"),
+        (vec!["visibility"], "build, query"),
+        (vec![], "no command given"),
+    ] {
+        let (code, stdout, stderr) = omnitrack(&args);
+        assert_eq!(code, 2, "{args:?}: {stderr}");
+        assert!(stdout.is_empty(), "{args:?} printed on stdout: {stdout}");
+        assert_eq!(stderr.trim_end().lines().count(), 1, "{args:?}: {stderr}");
+        assert!(
+            stderr.contains(expected),
+            "{args:?}: {stderr:?} should mention {expected:?}"
+        );
+    }
+    let (code, stdout, _) = omnitrack(&["run", "--help"]);
+    assert_eq!(code, 0);
+    assert!(stdout.contains("--trajectory"), "{stdout}");
+}
+
 #[cfg(feature = "desk")]
 #[test]
 fn a_short_replay_writes_a_tum_trajectory_near_the_truth() {

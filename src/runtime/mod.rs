@@ -9,8 +9,10 @@
 //! After start-up the loop allocates nothing of its own: the frame set, the edge detector's
 //! buffers and the tracker's tables are sized once (the sink decides what it keeps).
 //!
-//! [`pipeline`] is the threaded device runtime (capture threads, frame pool, tracker, publishers).
+//! [`pipeline`] is the threaded device runtime (capture threads, frame pool, tracker, publishers);
+//! [`cli`] the command-line parsing both binaries share.
 
+pub mod cli;
 pub mod pipeline;
 
 use crate::capture::{FrameSet, FrameSource, SourceError};

@@ -18,7 +18,6 @@
 //! Every error is one line on stderr and exit code 2, so scripts can tell a bad input from a
 //! crash.
 
-use clap::error::ErrorKind;
 use clap::{Parser, Subcommand};
 use omnitrack::desk::eval::{evaluate_files, ErrorSeries, EvalOptions, Evaluation, Stats};
 use omnitrack::desk::floorplan;
@@ -70,8 +69,10 @@ enum Command {
     },
     /// Render a synthetic recording of a rig moving through a model along a trajectory.
     Render {
+        /// The rig to render: each sensor's lens, size and mounting.
         #[arg(long, value_name = "RIG.toml")]
         rig: PathBuf,
+        /// The building model to render (OBJ, metres, z up).
         #[arg(long, value_name = "MODEL.obj")]
         model: PathBuf,
         /// T_world_rig per frame, TUM format; one recorded frame per line.
@@ -199,32 +200,8 @@ impl Look {
 }
 
 fn main() -> ExitCode {
-    let cli = match Cli::try_parse() {
-        Ok(cli) => cli,
-        Err(e) if matches!(e.kind(), ErrorKind::DisplayHelp | ErrorKind::DisplayVersion) => e.exit(),
-        Err(e) if e.kind() == ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand => {
-            eprintln!("omnitrack-desk: no command given (try: omnitrack-desk extrude PLAN.geojson --out MODEL.obj)");
-            return ExitCode::from(2);
-        }
-        Err(e) => {
-            // clap's report spans several lines (the problem, a tip, the usage); keep the first two.
-            let text = e.render().to_string();
-            let mut problem = String::new();
-            for line in text.lines().map(str::trim).take_while(|l| !l.starts_with("Usage:")) {
-                if !line.is_empty() {
-                    if !problem.is_empty() {
-                        problem.push_str(if problem.ends_with(':') { " " } else { "; " });
-                    }
-                    problem.push_str(line);
-                }
-            }
-            eprintln!(
-                "omnitrack-desk: {} (see omnitrack-desk --help)",
-                problem.trim_start_matches("error: ")
-            );
-            return ExitCode::from(2);
-        }
-    };
+    let cli: Cli =
+        omnitrack::runtime::cli::parse_or_exit("omnitrack-desk", "omnitrack-desk extrude PLAN.geojson --out MODEL.obj");
     match run(cli.command) {
         Ok(()) => ExitCode::SUCCESS,
         Err(message) => {
