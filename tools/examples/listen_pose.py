@@ -9,9 +9,9 @@ Set up the bindings once (PyPI package `iceoryx2`, same version as the Rust crat
 
     python3 -m venv tools/.venv-iox && tools/.venv-iox/bin/pip install iceoryx2==0.10.0
 
-Try it against the demo publisher (two shells, or `&`):
+Try it against the example publisher (two shells, or `&`):
 
-    cargo run -p omnitrack-tools --bin publish_demo -- --count 200 --hz 50 &
+    cargo run --release --example publish_poses -- 10 &
     tools/.venv-iox/bin/python tools/examples/listen_pose.py --count 10
 
 Options: --service NAME (default omnitrack/pose), --count N (stop after N samples, default: run

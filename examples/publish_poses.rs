@@ -1,0 +1,44 @@
+//! Publishes poses on the tracker's iceoryx2 service, as `omnitrack run` does for every frame:
+//! a rig walking a 2 m circle at 30 Hz, each pose with a covariance, for `SECONDS` (default 3).
+//! Any subscriber on the same computer receives them without a copy: `omnitrack listen`,
+//! `cargo run --example subscribe_poses`, or `tools/examples/listen_pose.py`.
+//!
+//! Run: `cargo run --release --example publish_poses [SECONDS]`.
+
+use nalgebra::{Matrix6, Translation3, UnitQuaternion, Vector3};
+use omnitrack::geometry::Pose;
+use omnitrack::publish::{PosePublisher, PoseStatus, POSE_SERVICE};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+
+fn main() {
+    let seconds: f64 = std::env::args().nth(1).and_then(|s| s.parse().ok()).unwrap_or(3.0);
+    let publisher = PosePublisher::create(POSE_SERVICE).unwrap_or_else(|e| {
+        eprintln!("publish_poses: {e}");
+        std::process::exit(2)
+    });
+    // 1 cm and 0.1° standard deviations.
+    let covariance = Matrix6::from_diagonal(&nalgebra::Vector6::new(1e-4, 1e-4, 1e-4, 3e-6, 3e-6, 3e-6));
+    let start = Instant::now();
+    let mut sequence = 0u64;
+    while start.elapsed().as_secs_f64() < seconds {
+        let angle = 0.5 * start.elapsed().as_secs_f64();
+        let pose: Pose = Pose::from_parts(
+            Translation3::new(2.0 * angle.cos(), 2.0 * angle.sin(), 1.5),
+            UnitQuaternion::from_axis_angle(&Vector3::z_axis(), angle + std::f64::consts::FRAC_PI_2),
+        );
+        let now_ns = SystemTime::now()
+            .duration_since(UNIX_EPOCH)
+            .map_or(0, |d| d.as_nanos() as u64);
+        match publisher.publish_pose(now_ns, sequence, PoseStatus::Tracking, &pose, &covariance, 60, 1e-5) {
+            Ok(reached) if sequence % 30 == 0 => println!("seq {sequence}: {reached} subscriber(s)"),
+            Ok(_) => {}
+            Err(e) => {
+                eprintln!("publish_poses: {e}");
+                std::process::exit(2)
+            }
+        }
+        sequence += 1;
+        std::thread::sleep(Duration::from_millis(33));
+    }
+    println!("published {sequence} poses on {POSE_SERVICE}");
+}
