@@ -21,7 +21,7 @@ use omnitrack::config::TrackerConfig;
 use omnitrack::publish::{PoseStatus, PoseSubscriber, SearchState, StatusSample, StatusSubscriber};
 use omnitrack::rig::Sensor;
 use omnitrack::runtime::pipeline::{
-    inside_publish, live_sensors, run_pipeline, FrameSink, PipelineOptions, PipelineStage, PipelineThread, StopReason,
+    inside_publish, live_sensors, run_pipeline, FrameSink, PipelineOptions, PipelineStage, PipelineThread, RunEnd,
     TumSink,
 };
 use omnitrack::runtime::{FrameRecord, RunOptions};
@@ -267,7 +267,7 @@ fn every_processed_frame_is_published_and_equals_the_trajectory() {
     let records = sink.records;
     eprintln!("{summary}");
 
-    assert_eq!(summary.reason, StopReason::EndOfStream);
+    assert_eq!(summary.reason, RunEnd::EndOfStream);
     assert_eq!(summary.frames_captured, RENDERED as u64);
     assert_eq!(summary.frames_processed, RENDERED as u64);
     assert_eq!(summary.frames_dropped, 0);
@@ -476,7 +476,7 @@ fn nothing_allocates_on_the_frame_path_over_300_frames() {
     eprintln!(
         "allocation window: {COUNTED} frames, {allocs} allocations on the frame path, {in_publish} inside iceoryx2 publish"
     );
-    assert_eq!(summary.reason, StopReason::Stopped);
+    assert_eq!(summary.reason, RunEnd::Stopped);
     assert!(sink.records.len() >= START + COUNTED);
     let window = &sink.records[START..START + COUNTED];
     let tracked = window.iter().filter(|r| r.result.pose.is_some()).count();
@@ -516,7 +516,7 @@ fn the_latest_frame_wins_and_every_drop_is_counted() {
     )
     .unwrap();
     eprintln!("{summary}");
-    assert_eq!(summary.reason, StopReason::EndOfStream);
+    assert_eq!(summary.reason, RunEnd::EndOfStream);
     assert_eq!(summary.frames_captured, RENDERED as u64);
     assert!(summary.frames_dropped > 0);
     assert_eq!(summary.frames_processed + summary.frames_dropped, RENDERED as u64);
@@ -553,7 +553,7 @@ fn the_stop_flag_ends_the_run_with_the_trajectory_flushed() {
     )
     .unwrap();
     eprintln!("{summary} (stopped in {:?})", started.elapsed());
-    assert_eq!(summary.reason, StopReason::Stopped);
+    assert_eq!(summary.reason, RunEnd::Stopped);
     assert!(summary.frames_processed < 100, "{}", summary.frames_processed);
     // The sink got every processed frame, and the file holds every tracked one.
     assert_eq!(sink.records.len() as u64, summary.frames_processed);
@@ -601,7 +601,7 @@ fn sigterm_stops_the_run_cleanly() {
         &mut RaiseAfter(0, 5),
     )
     .unwrap();
-    assert_eq!(summary.reason, StopReason::Stopped);
+    assert_eq!(summary.reason, RunEnd::Stopped);
     assert!(opts.stop.load(Ordering::Relaxed));
     assert!(summary.frames_processed < 100);
 }
@@ -722,7 +722,7 @@ fn per_sensor_capture_assembles_frames_by_timestamp_and_survives_a_dead_sensor()
     let summary = run_pipeline(source, &f.model, &f.table, &TrackerConfig::default(), &opts, &mut sink).unwrap();
     eprintln!("{summary}");
     eprintln!("{:?}", summary.sensors);
-    assert_eq!(summary.reason, StopReason::MaxFrames);
+    assert_eq!(summary.reason, RunEnd::MaxFrames);
     assert_eq!(summary.frames_processed, FRAMES);
     assert!(summary.source.is_none());
     // Before the failure the six images of an instant made one frame; after it, five.

@@ -384,11 +384,7 @@ pub fn run_demo(opts: &DemoOptions) -> Result<DemoReport, String> {
             estimate_frame.push(r.sequence);
         }
         let time_s = r.timestamp_ns.saturating_sub(t0) as f64 * 1e-9;
-        let now = tracker
-            .correspondences()
-            .iter()
-            .filter_map(|c| CorrespondenceState::from_code(c.state.code()).map(|s| (c.segment, s)))
-            .collect();
+        let now = tracker.correspondences().iter().map(|c| (c.segment, c.state)).collect();
         states.push((time_s, now));
         track_bar.inc(1);
         Ok(())

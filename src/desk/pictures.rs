@@ -16,6 +16,7 @@
 use crate::capture::FrameSet;
 use crate::desk::eval::PoseError;
 use crate::geometry::{Lens, Pose};
+pub use crate::tracker::CorrespondenceState;
 use crate::trajectory::Stamped;
 use crate::{Model, Rig};
 use image::RgbImage;
@@ -753,41 +754,12 @@ pub fn error_over_time(path: &Path, title: &str, traces: &[ErrorTrace], size: (u
     })
 }
 
-/// The state of a correspondence in the maintenance state machine (Koch–Teller §4.2:
-/// unknown → pending → accepted). The `u8` values are the documented codes 0, 1, 2.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-#[repr(u8)]
-pub enum CorrespondenceState {
-    Unknown = 0,
-    Pending = 1,
-    Accepted = 2,
-}
-
-impl CorrespondenceState {
-    /// The state of a code 0, 1 or 2.
-    pub fn from_code(code: u8) -> Option<Self> {
-        match code {
-            0 => Some(Self::Unknown),
-            1 => Some(Self::Pending),
-            2 => Some(Self::Accepted),
-            _ => None,
-        }
-    }
-
-    fn name(self) -> &'static str {
-        match self {
-            Self::Unknown => "unknown",
-            Self::Pending => "pending",
-            Self::Accepted => "accepted",
-        }
-    }
-
-    fn colour(self) -> RGBColor {
-        match self {
-            Self::Unknown => RGBColor(215, 215, 215),
-            Self::Pending => RGBColor(245, 170, 40),
-            Self::Accepted => RGBColor(40, 160, 70),
-        }
+/// The colour of a correspondence state in the pictures.
+fn state_colour(state: CorrespondenceState) -> RGBColor {
+    match state {
+        CorrespondenceState::Unknown => RGBColor(215, 215, 215),
+        CorrespondenceState::Pending => RGBColor(245, 170, 40),
+        CorrespondenceState::Accepted => RGBColor(40, 160, 70),
     }
 }
 
@@ -843,7 +815,7 @@ pub fn correspondence_states(
             CorrespondenceState::Accepted,
         ] {
             let square = [(x, si(10)), (x + si(28), si(30))];
-            legend.draw(&Rectangle::new(square, state.colour().filled()))?;
+            legend.draw(&Rectangle::new(square, state_colour(state).filled()))?;
             legend.draw(&Rectangle::new(square, RGBColor(120, 120, 120).stroke_width(s(1))))?;
             legend.draw_text(state.name(), &font(LABEL_PX), (x + si(36), si(16)))?;
             x += si(170);
@@ -881,7 +853,7 @@ pub fn correspondence_states(
             let y_bottom = (n - row - 1) as f64 + 0.12;
             chart.draw_series(trace.samples.iter().enumerate().map(|(i, &(t, state))| {
                 let next = trace.samples.get(i + 1).map(|s| s.0).unwrap_or(t_end);
-                Rectangle::new([(t, y_bottom), (next, y_top)], state.colour().filled())
+                Rectangle::new([(t, y_bottom), (next, y_top)], state_colour(state).filled())
             }))?;
             let (px, py) = chart.backend_coord(&(t_start, (n - row) as f64 - 0.5));
             let style = font(TICK_PX + 1.0).pos(plotters::style::text_anchor::Pos::new(

@@ -250,9 +250,10 @@ impl FrameSink for TumSink {
     }
 }
 
-/// Why the pipeline stopped (when it did not fail).
+/// Why the pipeline stopped (when it did not fail). Not the solver's `StopReason`, which says why
+/// consensus sampling stopped.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum StopReason {
+pub enum RunEnd {
     /// The source ended.
     EndOfStream,
     /// `max_frames` were processed.
@@ -264,7 +265,7 @@ pub enum StopReason {
 /// What a run did.
 #[derive(Debug, Clone)]
 pub struct PipelineSummary {
-    pub reason: StopReason,
+    pub reason: RunEnd,
     /// Start-up done → last frame processed.
     pub elapsed: Duration,
     /// Frames handed into the pool by capture (or assembly).
@@ -736,7 +737,7 @@ fn capture_sensor(
 
 /// What the process thread hands back.
 struct ProcessOutcome {
-    reason: StopReason,
+    reason: RunEnd,
     clocks: Vec<StageClock>,
     tracker: TrackerStats,
     frames_processed: u64,
@@ -795,20 +796,20 @@ impl Processor<'_, '_, '_> {
         self.publish_status();
         let reason = loop {
             if self.shared.stop.load(Ordering::Relaxed) {
-                break StopReason::Stopped;
+                break RunEnd::Stopped;
             }
             if self.shared.halt.load(Ordering::Relaxed) {
                 // A sink or source failure; the caller reports it.
-                break StopReason::Stopped;
+                break RunEnd::Stopped;
             }
             if self.max_frames.is_some_and(|m| self.processed >= m) {
-                break StopReason::MaxFrames;
+                break RunEnd::MaxFrames;
             }
             let wait = next_status.saturating_duration_since(Instant::now()).min(TICK);
             match self.ready.recv_timeout(wait) {
                 Ok(h) => self.frame(h),
                 Err(RecvTimeoutError::Timeout) => {}
-                Err(RecvTimeoutError::Disconnected) => break StopReason::EndOfStream,
+                Err(RecvTimeoutError::Disconnected) => break RunEnd::EndOfStream,
             }
             let now = Instant::now();
             if now >= next_status {

@@ -37,6 +37,25 @@ impl CorrespondenceState {
             CorrespondenceState::Accepted => 2,
         }
     }
+
+    /// The state of a code 0, 1 or 2 (see [`code`](Self::code)).
+    pub fn from_code(code: u8) -> Option<Self> {
+        match code {
+            0 => Some(CorrespondenceState::Unknown),
+            1 => Some(CorrespondenceState::Pending),
+            2 => Some(CorrespondenceState::Accepted),
+            _ => None,
+        }
+    }
+
+    /// `unknown`, `pending` or `accepted`.
+    pub fn name(self) -> &'static str {
+        match self {
+            CorrespondenceState::Unknown => "unknown",
+            CorrespondenceState::Pending => "pending",
+            CorrespondenceState::Accepted => "accepted",
+        }
+    }
 }
 
 /// The edge a correspondence holds: its plane and hue signature at its last observation.
