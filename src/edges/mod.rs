@@ -30,7 +30,7 @@ mod hue;
 mod sensor;
 
 pub use hue::{hue_of, HueSignature};
-pub use sensor::SensorStats;
+pub use sensor::ExtractionStats;
 
 use crate::capture::{FrameSet, SensorImage};
 use crate::config::EdgeConfig;
@@ -264,7 +264,7 @@ pub struct EdgeDetector {
     all: Vec<Edge>,
     /// all[offsets[k]..offsets[k + 1]] are sensor k's edges.
     offsets: Vec<usize>,
-    stats: Vec<SensorStats>,
+    stats: Vec<ExtractionStats>,
 }
 
 impl EdgeDetector {
@@ -350,7 +350,7 @@ impl EdgeDetector {
             done,
             all: Vec::with_capacity(n * max_edges),
             offsets: vec![0; n + 1],
-            stats: vec![SensorStats::default(); n],
+            stats: vec![ExtractionStats::default(); n],
         }
     }
 
@@ -426,7 +426,7 @@ impl EdgeDetector {
     }
 
     /// Sensor `k`'s counters of the last detection.
-    pub fn sensor_stats(&self, k: usize) -> SensorStats {
+    pub fn sensor_stats(&self, k: usize) -> ExtractionStats {
         self.stats[k]
     }
 }

@@ -115,12 +115,13 @@ pub(crate) struct Workspace {
     contrario: Contrario,
     pub edges: Vec<Edge>,
     /// Counters of the last run (for benchmarks and diagnostics).
-    pub stats: SensorStats,
+    pub stats: ExtractionStats,
 }
 
-/// What the last run of one sensor saw.
+/// What the last edge extraction of one sensor image saw (not `capture::SensorStats`, which counts
+/// what a sensor delivered).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub struct SensorStats {
+pub struct ExtractionStats {
     pub edgels: u32,
     pub chains: u32,
     pub candidates: u32,
@@ -185,7 +186,7 @@ impl Workspace {
             // Trying both polarities doubles LSD's count of tests.
             contrario: Contrario::new(w, h, 2 * (w + h), 2.0),
             edges: Vec::with_capacity(max_edges),
-            stats: SensorStats::default(),
+            stats: ExtractionStats::default(),
         }
     }
 
@@ -194,7 +195,7 @@ impl Workspace {
     pub fn run(&mut self, img: &SensorImage) {
         self.edges.clear();
         self.cands.clear();
-        self.stats = SensorStats::default();
+        self.stats = ExtractionStats::default();
         if !img.valid || img.width() as usize != self.w || img.height() as usize != self.h || self.w < 3 || self.h < 3 {
             return;
         }

@@ -276,7 +276,7 @@ pub struct PipelineSummary {
     /// Indexed by sensor id.
     pub sensors: Vec<SensorSummary>,
     /// Indexed by [`PipelineStage::index`].
-    pub stages: [StageSummary; 7],
+    pub stages: [StageSummary; PipelineStage::COUNT],
     pub tracker: TrackerStats,
     /// The whole-rig source's own counters (per-sensor sources: `None`).
     pub source: Option<SourceStats>,
@@ -783,7 +783,7 @@ struct Processor<'a, 'o, 'm> {
     status_delivered: Vec<u64>,
     status_rates: Vec<f32>,
     status_at: Instant,
-    status_overruns: [u64; 7],
+    status_overruns: [u64; PipelineStage::COUNT],
     /// What the last search made of its volume, and the widened diameter (m), for the status.
     search: SearchState,
     search_widened_to_m: f32,
@@ -1193,7 +1193,7 @@ pub fn run_pipeline(
                     status_delivered: vec![0; rig.sensors.len()],
                     status_rates: vec![0.0; rig.sensors.len()],
                     status_at: Instant::now(),
-                    status_overruns: [0; 7],
+                    status_overruns: [0; PipelineStage::COUNT],
                     search: SearchState::None,
                     search_widened_to_m: 0.0,
                 };
@@ -1244,7 +1244,7 @@ pub fn run_pipeline(
     let mut outcome = outcome;
     outcome.publisher_error = publisher_error;
     let capture = lock(&shared.capture).summary();
-    let mut stages = [StageSummary::default(); 7];
+    let mut stages = [StageSummary::default(); PipelineStage::COUNT];
     for s in PipelineStage::ALL {
         stages[s.index()] = match s {
             PipelineStage::Capture => capture,

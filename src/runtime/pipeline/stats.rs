@@ -135,7 +135,10 @@ pub enum PipelineStage {
 }
 
 impl PipelineStage {
-    pub const ALL: [PipelineStage; 7] = [
+    /// How many timed stages there are.
+    pub const COUNT: usize = 7;
+
+    pub const ALL: [PipelineStage; PipelineStage::COUNT] = [
         PipelineStage::Capture,
         PipelineStage::Edges,
         PipelineStage::Match,
