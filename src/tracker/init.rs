@@ -317,7 +317,7 @@ struct CellScratch {
     best: Vec<[(f32, u8); 3]>,
     weights: Vec<f64>,
     corr: Vec<Correspondence>,
-    pool: Vec<(f64, Pose)>,
+    pool: Pool,
 }
 
 impl CellScratch {
@@ -332,39 +332,45 @@ impl CellScratch {
             best: vec![[(0.0, 0); 3]; n],
             weights: vec![0.0; n],
             corr: Vec::with_capacity(3),
-            pool: Vec::with_capacity(POOL),
+            pool: Pool::new(),
         }
     }
 }
 
+/// The best [`POOL`] candidate poses with their scores.
+type Pool = heapless::Vec<(f64, Pose), POOL>;
+
 /// Keeps `entry` in `pool` if there is room or it beats the worst (lowest score is best).
-fn keep_best(pool: &mut Vec<(f64, Pose)>, entry: (f64, Pose)) {
-    if pool.len() < POOL {
-        pool.push(entry);
-    } else if let Some(w) = pool.iter_mut().max_by(|a, b| a.0.total_cmp(&b.0)) {
-        if entry.0 < w.0 {
-            *w = entry;
+fn keep_best(pool: &mut Pool, entry: (f64, Pose)) {
+    if let Err(entry) = pool.push(entry) {
+        if let Some(w) = pool.iter_mut().max_by(|a, b| a.0.total_cmp(&b.0)) {
+            if entry.0 < w.0 {
+                *w = entry;
+            }
         }
     }
 }
 
 /// Keeps `entry` (score, position; highest score best) among the best [`GRID_KEEP`] that are at
 /// least [`SAME_POSITION_M`] apart: a better neighbour replaces a worse one.
-fn keep_best_apart(best: &mut Vec<(f64, Point3<f64>)>, entry: (f64, Point3<f64>)) {
+fn keep_best_apart(best: &mut GridBest, entry: (f64, Point3<f64>)) {
     if let Some(k) = best.iter().position(|b| (b.1 - entry.1).norm() < SAME_POSITION_M) {
         if entry.0 > best[k].0 {
             best[k] = entry;
         }
         return;
     }
-    if best.len() < GRID_KEEP {
-        best.push(entry);
-    } else if let Some(w) = best.iter_mut().min_by(|a, b| a.0.total_cmp(&b.0)) {
-        if entry.0 > w.0 {
-            *w = entry;
+    if let Err(entry) = best.push(entry) {
+        if let Some(w) = best.iter_mut().min_by(|a, b| a.0.total_cmp(&b.0)) {
+            if entry.0 > w.0 {
+                *w = entry;
+            }
         }
     }
 }
+
+/// One rotation's best [`GRID_KEEP`] grid positions with their scores.
+type GridBest = heapless::Vec<(f64, Point3<f64>), GRID_KEEP>;
 
 /// The search's buffers, sized once.
 pub struct Initialiser<'m> {
@@ -385,7 +391,7 @@ pub struct Initialiser<'m> {
     plan_cells: Vec<(f64, Point3<f64>)>,
     scratch: Vec<CellScratch>,
     // Results.
-    pool: Vec<(f64, Pose)>,
+    pool: Pool,
     corr: Vec<Correspondence>,
     alphas: Vec<f64>,
     candidates: Vec<Candidate>,
@@ -399,7 +405,7 @@ pub struct Initialiser<'m> {
     /// The floors: the rig stands in a band above the one beneath it.
     floors: Floors,
     /// The grid search's best positions under each rotation (score, position).
-    grid_best: [Vec<(f64, Point3<f64>)>; MAX_ROTATIONS],
+    grid_best: [GridBest; MAX_ROTATIONS],
     /// VIS(T) refined at the candidate's own position: what polishing and scoring predict.
     at_pose: PoseVisibility,
     /// The directions the rig's sensors image.
@@ -464,7 +470,7 @@ impl<'m> Initialiser<'m> {
             cells: Vec::with_capacity(table.node_count()),
             plan_cells: Vec::with_capacity((table.header.dims[0] as usize) * (table.header.dims[1] as usize)),
             scratch: (0..workers).map(|_| CellScratch::new(m, n, max_set)).collect(),
-            pool: Vec::with_capacity(POOL),
+            pool: Pool::new(),
             corr: Vec::with_capacity(max_set),
             alphas: Vec::with_capacity(max_set),
             candidates: Vec::with_capacity(POLISHED + VOTED_ROTATIONS * PEAKS + MAX_ROTATIONS * GRID_KEEP),
@@ -472,7 +478,7 @@ impl<'m> Initialiser<'m> {
             vote_edges: Vec::with_capacity(VOTE_EDGES),
             vanishing: VanishingDirections::new(model, max_edges),
             floors,
-            grid_best: std::array::from_fn(|_| Vec::with_capacity(GRID_KEEP)),
+            grid_best: std::array::from_fn(|_| GridBest::new()),
             at_pose: PoseVisibility::new(model),
             view: ViewMap::new(rig),
             support_pred: Vec::with_capacity(max_set),
