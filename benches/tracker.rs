@@ -189,12 +189,12 @@ mod bench {
     fn figure15(rig: &Rig) {
         use omnitrack::desk::observations::{observe, NoiseModel};
         use omnitrack::solver::{minimise_xi, r_and_t_refine, SimplexOptions};
-        use omnitrack::visibility::build::Scene;
+        use omnitrack::visibility::build::Occluders;
         use rand::seq::SliceRandom;
         use rand::SeedableRng;
         let scenario = Scenario::get(ScenarioName::Lab);
         let model = Model::from_obj_str(&scenario.model_obj().unwrap(), "lab.obj").unwrap();
-        let scene = Scene::new(&model);
+        let scene = Occluders::new(&model);
         let tour = scenario.trajectory(101, 5);
         let solver = TrackerConfig::default().solver_options();
         let mut rng = rand::rngs::SmallRng::seed_from_u64(15);
@@ -748,7 +748,7 @@ mod bench {
             None => label.to_string(),
         };
         let label = label.as_str();
-        use omnitrack::visibility::build::Scene;
+        use omnitrack::visibility::build::Occluders;
         struct Row {
             name: String,
             kind: String,
@@ -782,7 +782,7 @@ mod bench {
             let mut source = ReplaySource::open(&dir, Pacing::AsFastAsPossible).unwrap();
             let truth: Vec<Stamped> = source.ground_truth().unwrap().to_vec();
             // VIS(T) against brute force at every 10th pose of the walk.
-            let scene = Scene::new(&model);
+            let scene = Occluders::new(&model);
             let eyes: Vec<Point3<f64>> = truth
                 .iter()
                 .step_by(10)

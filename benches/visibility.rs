@@ -38,7 +38,7 @@ mod bench {
     use nalgebra::Point3;
     use omnitrack::desk::scenario::{Scenario, ScenarioName};
     use omnitrack::desk::vis_truth::visible_segments;
-    use omnitrack::visibility::build::{build_raw, BuildOptions, Merge, Scene};
+    use omnitrack::visibility::build::{build_raw, BuildOptions, Merge, Occluders};
     use omnitrack::visibility::VisibilityTable;
     use omnitrack::Model;
     use rand::rngs::SmallRng;
@@ -149,7 +149,7 @@ mod bench {
         let range = base.max_range_m;
 
         // Random camera positions in free space, heights 1.0–2.0 m above the floor.
-        let scene = Scene::new(&model);
+        let scene = Occluders::new(&model);
         let (lo, hi) = model.bounds().expect("non-empty model");
         let mut rng = SmallRng::seed_from_u64(6);
         let mut eyes = Vec::with_capacity(positions);

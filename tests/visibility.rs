@@ -6,7 +6,7 @@
 #![cfg(feature = "desk")]
 
 use nalgebra::{Point3, Vector3};
-use omnitrack::visibility::build::{build_raw, build_table, BuildOptions, CubeMap, Merge, Scene};
+use omnitrack::visibility::build::{build_raw, build_table, BuildOptions, CubeMap, Merge, Occluders};
 use omnitrack::visibility::{query_json, VisibilityError, VisibilityTable};
 use omnitrack::Model;
 
@@ -122,7 +122,7 @@ fn segment(model: &Model, a: [f64; 3], b: [f64; 3]) -> u32 {
 }
 
 /// Brute force: some sample of the segment is in clear line of sight from `eye`.
-fn seen(scene: &Scene, model: &Model, eye: &Point3<f64>, s: u32) -> bool {
+fn seen(scene: &Occluders, model: &Model, eye: &Point3<f64>, s: u32) -> bool {
     let s = &model.segments[s as usize];
     (0..=200).any(|k| {
         let p = s.a + (s.b - s.a) * (k as f64 / 200.0);
@@ -204,7 +204,7 @@ fn two_rooms_wound(flips: Option<u64>) -> Obj {
 fn two_rooms_far_room_seen_only_through_the_door() {
     let obj = two_rooms();
     let model = obj.model();
-    let scene = Scene::new(&model);
+    let scene = Occluders::new(&model);
     let table = build_table(&model, "two_rooms.obj", &options());
 
     // Nodes inside the wall (x = 4.15) and outside the building (room B's side beyond y = 3)
@@ -563,7 +563,7 @@ fn the_inside_of_a_thick_solid_is_not_free() {
         obj.room([0.0, 0.0, 0.0], [3.0, 3.0, H]);
         obj.room([3.45, 0.0, 0.0], [6.45, 3.0, H]);
         let model = obj.model();
-        let scene = Scene::new(&model);
+        let scene = Occluders::new(&model);
         assert!(scene.is_free(&Point3::new(1.5, 1.5, 1.5), 0.2));
         assert!(!scene.is_free(&Point3::new(3.225, 1.5, 1.5), 0.2), "inside the wall");
         assert!(!scene.is_free(&Point3::new(1.5, 1.5, -0.3), 0.2), "under the floor");
@@ -616,7 +616,7 @@ fn coincident_faces_show_the_smaller_face_id() {
     let (a, b) = (once.model(), twice.model());
     let n = a.faces.len() as u32;
     assert_eq!(b.faces.len() as u32, 2 * n);
-    let scene = Scene::new(&b);
+    let scene = Occluders::new(&b);
     let mut cube = CubeMap::new(64, b.faces.len());
     for eye in [[1.0, 1.0, 1.5], [2.5, 3.0, 1.0], [6.0, 1.5, 1.5]] {
         let (faces, _) = cube.visibility(&scene, &Point3::from(eye), &options());
@@ -759,6 +759,6 @@ fn an_open_model_without_a_ceiling_keeps_its_room() {
         assert!(set.segments.contains(&s), "corner {corner:?}");
     }
     // Outside the walls is not free space, though nothing is there to stand under.
-    let scene = Scene::new(&model);
+    let scene = Occluders::new(&model);
     assert!(!scene.is_free(&Point3::new(3.0, 5.0, 1.5), 0.2));
 }

@@ -1,7 +1,7 @@
 //! What a position really sees, by brute-force ray casting, and how much of it a visibility
 //! table's VIS(T) holds: the ground truth of Koch–Teller §4.3's tables on models of any origin.
 //!
-//! In: a model, its [`Scene`], eye positions, a visibility table. Out: per segment whether any of
+//! In: a model, its [`Occluders`], eye positions, a visibility table. Out: per segment whether any of
 //! it is visible from the eye and the angle its visible runs subtend ([`visible_segments`]); the
 //! recall of VIS(T) over those segments ([`recall`]).
 //!
@@ -12,12 +12,12 @@
 //! 2° (smaller ones no edge detector finds) and, separately, all visible segments.
 
 use crate::model::Model;
-use crate::visibility::build::Scene;
+use crate::visibility::build::Occluders;
 use crate::visibility::VisibilityTable;
 use nalgebra::{Point3, Vector3};
 
 /// Per model segment: (visible at all, visible extent in radians).
-pub fn visible_segments(scene: &Scene, model: &Model, eye: &Point3<f64>, range_m: f64) -> Vec<(bool, f64)> {
+pub fn visible_segments(scene: &Occluders, model: &Model, eye: &Point3<f64>, range_m: f64) -> Vec<(bool, f64)> {
     let step_rad = 0.5f64.to_radians();
     model
         .segments
@@ -89,7 +89,7 @@ impl Recall {
 
 /// The recall of `table`'s VIS(T) at `eyes` (the table's own range); positions no node serves
 /// count every segment they see as missed.
-pub fn recall(table: &VisibilityTable, scene: &Scene, model: &Model, eyes: &[Point3<f64>]) -> Recall {
+pub fn recall(table: &VisibilityTable, scene: &Occluders, model: &Model, eyes: &[Point3<f64>]) -> Recall {
     let big = 2f64.to_radians();
     let range = table.header.max_range_m;
     let mut r = Recall::default();

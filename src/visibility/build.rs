@@ -246,8 +246,10 @@ impl Bins {
     }
 }
 
-/// Everything the per-node work shares.
-pub struct Scene<'m> {
+/// The model's faces as occluders, which every node's work shares: their triangles, a BVH for
+/// exact rays and x-y bins for what lies near a position. (The renderer's `desk::render::Scene`
+/// is another thing: surfaces with appearance, for pictures.)
+pub struct Occluders<'m> {
     model: &'m Model,
     tris: Vec<Tri>,
     /// Per triangle: bounding box min, max.
@@ -257,8 +259,8 @@ pub struct Scene<'m> {
     segment_bins: Bins,
 }
 
-impl<'m> Scene<'m> {
-    pub fn new(model: &'m Model) -> Scene<'m> {
+impl<'m> Occluders<'m> {
+    pub fn new(model: &'m Model) -> Occluders<'m> {
         let mut tris = Vec::new();
         for (fi, face) in model.faces.iter().enumerate() {
             let corners: Vec<Point3<f64>> = face.vertices.iter().map(|&v| model.vertices[v as usize]).collect();
@@ -306,7 +308,7 @@ impl<'m> Scene<'m> {
             })
             .collect();
         let segment_bins = Bins::new(&segment_boxes);
-        Scene {
+        Occluders {
             model,
             tris,
             boxes,
@@ -528,7 +530,7 @@ fn face_bit(id: u32) -> u64 {
 }
 
 thread_local! {
-    /// Scratch of [`Scene::is_free`]'s clearance test, one per worker thread.
+    /// Scratch of [`Occluders::is_free`]'s clearance test, one per worker thread.
     static NEAR_SCRATCH: std::cell::RefCell<Vec<u32>> = const { std::cell::RefCell::new(Vec::new()) };
 }
 
@@ -630,7 +632,7 @@ impl CubeMap {
     }
 
     /// Renders the scene around `eye`; returns the visible faces (sorted) and segments (sorted).
-    pub fn visibility(&mut self, scene: &Scene, eye: &Point3<f64>, opts: &BuildOptions) -> (Vec<u32>, Vec<u32>) {
+    pub fn visibility(&mut self, scene: &Occluders, eye: &Point3<f64>, opts: &BuildOptions) -> (Vec<u32>, Vec<u32>) {
         self.inv_z.fill(0.0);
         self.id.fill(u32::MAX);
         let e = [eye.x, eye.y, eye.z];
@@ -836,7 +838,13 @@ impl CubeMap {
     }
 
     /// Koch–Teller's rule: at least `min_pixels` pixels of the segment pass the depth test.
-    fn segment_visible(&mut self, scene: &Scene, e: &[f64; 3], seg: &crate::model::Segment, min_pixels: u32) -> bool {
+    fn segment_visible(
+        &mut self,
+        scene: &Occluders,
+        e: &[f64; 3],
+        seg: &crate::model::Segment,
+        min_pixels: u32,
+    ) -> bool {
         let own_faces = seg.faces.iter().fold(0, |m, &id| m | face_bit(id));
         let pa = sub([seg.a.x, seg.a.y, seg.a.z], *e);
         let pb = sub([seg.b.x, seg.b.y, seg.b.z], *e);
@@ -1023,7 +1031,7 @@ pub fn build_raw(model: &Model, model_path: &str, opts: &BuildOptions) -> (RawTa
         ..opts.clone()
     };
     let t0 = Instant::now();
-    let scene = Scene::new(model);
+    let scene = Occluders::new(model);
     let (origin, dims) = grid(model, opts);
     let (nx, ny, nz) = (dims[0] as usize, dims[1] as usize, dims[2] as usize);
     let cells = nx * ny * nz;
