@@ -543,6 +543,14 @@ mod bench {
         wrong_commits: usize,
     }
 
+    /// The configured search volume about the true start: the hint of the benchmark's runs.
+    fn hint_at_start(truth: &[Stamped], cfg: &TrackerConfig) -> SearchVolume {
+        SearchVolume {
+            centre: Point3::from(truth[0].pose.translation.vector),
+            diameter_m: Some(cfg.initialisation.search_diameter_m),
+        }
+    }
+
     /// Tracks a whole recording once from `hint`, prints its table row and the lines under it.
     #[allow(clippy::too_many_arguments)]
     fn run_once(
@@ -796,10 +804,7 @@ mod bench {
                 rec.precision_percent(),
                 eyes.len()
             );
-            let hint = Some(SearchVolume {
-                centre: Point3::from(truth[0].pose.translation.vector),
-                diameter_m: Some(cfg.initialisation.search_diameter_m),
-            });
+            let hint = Some(hint_at_start(&truth, &cfg));
             let run = run_once(
                 &name,
                 &name,
@@ -1020,10 +1025,7 @@ mod bench {
                 } else {
                     name.to_string()
                 };
-                let hint = a.hint.then(|| SearchVolume {
-                    centre: Point3::from(truth[0].pose.translation.vector),
-                    diameter_m: Some(cfg.initialisation.search_diameter_m),
-                });
+                let hint = a.hint.then(|| hint_at_start(&truth, &cfg));
                 if let Some(out) = run_once(
                     &row,
                     name.as_str(),

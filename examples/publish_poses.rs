@@ -11,7 +11,16 @@ use omnitrack::publish::{PosePublisher, PoseStatus, POSE_SERVICE};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 fn main() {
-    let seconds: f64 = std::env::args().nth(1).and_then(|s| s.parse().ok()).unwrap_or(3.0);
+    let seconds: f64 = match std::env::args().nth(1) {
+        None => 3.0,
+        Some(s) => match s.parse() {
+            Ok(v) if v > 0.0 => v,
+            _ => {
+                eprintln!("publish_poses: SECONDS must be a positive number, got {s:?}");
+                std::process::exit(2)
+            }
+        },
+    };
     let publisher = PosePublisher::create(POSE_SERVICE).unwrap_or_else(|e| {
         eprintln!("publish_poses: {e}");
         std::process::exit(2)

@@ -10,10 +10,22 @@ use omnitrack::publish::{format_pose_line, PoseSample, SampleSubscriber, POSE_SE
 use std::io::Write;
 use std::time::Duration;
 
+/// The argument `what` as a positive number, `default` when absent; one line and exit 2 otherwise.
+fn positive(arg: Option<String>, what: &str, default: f64) -> f64 {
+    match arg.map(|s| (s.parse::<f64>(), s)) {
+        None => default,
+        Some((Ok(v), _)) if v > 0.0 && v.is_finite() => v,
+        Some((_, s)) => {
+            eprintln!("subscribe_poses: {what} must be a positive number, got {s:?}");
+            std::process::exit(2)
+        }
+    }
+}
+
 fn main() {
     let mut args = std::env::args().skip(1);
-    let count: u64 = args.next().and_then(|s| s.parse().ok()).unwrap_or(5);
-    let timeout = Duration::from_secs_f64(args.next().and_then(|s| s.parse().ok()).unwrap_or(10.0));
+    let count: u64 = positive(args.next(), "COUNT", 5.0) as u64;
+    let timeout = Duration::from_secs_f64(positive(args.next(), "TIMEOUT", 10.0));
     let subscriber = SampleSubscriber::<PoseSample>::create(POSE_SERVICE).unwrap_or_else(|e| {
         eprintln!("subscribe_poses: {e}");
         std::process::exit(2)

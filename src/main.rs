@@ -37,7 +37,7 @@ enum Command {
         /// A building model (OBJ) to load, with its faces and segments summarised.
         #[arg(long, value_name = "MODEL.obj")]
         model: Option<PathBuf>,
-        /// A tracker config to validate against the rig.
+        /// A tracker config to validate (every key's type and range).
         #[arg(long, value_name = "tracker.toml")]
         config: Option<PathBuf>,
     },

@@ -1,9 +1,10 @@
 //! Choosing the frame source from the command line, and what the live sources share.
 //!
 //! In: a `--source` spec (docs/interfaces.md, "Command line": `replay:DIR`, `v4l` or `usb`) and
-//! the rig given with `--rig`, if any. Out: a boxed [`FrameSource`] ([`open_source`]), or one line saying what is
-//! wrong: an unknown spec, a live source without a rig, a live source this binary was built
-//! without (with the cargo command that enables it), or the device error of the source itself.
+//! the rig given with `--rig`, if any. Out: a boxed [`FrameSource`] ([`open_source`]), or one
+//! line saying what is wrong: an unknown spec, a live source without a rig, a live source this
+//! binary was built without (with the cargo command that enables it), or the device error of
+//! the source itself.
 //!
 //! A recording carries its own rig, so `replay:DIR` needs none; when `--rig` is given as well its
 //! sensors must have the recording's sizes. `v4l` and `usb` need the rig: it names each sensor's

@@ -6,11 +6,12 @@
 //! service"). The publisher knows the pose message only: nothing of frames, edges or the tracker.
 //!
 //! Each service keeps a history of one sample, so a subscriber that starts late gets the latest
-//! pose at once (on the publisher's next publish or `update_connections`, see below); each subscriber has a buffer of [`SUBSCRIBER_BUFFER`] samples and on overflow the
-//! oldest is replaced (a slow reader sees the newest poses, the tracker never blocks). Beside each
-//! publish–subscribe service is an event service of the same name: the publisher notifies it after
-//! every send so that a subscriber can sleep until a sample arrives ([`SampleSubscriber::wait`])
-//! instead of polling.
+//! pose at once (on the publisher's next publish or `update_connections`, see below); each
+//! subscriber has a buffer of [`SUBSCRIBER_BUFFER`] samples and on overflow the oldest is
+//! replaced (a slow reader sees the newest poses, the tracker never blocks). Beside each
+//! publish–subscribe service is an event service of the same name: the publisher notifies it
+//! after every send so that a subscriber can sleep until a sample arrives
+//! ([`SampleSubscriber::wait`]) instead of polling.
 //!
 //! The sample is loaned from the shared-memory pool preallocated at [`SamplePublisher::create`],
 //! written in place and sent. One heap allocation per publish remains, inside iceoryx2 0.10: the

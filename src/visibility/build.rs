@@ -15,9 +15,9 @@
 //!    box 1.2 m or more across is a room, since winding cannot say it is solid);
 //! 4. no face is nearer than `clearance_m` (exact point–triangle distance; default 0.2 m).
 //!
-//! Nothing reads the faces' winding (docs/interfaces.md, "Building model", gives it no meaning): a wall may be one
-//! face seen from both sides, faces may be duplicated or overlap, and a model may have no
-//! faces outside its rooms. The rule before this one counted the faces seen "from behind",
+//! Nothing reads the faces' winding (docs/interfaces.md, "Building model", gives it no
+//! meaning): a wall may be one face seen from both sides, faces may be duplicated or overlap,
+//! and a model may have no faces outside its rooms. The rule before this one counted the faces seen "from behind",
 //! and kept 459 of 1,872 nodes of a building drawn with single-face walls wound either way
 //! (issue 20).
 //!
@@ -224,8 +224,8 @@ impl Bins {
         [at(lo[0], 0), at(lo[1], 1), at(hi[0], 0), at(hi[1], 1)]
     }
 
-    /// Appends to `out`, ascending and once each, the items whose boxes reach cells within `r`
-    /// of `p` in x and y (a superset of those within `r`; callers test exactly).
+    /// Puts in `out`, once each and in no particular order, the items whose boxes reach cells
+    /// within `r` of `p` in x and y (a superset of those within `r`; callers test exactly).
     fn near(&self, p: [f64; 3], r: f64, out: &mut Vec<u32>) {
         out.clear();
         let q = self.cells([p[0] - r, p[1] - r], [p[0] + r, p[1] + r]);
@@ -241,8 +241,6 @@ impl Bins {
                 }
             }
         }
-        // Index order, as a scan of every item would visit them: segment sets come out sorted.
-        out.sort_unstable();
     }
 }
 
@@ -677,6 +675,8 @@ impl CubeMap {
         faces.sort_unstable();
         let mut segments = Vec::new();
         scene.segment_bins.near(e, opts.max_range_m, &mut near);
+        // Index order, so that the segment set comes out sorted.
+        near.sort_unstable();
         for &si in &near {
             let seg = &scene.model.segments[si as usize];
             // Every segment within range is a candidate, not only those bounding a visible face
@@ -820,7 +820,7 @@ impl CubeMap {
             if xb < xa as isize {
                 continue;
             }
-            // Branch-free and indexed by i32 so that the compiler vectorises it: this loop is
+            // Branch-free and indexed by i32 so that the compiler vectorises it: this loop was
             // half of a build's time. `x as i32 as f64` is exact, so the depths are those of the
             // scalar loop to the bit.
             let span = row + xa..row + xb as usize + 1;
