@@ -455,11 +455,12 @@ fn med_r_and_t_reaches_past_lms_breakdown_at_50_percent_outliers_when_told_to_ex
 // ---------------------------------------------------------------------------------------------
 // §5 covariance against the empirical covariance
 
-fn empirical_vs_analytic(sensors: &[Pose], seed: u64) -> [f64; 6] {
+fn empirical_vs_analytic(sensors: &[Pose], seed: u64, error: LineError) -> [f64; 6] {
     let mut rng = SmallRng::seed_from_u64(seed);
     let truth = random_pose(&mut rng);
     let c = scene(&mut rng, sensors, &truth, 20);
     let o = SolverOptions {
+        error,
         edge_sigma_rad: 0.05f64.to_radians(),
         ..SolverOptions::default()
     };
@@ -484,11 +485,13 @@ fn empirical_vs_analytic(sensors: &[Pose], seed: u64) -> [f64; 6] {
 
 #[test]
 fn covariance_matches_empirical_scatter() {
-    for (name, sensors, seed) in [("pinhole", pinhole(), 21), ("rig", rig(), 22)] {
-        let ratios = empirical_vs_analytic(&sensors, seed);
-        eprintln!("{name}: analytic / empirical variance {ratios:.3?}");
-        for (i, r) in ratios.iter().enumerate() {
-            assert!((r - 1.0).abs() < 0.15, "{name} entry {i}: ratio {r}");
+    for error in [LineError::E2, LineError::E3] {
+        for (name, sensors, seed) in [("pinhole", pinhole(), 21), ("rig", rig(), 22)] {
+            let ratios = empirical_vs_analytic(&sensors, seed, error);
+            eprintln!("{name}, {error:?}: analytic / empirical variance {ratios:.3?}");
+            for (i, r) in ratios.iter().enumerate() {
+                assert!((r - 1.0).abs() < 0.15, "{name}, {error:?}, entry {i}: ratio {r}");
+            }
         }
     }
 }

@@ -146,12 +146,34 @@ pub(crate) fn line_error(c: &[Correspondence], q: &UnitQuaternion<f64>, s: &Vect
     c.iter().map(|l| line_error_of(l, q, s, error)).sum()
 }
 
-/// One line's share of the objective (both end points).
+/// One line's share of the objective (both end points): [`line_residuals`]' weighted squares,
+/// without the Jacobians. Med_R_and_T ranks every line at every subset pose with this, where
+/// E3's Jacobian rows would be most of the cost.
 #[inline]
 pub(crate) fn line_error_of(c: &Correspondence, q: &UnitQuaternion<f64>, s: &Vector3<f64>, error: LineError) -> f64 {
-    match line_residuals(c, q, s, error) {
-        Some(res) => (0..2).map(|k| res.weight[k] * res.r[k] * res.r[k]).sum(),
-        None => 2.0,
+    let centre = c.edge.centre.coords;
+    let x1 = q * c.segment[0].coords + s - centre;
+    let x2 = q * c.segment[1].coords + s - centre;
+    match error {
+        LineError::E1 | LineError::E2 => {
+            let n = c.edge.normal.into_inner();
+            let (r1, r2) = (n.dot(&x1), n.dot(&x2));
+            match error {
+                LineError::E2 => r1 * r1 / x1.norm_squared() + r2 * r2 / x2.norm_squared(),
+                _ => r1 * r1 + r2 * r2,
+            }
+        }
+        LineError::E3 => {
+            let u = x1.cross(&x2);
+            let len2 = u.norm_squared();
+            // The plane test of `line_residuals`, squared; a NaN fails it as there.
+            let spans_a_plane = len2 > 1e-24 * x1.norm_squared() * x2.norm_squared();
+            if !spans_a_plane {
+                return 2.0;
+            }
+            let (r1, r2) = (c.edge.ends[0].dot(&u), c.edge.ends[1].dot(&u));
+            (r1 * r1 + r2 * r2) / len2
+        }
     }
 }
 
@@ -556,4 +578,46 @@ pub fn r_and_t(c: &[Correspondence], guess: Option<&Pose>, o: &SolverOptions) ->
         None => no_guess(c, o)?,
     };
     Ok(solution(c, &r.q, &r.s, r.iterations, r.converged, o))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::EdgePlane;
+    use nalgebra::Point3;
+    use rand::rngs::SmallRng;
+    use rand::{Rng, SeedableRng};
+
+    /// The ranking shortcut must be the refinement's objective: the weighted squares of
+    /// [`line_residuals`], for every error, including lines that point at the centre.
+    #[test]
+    fn line_error_of_is_the_residuals_weighted_squares() {
+        let mut rng = SmallRng::seed_from_u64(7);
+        let v = |rng: &mut SmallRng, r: f64| Vector3::from_fn(|_, _| rng.random_range(-r..r));
+        for _ in 0..500 {
+            let centre = Point3::from(v(&mut rng, 0.2));
+            let edge = EdgePlane::from_rays(centre, &v(&mut rng, 1.0), &v(&mut rng, 1.0)).unwrap();
+            let segment = [Point3::from(v(&mut rng, 5.0)), Point3::from(v(&mut rng, 5.0))];
+            let c = Correspondence { edge, segment };
+            let q = UnitQuaternion::from_scaled_axis(v(&mut rng, 3.0));
+            let s = v(&mut rng, 2.0);
+            for e in [LineError::E1, LineError::E2, LineError::E3] {
+                let full = match line_residuals(&c, &q, &s, e) {
+                    Some(r) => (0..2).map(|k| r.weight[k] * r.r[k] * r.r[k]).sum(),
+                    None => 2.0,
+                };
+                let fast = line_error_of(&c, &q, &s, e);
+                assert!((full - fast).abs() <= 1e-12 * (1.0 + full), "{e:?}: {full} vs {fast}");
+            }
+        }
+        // A segment through the centre spans no plane: E3's worst value, as in the refinement.
+        let edge = EdgePlane::from_rays(Point3::origin(), &Vector3::x(), &Vector3::y()).unwrap();
+        let (q, s) = (UnitQuaternion::identity(), Vector3::zeros());
+        let through = Correspondence {
+            edge,
+            segment: [Point3::new(1.0, 1.0, 1.0), Point3::new(2.0, 2.0, 2.0)],
+        };
+        assert!(line_residuals(&through, &q, &s, LineError::E3).is_none());
+        assert_eq!(line_error_of(&through, &q, &s, LineError::E3), 2.0);
+    }
 }
