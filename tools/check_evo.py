@@ -27,7 +27,7 @@ from pathlib import Path
 TOOLS = Path(__file__).resolve().parent
 REPO = TOOLS.parent
 VENV = TOOLS / ".venv-evo"
-# The version whose definitions src/desk/eval.rs follows; override with EVO_SPEC=evo to try newer.
+# The version whose definitions crates/desk/src/eval.rs follows; override with EVO_SPEC=evo to try newer.
 EVO_SPEC = os.environ.get("EVO_SPEC", "evo==1.38.1")
 TOLERANCE = 1e-6
 STATS = ["rmse", "mean", "median", "std", "min", "max"]

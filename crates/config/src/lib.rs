@@ -1,0 +1,533 @@
+//! The tracker's tunables (`firmware_config/tracker.toml`).
+//!
+//! In: TOML whose every key is optional; an absent key takes the papers' value. Out: a validated
+//! [`TrackerConfig`]. Unknown keys and out-of-range values are errors naming the file and key, so
+//! a typo never silently runs the tracker on a default.
+//!
+//! The defaults here and the shipped `tracker.toml` are the same numbers (a test checks it); the
+//! comments in the TOML file cite the paper section each value comes from.
+
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct EdgeConfig {
+    pub hue_strip_width_px: u32,
+    pub max_edges_per_sensor: u32,
+    pub min_edge_length_deg: f64,
+    pub min_hue_saturation: f64,
+    pub min_hue_value: f64,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct InitialisationConfig {
+    pub search_diameter_m: f64,
+    pub best_edges_per_segment: u32,
+    pub max_samples: u32,
+    pub time_budget_ms: f64,
+    pub simplex_refinement: bool,
+    pub confirm_frames: u32,
+    /// A rig imaging less than half the sphere commits only where this many decided searches in
+    /// a row chose the same place (one narrow view cannot tell a symmetric place from its twin).
+    pub narrow_rig_searches: u32,
+    pub edges_considered: u32,
+    pub segments_considered: u32,
+    pub samples_per_cell: u32,
+    pub dihedral_tolerance_deg: f64,
+    pub max_dihedral_range_deg: f64,
+    pub whole_model_time_budget_ms: f64,
+    pub clear_winner_ratio: f64,
+    pub accept_explained_fraction: f64,
+    /// A candidate must also explain this share of the frame's edges (by angle).
+    pub accept_support_fraction: f64,
+    /// A sampled point of a predicted segment with no edge of any direction this near (deg) is
+    /// *blank*: the model draws a line across a plain surface of the image there. 0 turns the
+    /// blank share off.
+    pub blank_radius_deg: f64,
+    pub wide_edges_considered: u32,
+    pub wide_segments_considered: u32,
+    pub wide_samples_per_cell: u32,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MaintenanceConfig {
+    pub angular_gate_deg: f64,
+    pub hue_gate: f64,
+    pub accept_after_frames: u32,
+    pub sample_size: u32,
+    pub success_probability: f64,
+    pub outlier_percent: f64,
+    pub max_samples: u32,
+    pub time_budget_ms: f64,
+    pub constant_velocity_prior: bool,
+    /// The frame's final fit over its observed correspondences weighs them by Cauchy's loss
+    /// (`solver::robust`) instead of least squares (R_and_T only, not upright).
+    pub robust_final_fit: bool,
+    /// How the consensus scores a sample's pose (`truncated`: MSAC, `median`: least median of
+    /// squares).
+    pub consensus_score: omnitrack_solver::SampleScore,
+    pub inlier_angle_deg: f64,
+    pub min_inliers: u32,
+    pub lost_after_frames: u32,
+    pub max_jump_m: f64,
+    pub max_jump_deg: f64,
+    pub relocalise_diameter_m: f64,
+    /// A solved pose must explain (an edge within the inlier angle) at least this fraction of
+    /// what recent good frames explained of VIS(T) (their running mean); 0 turns the check off.
+    pub min_explained_ratio: f64,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct VisibilityConfig {
+    pub node_spacing_m: f64,
+    pub min_visible_pixels: u32,
+    pub cube_map_resolution: u32,
+    pub node_heights_m: Vec<f64>,
+    /// Model segments shorter than this (m) enter no visibility set, so the tracker never
+    /// matches or scores them: the handles, sash profiles and tessellated curves of a detailed
+    /// model (README, "Models from IFC").
+    pub min_segment_length_m: f64,
+}
+
+pub use omnitrack_solver::{LineError, Method as SolverMethod};
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SolverConfig {
+    pub method: SolverMethod,
+    pub error: LineError,
+    pub max_iterations: u32,
+    pub convergence_rad: f64,
+    pub initial_rotation_samples: u32,
+    pub lms_subset_size: u32,
+    pub lms_success_probability: f64,
+    pub lms_outlier_fraction: f64,
+    pub lms_outlier_threshold: f64,
+    pub degenerate_subset_det: f64,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct NoiseConfig {
+    pub edge_normal_sigma_deg: f64,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MotionConfig {
+    pub upright: bool,
+    pub upright_height_m: f64,
+    /// Fastest plausible turn of the rig (deg/s): a relocalised or re-initialised pose that
+    /// turned further since the last good frame (beyond `maintenance.max_jump_deg`) is refused.
+    pub max_turn_rate_deg_s: f64,
+    /// Largest tilt of the rig's z axis from the world's up (deg) a search considers; 180 keeps
+    /// every orientation.
+    pub max_tilt_deg: f64,
+    /// The rig centre's height above the floor beneath it (m, lowest and highest): searches
+    /// refuse poses outside it, below every floor or outside the building. Ignored for a model
+    /// without floors and when `upright`.
+    pub height_above_floor_m: [f64; 2],
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct BudgetConfig {
+    pub frame_ms: f64,
+    pub edges_ms: f64,
+    pub frame_sync_tolerance_ms: f64,
+    /// One grab: a whole-rig `next_frame` or one sensor's read (runtime::pipeline).
+    pub capture_ms: f64,
+    /// Tracker (matching + solve) per frame.
+    pub track_ms: f64,
+    /// Loan, write and send of one pose sample.
+    pub publish_ms: f64,
+    /// Longest wait for the other sensors' images of one instant once the first has arrived.
+    pub frame_assembly_wait_ms: f64,
+    /// Time between two status samples.
+    pub status_interval_ms: f64,
+}
+
+/// Every tunable of the tracker, grouped by the stage that reads it.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TrackerConfig {
+    pub edges: EdgeConfig,
+    pub initialisation: InitialisationConfig,
+    pub maintenance: MaintenanceConfig,
+    pub visibility: VisibilityConfig,
+    pub solver: SolverConfig,
+    pub noise: NoiseConfig,
+    pub motion: MotionConfig,
+    pub budgets: BudgetConfig,
+}
+
+impl Default for EdgeConfig {
+    fn default() -> Self {
+        Self {
+            hue_strip_width_px: 5, // Koch–Teller §4.2.1
+            max_edges_per_sensor: 256,
+            min_edge_length_deg: 2.0,
+            min_hue_saturation: 0.15,
+            min_hue_value: 0.10,
+        }
+    }
+}
+
+impl Default for InitialisationConfig {
+    fn default() -> Self {
+        Self {
+            search_diameter_m: 3.0,    // Koch–Teller §5.3
+            best_edges_per_segment: 3, // Koch–Teller §4.1.2, k = 3
+            max_samples: 5000,
+            time_budget_ms: 950.0,
+            simplex_refinement: true, // Koch–Teller §4.1.3
+            confirm_frames: 3,
+            narrow_rig_searches: 3,
+            edges_considered: 40,
+            segments_considered: 40,
+            samples_per_cell: 100,
+            dihedral_tolerance_deg: 1.0,
+            max_dihedral_range_deg: 10.0,
+            whole_model_time_budget_ms: 10000.0,
+            clear_winner_ratio: 0.8,
+            accept_explained_fraction: 0.4,
+            accept_support_fraction: 0.15,
+            blank_radius_deg: 2.0,
+            wide_edges_considered: 64,
+            wide_segments_considered: 60,
+            wide_samples_per_cell: 300,
+        }
+    }
+}
+
+impl Default for MaintenanceConfig {
+    fn default() -> Self {
+        Self {
+            angular_gate_deg: 10.0,    // Koch–Teller §4.2.1
+            hue_gate: 0.03,            // Koch–Teller §4.2.1
+            accept_after_frames: 4,    // Koch–Teller §4.2.4, k = 4
+            sample_size: 10,           // Koch–Teller §4.2.4, λ
+            success_probability: 0.95, // Koch–Teller eq. 2
+            outlier_percent: 30.0,     // Koch–Teller Table 1, b
+            max_samples: 1000,
+            time_budget_ms: 30.0,
+            constant_velocity_prior: true,
+            robust_final_fit: true,
+            consensus_score: omnitrack_solver::SampleScore::Median,
+            inlier_angle_deg: 1.5,
+            min_inliers: 8,
+            lost_after_frames: 3,
+            max_jump_m: 0.5,
+            max_jump_deg: 15.0,
+            relocalise_diameter_m: 1.0,
+            min_explained_ratio: 0.6,
+        }
+    }
+}
+
+/// The default [`VisibilityConfig::min_segment_length_m`] (m): measured on KIT's FZK-Haus
+/// converted from IFC (README, "Models from IFC").
+pub const MIN_SEGMENT_LENGTH_M: f64 = 0.1;
+
+impl Default for VisibilityConfig {
+    fn default() -> Self {
+        Self {
+            node_spacing_m: 1.0,   // Koch–Teller §4.1.1
+            min_visible_pixels: 2, // Koch–Teller §4.3
+            cube_map_resolution: 256,
+            node_heights_m: vec![1.0, 1.5, 2.0],
+            min_segment_length_m: MIN_SEGMENT_LENGTH_M,
+        }
+    }
+}
+
+impl Default for SolverConfig {
+    fn default() -> Self {
+        Self {
+            method: SolverMethod::RAndT, // Kumar–Hanson §6: R_and_T beats R_then_T
+            error: LineError::E2,        // Kumar–Hanson eq. 11 (best in the tracker benchmark)
+            max_iterations: 50,          // Kumar–Hanson §3.1 step 4
+            convergence_rad: 1e-10,
+            initial_rotation_samples: 24, // Kumar–Hanson §3.2 (Horn: 12, 24 or 60)
+            lms_subset_size: 3,           // Kumar–Hanson §4
+            // Kumar–Hanson §4 promises 49.9 % outliers: sized for half (87 subsets of 3).
+            lms_success_probability: 0.99999,
+            lms_outlier_fraction: 0.5,
+            lms_outlier_threshold: 2.5,  // Rousseeuw & Leroy: |r| > 2.5 σ̂
+            degenerate_subset_det: 0.05, // Kumar–Hanson §4
+        }
+    }
+}
+
+impl Default for NoiseConfig {
+    fn default() -> Self {
+        Self {
+            edge_normal_sigma_deg: 0.5,
+        } // Koch–Teller §5.1
+    }
+}
+
+impl Default for MotionConfig {
+    fn default() -> Self {
+        Self {
+            upright: false,
+            upright_height_m: 1.2,
+            max_turn_rate_deg_s: 360.0,       // ours: heads turn at up to ~300–400°/s
+            max_tilt_deg: 60.0,               // ours: a worn rig leans less than a look at the floor
+            height_above_floor_m: [1.0, 2.0], // ours: worn 1.2–1.9 m, hand-held or on a cart 1.0–1.6 m
+        } // Koch–Teller §5.4
+    }
+}
+
+impl Default for BudgetConfig {
+    fn default() -> Self {
+        Self {
+            frame_ms: 33.0,
+            edges_ms: 10.0,
+            frame_sync_tolerance_ms: 5.0,
+            capture_ms: 40.0,
+            track_ms: 20.0,
+            publish_ms: 0.5,
+            frame_assembly_wait_ms: 10.0,
+            status_interval_ms: 250.0,
+        }
+    }
+}
+
+/// A tracker config that cannot be used: one line naming the file and the key.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{file}: {message}")]
+pub struct ConfigError {
+    pub file: String,
+    pub message: String,
+}
+
+impl TrackerConfig {
+    /// The solver tunables of this config.
+    pub fn solver_options(&self) -> omnitrack_solver::SolverOptions {
+        let s = &self.solver;
+        omnitrack_solver::SolverOptions {
+            error: s.error,
+            max_iterations: s.max_iterations,
+            convergence_rad: s.convergence_rad,
+            initial_rotation_samples: s.initial_rotation_samples,
+            lms_success_probability: s.lms_success_probability,
+            lms_outlier_fraction: s.lms_outlier_fraction,
+            lms_outlier_threshold: s.lms_outlier_threshold,
+            degenerate_subset_det: s.degenerate_subset_det,
+            edge_sigma_rad: self.noise.edge_normal_sigma_deg.to_radians(),
+        }
+    }
+
+    pub fn load(path: &Path) -> Result<TrackerConfig, ConfigError> {
+        let file = path.display().to_string();
+        let text = std::fs::read_to_string(path).map_err(|e| ConfigError {
+            file: file.clone(),
+            message: format!("cannot read tracker config: {e}"),
+        })?;
+        TrackerConfig::from_toml_str(&text, &file)
+    }
+
+    pub fn from_toml_str(text: &str, file: &str) -> Result<TrackerConfig, ConfigError> {
+        let config: TrackerConfig = toml::from_str(text).map_err(|e| ConfigError {
+            file: file.to_string(),
+            message: omnitrack_core::rig::one_line(&e.to_string()),
+        })?;
+        config.validate().map_err(|message| ConfigError {
+            file: file.to_string(),
+            message,
+        })?;
+        Ok(config)
+    }
+
+    /// Range checks that serde's types cannot express; the message names the key.
+    pub fn validate(&self) -> Result<(), String> {
+        fn positive(key: &str, v: f64) -> Result<(), String> {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(format!("key '{key}': must be a positive number, found {v}"))
+            }
+        }
+        fn open_unit(key: &str, v: f64) -> Result<(), String> {
+            if v > 0.0 && v < 1.0 {
+                Ok(())
+            } else {
+                Err(format!("key '{key}': must lie strictly between 0 and 1, found {v}"))
+            }
+        }
+        fn at_least(key: &str, v: u32, min: u32) -> Result<(), String> {
+            if v >= min {
+                Ok(())
+            } else {
+                Err(format!("key '{key}': must be at least {min}, found {v}"))
+            }
+        }
+        let (e, i, m, v, s) = (
+            &self.edges,
+            &self.initialisation,
+            &self.maintenance,
+            &self.visibility,
+            &self.solver,
+        );
+        at_least("edges.hue_strip_width_px", e.hue_strip_width_px, 1)?;
+        at_least("edges.max_edges_per_sensor", e.max_edges_per_sensor, 3)?;
+        positive("edges.min_edge_length_deg", e.min_edge_length_deg)?;
+        for (key, x) in [
+            ("edges.min_hue_saturation", e.min_hue_saturation),
+            ("edges.min_hue_value", e.min_hue_value),
+        ] {
+            if !(0.0..1.0).contains(&x) {
+                return Err(format!("key '{key}': must lie in [0, 1), found {x}"));
+            }
+        }
+        positive("initialisation.search_diameter_m", i.search_diameter_m)?;
+        at_least("initialisation.best_edges_per_segment", i.best_edges_per_segment, 1)?;
+        at_least("initialisation.max_samples", i.max_samples, 1)?;
+        positive("initialisation.time_budget_ms", i.time_budget_ms)?;
+        at_least("initialisation.confirm_frames", i.confirm_frames, 1)?;
+        at_least("initialisation.narrow_rig_searches", i.narrow_rig_searches, 1)?;
+        at_least("initialisation.edges_considered", i.edges_considered, 3)?;
+        if i.edges_considered > 64 {
+            return Err(format!(
+                "key 'initialisation.edges_considered': must be at most 64 (one bit per edge), found {}",
+                i.edges_considered
+            ));
+        }
+        at_least("initialisation.segments_considered", i.segments_considered, 3)?;
+        at_least("initialisation.samples_per_cell", i.samples_per_cell, 1)?;
+        positive("initialisation.dihedral_tolerance_deg", i.dihedral_tolerance_deg)?;
+        positive("initialisation.max_dihedral_range_deg", i.max_dihedral_range_deg)?;
+        positive(
+            "initialisation.whole_model_time_budget_ms",
+            i.whole_model_time_budget_ms,
+        )?;
+        if !(i.clear_winner_ratio > 0.0 && i.clear_winner_ratio <= 1.0) {
+            return Err(format!(
+                "key 'initialisation.clear_winner_ratio': must lie in (0, 1], found {}",
+                i.clear_winner_ratio
+            ));
+        }
+        if !(i.accept_explained_fraction > 0.0 && i.accept_explained_fraction < 1.0) {
+            return Err(format!(
+                "key 'initialisation.accept_explained_fraction': must lie strictly between 0 and 1, found {}",
+                i.accept_explained_fraction
+            ));
+        }
+        if !(i.accept_support_fraction >= 0.0 && i.accept_support_fraction < 1.0) {
+            return Err(format!(
+                "key 'initialisation.accept_support_fraction': must lie in [0, 1), found {}",
+                i.accept_support_fraction
+            ));
+        }
+        if !(i.blank_radius_deg >= 0.0 && i.blank_radius_deg <= 10.0) {
+            return Err(format!(
+                "key 'initialisation.blank_radius_deg': must lie in [0, 10] degrees, found {}",
+                i.blank_radius_deg
+            ));
+        }
+        at_least(
+            "initialisation.wide_edges_considered",
+            i.wide_edges_considered,
+            i.edges_considered,
+        )?;
+        if i.wide_edges_considered > 64 {
+            return Err(format!(
+                "key 'initialisation.wide_edges_considered': must be at most 64 (one bit per edge), found {}",
+                i.wide_edges_considered
+            ));
+        }
+        at_least(
+            "initialisation.wide_segments_considered",
+            i.wide_segments_considered,
+            i.segments_considered,
+        )?;
+        at_least("initialisation.wide_samples_per_cell", i.wide_samples_per_cell, 1)?;
+        positive("maintenance.angular_gate_deg", m.angular_gate_deg)?;
+        if !(m.hue_gate > 0.0 && m.hue_gate <= 0.5) {
+            return Err(format!(
+                "key 'maintenance.hue_gate': must lie in (0, 0.5] (hue wraps at 1), found {}",
+                m.hue_gate
+            ));
+        }
+        at_least("maintenance.accept_after_frames", m.accept_after_frames, 1)?;
+        at_least("maintenance.sample_size", m.sample_size, 3)?;
+        open_unit("maintenance.success_probability", m.success_probability)?;
+        if !(0.0..100.0).contains(&m.outlier_percent) {
+            return Err(format!(
+                "key 'maintenance.outlier_percent': must lie in [0, 100), found {}",
+                m.outlier_percent
+            ));
+        }
+        at_least("maintenance.max_samples", m.max_samples, 1)?;
+        positive("maintenance.time_budget_ms", m.time_budget_ms)?;
+        positive("maintenance.inlier_angle_deg", m.inlier_angle_deg)?;
+        at_least("maintenance.min_inliers", m.min_inliers, 4)?;
+        at_least("maintenance.lost_after_frames", m.lost_after_frames, 1)?;
+        positive("maintenance.max_jump_m", m.max_jump_m)?;
+        positive("maintenance.max_jump_deg", m.max_jump_deg)?;
+        if !(m.relocalise_diameter_m >= 0.0 && m.relocalise_diameter_m.is_finite()) {
+            return Err(format!(
+                "key 'maintenance.relocalise_diameter_m': must be 0 (off) or a positive number of metres, found {}",
+                m.relocalise_diameter_m
+            ));
+        }
+        if !(0.0..1.0).contains(&m.min_explained_ratio) {
+            return Err(format!(
+                "key 'maintenance.min_explained_ratio': must lie in [0, 1) (0 = off), found {}",
+                m.min_explained_ratio
+            ));
+        }
+        positive("visibility.node_spacing_m", v.node_spacing_m)?;
+        at_least("visibility.min_visible_pixels", v.min_visible_pixels, 1)?;
+        at_least("visibility.cube_map_resolution", v.cube_map_resolution, 8)?;
+        if !(v.min_segment_length_m.is_finite() && v.min_segment_length_m >= 0.0) {
+            return Err(format!(
+                "key 'visibility.min_segment_length_m': must be a finite length ≥ 0 (0 = every segment), found {}",
+                v.min_segment_length_m
+            ));
+        }
+        if v.node_heights_m.is_empty() || v.node_heights_m.iter().any(|h| !h.is_finite()) {
+            return Err("key 'visibility.node_heights_m': must be a non-empty list of finite heights".into());
+        }
+        at_least("solver.max_iterations", s.max_iterations, 1)?;
+        positive("solver.convergence_rad", s.convergence_rad)?;
+        if ![12, 24, 60].contains(&s.initial_rotation_samples) {
+            return Err(format!(
+                "key 'solver.initial_rotation_samples': must be 12, 24 or 60 (Horn's rotation groups), found {}",
+                s.initial_rotation_samples
+            ));
+        }
+        at_least("solver.lms_subset_size", s.lms_subset_size, 3)?;
+        open_unit("solver.lms_success_probability", s.lms_success_probability)?;
+        open_unit("solver.lms_outlier_fraction", s.lms_outlier_fraction)?;
+        positive("solver.lms_outlier_threshold", s.lms_outlier_threshold)?;
+        positive("solver.degenerate_subset_det", s.degenerate_subset_det)?;
+        positive("noise.edge_normal_sigma_deg", self.noise.edge_normal_sigma_deg)?;
+        positive("motion.upright_height_m", self.motion.upright_height_m)?;
+        positive("motion.max_turn_rate_deg_s", self.motion.max_turn_rate_deg_s)?;
+        let tilt = self.motion.max_tilt_deg;
+        if !(tilt > 0.0 && tilt <= 180.0) {
+            return Err(format!("key 'motion.max_tilt_deg': must be in (0, 180], found {tilt}"));
+        }
+        let [lo, hi] = self.motion.height_above_floor_m;
+        if !(lo.is_finite() && hi.is_finite() && lo >= 0.0 && hi > lo) {
+            return Err(format!(
+                "key 'motion.height_above_floor_m': must be [lowest, highest] with 0 <= lowest < highest, found [{lo}, {hi}]"
+            ));
+        }
+        positive("budgets.frame_ms", self.budgets.frame_ms)?;
+        positive("budgets.edges_ms", self.budgets.edges_ms)?;
+        positive("budgets.frame_sync_tolerance_ms", self.budgets.frame_sync_tolerance_ms)?;
+        positive("budgets.capture_ms", self.budgets.capture_ms)?;
+        positive("budgets.track_ms", self.budgets.track_ms)?;
+        positive("budgets.publish_ms", self.budgets.publish_ms)?;
+        positive("budgets.frame_assembly_wait_ms", self.budgets.frame_assembly_wait_ms)?;
+        positive("budgets.status_interval_ms", self.budgets.status_interval_ms)?;
+        Ok(())
+    }
+}

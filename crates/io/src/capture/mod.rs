@@ -1,0 +1,464 @@
+//! Capture: where frames come from.
+//!
+//! In: a camera rig ([`Rig`]) and a source of images, all behind the [`FrameSource`] trait: a
+//! recording on disk ([`replay`], the mock camera), V4L2 devices (`v4l2`, cargo feature `v4l`)
+//! or USB3 Vision cameras (`usb`, cargo feature `usb`, over the always-compiled stream parser
+//! [`u3v`]). [`open_source`] picks one from a `--source` spec (`replay:DIR`, `v4l`, `usb`) and
+//! answers a live source left out of the build with the cargo command that enables it. The live
+//! sources share [`LiveSource`] (one camera per sensor, a lost sensor reopened every second while
+//! the others go on) and the pixel conversions of [`convert`].
+//! Out: [`FrameSet`]s — one RGB8 image per rig sensor, with its capture time and whether the
+//! sensor delivered for this frame — plus [`SourceStats`] counting everything that went wrong.
+//!
+//! Capture knows frames and sensors, nothing of edges or tracking.
+//!
+//! Memory: a [`FrameSet`] is built once from the rig ([`FrameSet::for_rig`]), each sensor buffer
+//! sized width × height × 3, and every [`FrameSource::next_frame`] call fills it in place. A
+//! source sizes its own scratch space when it is opened, so that the steady state allocates
+//! nothing of its own (see [`replay`] for what its PNG decoder still allocates inside).
+//!
+//! Failure: one sensor failing for one frame (dropped, missing, corrupt, wrong size) is recorded
+//! on that sensor's [`SensorImage`] (`valid = false`, with an [`ImageFault`]), counted in
+//! [`SourceStats`], warned on standard error a few times per kind, and the stream goes on.
+//! [`SourceError`] is only for the whole source failing (cannot open, wrong frame set).
+
+pub mod convert;
+pub mod open;
+pub mod replay;
+pub mod u3v;
+#[cfg(feature = "usb")]
+pub mod usb;
+#[cfg(feature = "v4l")]
+pub mod v4l2;
+
+pub use open::{open_source, open_source_with, LiveSource, SourceOptions};
+pub use replay::{Pacing, ReplaySource};
+
+use omnitrack_core::rig::{Rig, RigError};
+use omnitrack_core::trajectory::TumError;
+use std::fmt;
+use std::path::PathBuf;
+
+/// Why one sensor has no usable image in a frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum ImageFault {
+    /// The source has nothing for this sensor in this frame (a recording without a row for it, a
+    /// camera that did not deliver in time).
+    Dropped,
+    /// The image should be there but is not: file or directory missing or unreadable.
+    Missing,
+    /// The image data cannot be decoded.
+    Corrupt,
+    /// The image is not the sensor's width × height.
+    WrongSize,
+    /// The image has a pixel format that cannot be turned into RGB8 (e.g. 16 bits per channel).
+    WrongFormat,
+}
+
+impl ImageFault {
+    /// Every fault, in the order of [`ImageFault::index`].
+    pub const ALL: [ImageFault; 5] = [
+        ImageFault::Dropped,
+        ImageFault::Missing,
+        ImageFault::Corrupt,
+        ImageFault::WrongSize,
+        ImageFault::WrongFormat,
+    ];
+
+    /// Position in [`ImageFault::ALL`] (for per-kind counter arrays).
+    pub fn index(self) -> usize {
+        self as usize
+    }
+
+    /// Short human-readable name.
+    pub fn name(self) -> &'static str {
+        match self {
+            ImageFault::Dropped => "dropped",
+            ImageFault::Missing => "missing",
+            ImageFault::Corrupt => "corrupt",
+            ImageFault::WrongSize => "wrong size",
+            ImageFault::WrongFormat => "wrong format",
+        }
+    }
+}
+
+impl fmt::Display for ImageFault {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// One sensor's image of one frame: an RGB8 buffer of exactly the sensor's size, allocated once.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SensorImage {
+    sensor: usize,
+    width: u32,
+    height: u32,
+    /// Row-major RGB8, `width * height * 3` bytes; a boxed slice so that it can never grow.
+    pixels: Box<[u8]>,
+    /// Capture time (ns) as the source knows it; 0 when the source has no record of this sensor
+    /// in this frame ([`ImageFault::Dropped`]).
+    pub timestamp_ns: u64,
+    /// Whether this sensor delivered a usable image for this frame. When false the pixels are
+    /// stale or partly overwritten and must not be used.
+    pub valid: bool,
+    /// Why the image is not valid; `None` when `valid`.
+    pub fault: Option<ImageFault>,
+}
+
+impl SensorImage {
+    /// A zeroed, not-yet-valid image for a sensor of the given size.
+    pub fn new(sensor: usize, width: u32, height: u32) -> SensorImage {
+        let len = width as usize * height as usize * 3;
+        SensorImage {
+            sensor,
+            width,
+            height,
+            pixels: vec![0u8; len].into_boxed_slice(),
+            timestamp_ns: 0,
+            valid: false,
+            fault: Some(ImageFault::Dropped),
+        }
+    }
+
+    /// Sensor id (index in [`Rig::sensors`]).
+    pub fn sensor(&self) -> usize {
+        self.sensor
+    }
+
+    pub fn width(&self) -> u32 {
+        self.width
+    }
+
+    pub fn height(&self) -> u32 {
+        self.height
+    }
+
+    /// Row-major RGB8 pixels, `width * height * 3` bytes.
+    pub fn pixels(&self) -> &[u8] {
+        &self.pixels
+    }
+
+    /// Mutable pixels, for sources (and image-noise stages) that fill the buffer in place.
+    pub fn pixels_mut(&mut self) -> &mut [u8] {
+        &mut self.pixels
+    }
+
+    /// RGB of the pixel at column `u`, row `v`. Panics if outside the image.
+    pub fn rgb(&self, u: u32, v: u32) -> [u8; 3] {
+        assert!(
+            u < self.width && v < self.height,
+            "pixel ({u}, {v}) outside {}x{}",
+            self.width,
+            self.height
+        );
+        let i = (v as usize * self.width as usize + u as usize) * 3;
+        [self.pixels[i], self.pixels[i + 1], self.pixels[i + 2]]
+    }
+
+    /// Marks the image usable, captured at `timestamp_ns`.
+    pub fn set_valid(&mut self, timestamp_ns: u64) {
+        self.timestamp_ns = timestamp_ns;
+        self.valid = true;
+        self.fault = None;
+    }
+
+    /// Marks the image unusable for `fault`; `timestamp_ns` is the capture time if known, else 0.
+    pub fn set_invalid(&mut self, fault: ImageFault, timestamp_ns: u64) {
+        self.timestamp_ns = timestamp_ns;
+        self.valid = false;
+        self.fault = Some(fault);
+    }
+}
+
+/// One frame of the rig: one [`SensorImage`] per sensor, indexed by sensor id.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FrameSet {
+    /// Frame sequence number as the source numbers it (for a recording: the `frame` column of
+    /// `frames.csv`, so numbers may skip where a whole frame was dropped).
+    pub sequence: u64,
+    /// Indexed by sensor id; its length never changes.
+    sensors: Box<[SensorImage]>,
+}
+
+impl FrameSet {
+    /// Allocates the buffers for every sensor of the rig (the only allocation a frame ever needs).
+    pub fn for_rig(rig: &Rig) -> FrameSet {
+        FrameSet {
+            sequence: 0,
+            sensors: rig
+                .sensors
+                .iter()
+                .map(|s| SensorImage::new(s.id, s.width, s.height))
+                .collect(),
+        }
+    }
+
+    /// Whether the buffers are the rig's: one per sensor, in id order, of each sensor's size.
+    pub fn fits(&self, rig: &Rig) -> bool {
+        self.sensors.len() == rig.sensors.len()
+            && self
+                .sensors
+                .iter()
+                .zip(&rig.sensors)
+                .all(|(img, s)| img.sensor == s.id && img.width == s.width && img.height == s.height)
+    }
+
+    /// One image per sensor, indexed by sensor id.
+    pub fn sensors(&self) -> &[SensorImage] {
+        &self.sensors
+    }
+
+    /// Mutable images (the slice cannot change length).
+    pub fn sensors_mut(&mut self) -> &mut [SensorImage] {
+        &mut self.sensors
+    }
+
+    /// The image of sensor `id`. Panics if the rig has no such sensor.
+    pub fn sensor(&self, id: usize) -> &SensorImage {
+        &self.sensors[id]
+    }
+
+    pub fn sensor_mut(&mut self, id: usize) -> &mut SensorImage {
+        &mut self.sensors[id]
+    }
+
+    /// Number of sensors that delivered a usable image.
+    pub fn valid_count(&self) -> usize {
+        self.sensors.iter().filter(|s| s.valid).count()
+    }
+
+    /// Earliest capture time among the valid images, if any is valid.
+    pub fn timestamp_ns(&self) -> Option<u64> {
+        self.sensors.iter().filter(|s| s.valid).map(|s| s.timestamp_ns).min()
+    }
+}
+
+/// What one sensor delivered over the stream so far.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct SensorStats {
+    /// Valid images delivered.
+    pub delivered: u64,
+    /// Frames with no image at all for this sensor ([`ImageFault::Dropped`]).
+    pub dropped: u64,
+    /// [`ImageFault::Missing`]: file or directory missing / unreadable.
+    pub missing: u64,
+    /// [`ImageFault::Corrupt`]: not decodable.
+    pub corrupt: u64,
+    /// [`ImageFault::WrongSize`].
+    pub wrong_size: u64,
+    /// [`ImageFault::WrongFormat`].
+    pub wrong_format: u64,
+}
+
+impl SensorStats {
+    /// The counter of one fault kind.
+    pub fn faults(&self, fault: ImageFault) -> u64 {
+        match fault {
+            ImageFault::Dropped => self.dropped,
+            ImageFault::Missing => self.missing,
+            ImageFault::Corrupt => self.corrupt,
+            ImageFault::WrongSize => self.wrong_size,
+            ImageFault::WrongFormat => self.wrong_format,
+        }
+    }
+
+    /// Counts one fault.
+    pub fn count(&mut self, fault: ImageFault) {
+        match fault {
+            ImageFault::Dropped => self.dropped += 1,
+            ImageFault::Missing => self.missing += 1,
+            ImageFault::Corrupt => self.corrupt += 1,
+            ImageFault::WrongSize => self.wrong_size += 1,
+            ImageFault::WrongFormat => self.wrong_format += 1,
+        }
+    }
+
+    /// All faults of every kind.
+    pub fn total_faults(&self) -> u64 {
+        ImageFault::ALL.iter().map(|&f| self.faults(f)).sum()
+    }
+}
+
+/// Index rows (e.g. of `frames.csv`) that were skipped at open, by reason.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct BadRowStats {
+    /// Not exactly the expected number of comma-separated fields.
+    pub field_count: u64,
+    /// A numeric field (frame, sensor, timestamp) that is not a non-negative integer.
+    pub not_a_number: u64,
+    /// A sensor id the rig does not have.
+    pub unknown_sensor: u64,
+    /// A second row for a (frame, sensor) pair already seen (the first one is kept).
+    pub duplicate: u64,
+    /// An empty path field.
+    pub empty_path: u64,
+}
+
+impl BadRowStats {
+    pub fn total(&self) -> u64 {
+        self.field_count + self.not_a_number + self.unknown_sensor + self.duplicate + self.empty_path
+    }
+}
+
+/// Everything a source counted: what it delivered and what went wrong. Bounded in size (counters
+/// only, no stored messages), so it can live for the whole run.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct SourceStats {
+    /// Frame sets delivered (`next_frame` returned `Ok(true)`).
+    pub frames_delivered: u64,
+    /// Indexed by sensor id.
+    pub sensors: Vec<SensorStats>,
+    /// Index rows skipped when the source was opened.
+    pub bad_rows: BadRowStats,
+    /// Warnings written to standard error.
+    pub warnings_printed: u64,
+    /// Warnings counted but not written (past the per-kind limit).
+    pub warnings_suppressed: u64,
+}
+
+impl SourceStats {
+    /// Zeroed counters for a rig of `sensors` sensors.
+    pub fn new(sensors: usize) -> SourceStats {
+        SourceStats {
+            sensors: vec![SensorStats::default(); sensors],
+            ..SourceStats::default()
+        }
+    }
+
+    /// Sum over sensors of one fault kind.
+    pub fn faults(&self, fault: ImageFault) -> u64 {
+        self.sensors.iter().map(|s| s.faults(fault)).sum()
+    }
+
+    /// Valid images delivered, all sensors.
+    pub fn images_delivered(&self) -> u64 {
+        self.sensors.iter().map(|s| s.delivered).sum()
+    }
+}
+
+impl fmt::Display for SourceStats {
+    /// One line, e.g. `12 frames, 70/72 images; dropped 1, corrupt 1; 0 bad rows; 2 warnings (0 suppressed)`.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let expected = self.frames_delivered * self.sensors.len() as u64;
+        write!(
+            f,
+            "{} frames, {}/{} images",
+            self.frames_delivered,
+            self.images_delivered(),
+            expected
+        )?;
+        let mut sep = "; ";
+        for fault in ImageFault::ALL {
+            let n = self.faults(fault);
+            if n > 0 {
+                write!(f, "{sep}{fault} {n}")?;
+                sep = ", ";
+            }
+        }
+        write!(
+            f,
+            "; {} bad rows; {} warnings ({} suppressed)",
+            self.bad_rows.total(),
+            self.warnings_printed,
+            self.warnings_suppressed
+        )
+    }
+}
+
+/// The whole source failed: one line naming the file or device and the problem.
+#[derive(Debug, thiserror::Error)]
+pub enum SourceError {
+    /// The rig file of a recording (or of a live source) is missing or invalid.
+    #[error("{0}")]
+    Rig(#[from] RigError),
+    /// The ground-truth trajectory of a recording is present but unreadable.
+    #[error("{0}")]
+    GroundTruth(#[from] TumError),
+    /// A file or directory the source needs cannot be read.
+    #[error("{}: {message}", path.display())]
+    Io { path: PathBuf, message: String },
+    /// A file the source needs is readable but not in the expected format.
+    #[error("{}{}: {message}", path.display(), line.map(|l| format!(":{l}")).unwrap_or_default())]
+    Format {
+        path: PathBuf,
+        line: Option<usize>,
+        message: String,
+    },
+    /// A capture device failed (for live drivers): `device` is e.g. `/dev/video0`.
+    #[error("{device}: {message}")]
+    Device { device: String, message: String },
+    /// `next_frame` was given a [`FrameSet`] not built for this source's rig.
+    #[error("frame set does not fit rig '{rig}': build it with FrameSet::for_rig(source.rig())")]
+    FrameSetMismatch { rig: String },
+}
+
+/// A source of rig frames: a recording now, live cameras later. Object-safe, so a runtime can hold
+/// a `Box<dyn FrameSource>` chosen from the command line.
+pub trait FrameSource {
+    /// The rig whose frames this source delivers; build the [`FrameSet`] from it.
+    fn rig(&self) -> &Rig;
+
+    /// Fills `out` (built by [`FrameSet::for_rig`] from [`FrameSource::rig`]) in place with the
+    /// next frame. `Ok(true)`: a frame was delivered (some sensors may be invalid, see
+    /// [`SensorImage::valid`]); `Ok(false)`: end of stream, `out` is untouched; `Err`: the whole
+    /// source failed. A per-sensor failure is never an `Err`.
+    fn next_frame(&mut self, out: &mut FrameSet) -> Result<bool, SourceError>;
+
+    /// Counters so far.
+    fn stats(&self) -> &SourceStats;
+}
+
+/// Writes capture warnings to standard error, at most `limit` per kind, counting the rest.
+/// A fixed array of counters: no allocation, no stored strings.
+#[derive(Debug, Clone)]
+pub(crate) struct WarningLimiter {
+    printed: [u32; WarningKind::COUNT],
+    limit: u32,
+}
+
+/// What a warning is about, for rate limiting.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum WarningKind {
+    Image(ImageFault),
+    BadRow,
+    Directory,
+}
+
+impl WarningKind {
+    const COUNT: usize = ImageFault::ALL.len() + 2;
+
+    fn index(self) -> usize {
+        match self {
+            WarningKind::Image(f) => f.index(),
+            WarningKind::BadRow => ImageFault::ALL.len(),
+            WarningKind::Directory => ImageFault::ALL.len() + 1,
+        }
+    }
+}
+
+impl WarningLimiter {
+    pub(crate) fn new(limit: u32) -> WarningLimiter {
+        WarningLimiter {
+            printed: [0; WarningKind::COUNT],
+            limit,
+        }
+    }
+
+    /// Prints `message` (prefixed `warning: `) unless `kind` has reached its limit; the last
+    /// printed one of a kind says that more will be counted only. Updates `stats`.
+    pub(crate) fn warn(&mut self, stats: &mut SourceStats, kind: WarningKind, message: fmt::Arguments<'_>) {
+        let n = &mut self.printed[kind.index()];
+        if *n >= self.limit {
+            stats.warnings_suppressed += 1;
+            return;
+        }
+        *n += 1;
+        stats.warnings_printed += 1;
+        if *n == self.limit {
+            eprintln!("warning: {message} (further warnings of this kind are only counted)");
+        } else {
+            eprintln!("warning: {message}");
+        }
+    }
+}

@@ -1,0 +1,388 @@
+//! Choosing the frame source from the command line, and what the live sources share.
+//!
+//! In: a `--source` spec (docs/interfaces.md, "Command line": `replay:DIR`, `v4l` or `usb`) and
+//! the rig given with `--rig`, if any. Out: a boxed [`FrameSource`] ([`open_source`]), or one
+//! line saying what is wrong: an unknown spec, a live source without a rig, a live source this
+//! binary was built without (with the cargo command that enables it), or the device error of
+//! the source itself.
+//!
+//! A recording carries its own rig, so `replay:DIR` needs none; when `--rig` is given as well its
+//! sensors must have the recording's sizes. `v4l` and `usb` need the rig: it names each sensor's
+//! device (`device`, `usb_serial`, `[usb]`).
+//!
+//! [`LiveSource`] is the frame source of both live drivers ([`LiveCamera`] implementations, one
+//! camera per sensor): each [`FrameSource::next_frame`] reads one image from every connected
+//! sensor in turn, straight into the frame set. A sensor whose read fails is marked invalid for
+//! that frame (its [`ImageFault`] counted and warned, rate-limited); when the failure means the
+//! device is gone (unplugged, I/O error, or [`LOST_AFTER_TIMEOUTS`] timeouts in a row) it is
+//! closed, reported on standard error, and reopened every [`SourceOptions::reopen_interval`]
+//! until it comes back (reported again); the other sensors go on meanwhile. With no sensor
+//! connected, `next_frame` waits for the next reopening attempt instead of spinning.
+//!
+//! Clock: image timestamps are nanoseconds of the host's monotonic clock: the drivers' own
+//! (V4L2 buffers stamped `CLOCK_MONOTONIC`) or, where a driver has none, [`host_time_ns`], the
+//! time since the first call in this process (also monotonic, but another origin).
+
+use super::{FrameSet, FrameSource, ImageFault, Pacing, ReplaySource, SensorImage, SourceError, SourceStats};
+use super::{WarningKind, WarningLimiter};
+use omnitrack_core::rig::{Rig, Sensor};
+use std::fmt;
+use std::path::Path;
+use std::sync::OnceLock;
+use std::time::{Duration, Instant};
+
+/// Timeouts in a row after which a live sensor counts as lost and is reopened.
+pub const LOST_AFTER_TIMEOUTS: u32 = 3;
+
+/// Warnings of one kind printed before the rest are only counted.
+const WARN_LIMIT: u32 = 5;
+
+/// How sources are opened and run; [`SourceOptions::default`] is what `omnitrack run` uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SourceOptions {
+    /// Pacing of `replay:DIR` (default: real time, like a camera).
+    pub pacing: Pacing,
+    /// Longest wait for one sensor's image before it counts as dropped (live sources; default 1 s).
+    pub frame_timeout: Duration,
+    /// How often a lost live sensor is reopened (default 1 s).
+    pub reopen_interval: Duration,
+}
+
+impl Default for SourceOptions {
+    fn default() -> SourceOptions {
+        SourceOptions {
+            pacing: Pacing::RealTime,
+            frame_timeout: Duration::from_secs(1),
+            reopen_interval: Duration::from_secs(1),
+        }
+    }
+}
+
+/// The hint printed when a live source is asked of a binary built without it.
+pub const V4L_DISABLED: &str = "live V4L2 capture is not in this build: rebuild with \
+     `cargo build --release --features v4l` (needs libclang, e.g. `apt-get install libclang-dev`)";
+
+/// The hint printed when `--source usb` is asked of a binary built without it.
+pub const USB_DISABLED: &str = "live USB3 Vision capture is not in this build: rebuild with \
+     `cargo build --release --features usb`";
+
+/// Opens the source named by `spec` with [`SourceOptions::default`]. See the module doc.
+pub fn open_source(spec: &str, rig: Option<&Rig>) -> Result<Box<dyn FrameSource + Send>, SourceError> {
+    open_source_with(spec, rig, &SourceOptions::default())
+}
+
+/// [`open_source`] with explicit options.
+pub fn open_source_with(
+    spec: &str,
+    rig: Option<&Rig>,
+    options: &SourceOptions,
+) -> Result<Box<dyn FrameSource + Send>, SourceError> {
+    let spec_error = |message: String| SourceError::Device {
+        device: spec.to_string(),
+        message,
+    };
+    let spec = spec.trim();
+    if let Some(dir) = spec.strip_prefix("replay:") {
+        if dir.is_empty() {
+            return Err(spec_error(
+                "replay needs a recording directory: --source replay:DIR".into(),
+            ));
+        }
+        let source = ReplaySource::open(Path::new(dir), options.pacing)?;
+        if let Some(rig) = rig {
+            check_same_sensors(source.rig(), rig, dir)?;
+        }
+        return Ok(Box::new(source));
+    }
+    let need_rig = |what: &str| {
+        rig.ok_or_else(|| spec_error(format!("needs the rig (--rig RIG.toml) to know each sensor's {what}")))
+    };
+    match spec {
+        "v4l" => {
+            let rig = need_rig("V4L2 device")?;
+            open_v4l(rig, options)
+        }
+        "usb" => {
+            let rig = need_rig("USB3 Vision camera")?;
+            open_usb(rig, options)
+        }
+        "replay" => Err(spec_error(
+            "replay needs a recording directory: --source replay:DIR".into(),
+        )),
+        _ => Err(spec_error("unknown source (expected replay:DIR, v4l or usb)".into())),
+    }
+}
+
+#[cfg(feature = "v4l")]
+fn open_v4l(rig: &Rig, options: &SourceOptions) -> Result<Box<dyn FrameSource + Send>, SourceError> {
+    Ok(Box::new(super::v4l2::V4l2Source::open(rig.clone(), *options)?))
+}
+
+#[cfg(not(feature = "v4l"))]
+fn open_v4l(_rig: &Rig, _options: &SourceOptions) -> Result<Box<dyn FrameSource + Send>, SourceError> {
+    Err(SourceError::Device {
+        device: "v4l".into(),
+        message: V4L_DISABLED.into(),
+    })
+}
+
+#[cfg(feature = "usb")]
+fn open_usb(rig: &Rig, options: &SourceOptions) -> Result<Box<dyn FrameSource + Send>, SourceError> {
+    Ok(Box::new(super::usb::UsbSource::open(rig.clone(), *options)?))
+}
+
+#[cfg(not(feature = "usb"))]
+fn open_usb(_rig: &Rig, _options: &SourceOptions) -> Result<Box<dyn FrameSource + Send>, SourceError> {
+    Err(SourceError::Device {
+        device: "usb".into(),
+        message: USB_DISABLED.into(),
+    })
+}
+
+/// A `--rig` given with a recording must have the recording's sensors (count and sizes).
+fn check_same_sensors(recorded: &Rig, given: &Rig, dir: &str) -> Result<(), SourceError> {
+    let sizes = |r: &Rig| r.sensors.iter().map(|s| (s.width, s.height)).collect::<Vec<_>>();
+    if sizes(recorded) == sizes(given) {
+        return Ok(());
+    }
+    Err(SourceError::Format {
+        path: Path::new(dir).join("rig.toml"),
+        line: None,
+        message: format!(
+            "the recording's rig '{}' ({} sensors) does not match --rig '{}' ({} sensors) in sensor count or sizes",
+            recorded.name,
+            recorded.sensors.len(),
+            given.name,
+            given.sensors.len()
+        ),
+    })
+}
+
+/// Nanoseconds since the first call in this process, monotonic.
+pub fn host_time_ns() -> u64 {
+    static EPOCH: OnceLock<Instant> = OnceLock::new();
+    EPOCH.get_or_init(Instant::now).elapsed().as_nanos() as u64
+}
+
+/// Why one read of a live sensor gave no image. Small and `Copy`: nothing is built per frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FailureDetail {
+    /// No image within [`SourceOptions::frame_timeout`].
+    TimedOut,
+    /// An operating-system error number.
+    Os(i32),
+    /// The image arrived but could not be converted.
+    Convert(super::convert::ConvertError),
+    /// A USB3 Vision block was rejected.
+    U3v(super::u3v::RejectReason),
+    /// Anything else, in a few words.
+    Text(&'static str),
+}
+
+impl fmt::Display for FailureDetail {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            FailureDetail::TimedOut => f.write_str("no image in time"),
+            FailureDetail::Os(code) => write!(f, "{}", std::io::Error::from_raw_os_error(*code)),
+            FailureDetail::Convert(e) => write!(f, "{e}"),
+            FailureDetail::U3v(r) => write!(f, "USB3 Vision block rejected: {r}"),
+            FailureDetail::Text(t) => f.write_str(t),
+        }
+    }
+}
+
+/// One failed read of a live sensor.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ReadFailure {
+    /// What the sensor's image is marked with for this frame.
+    pub fault: ImageFault,
+    /// Whether the device is gone (closed and reopened later) rather than one image lost.
+    pub lost: bool,
+    pub detail: FailureDetail,
+}
+
+/// A live camera for one sensor of the rig: a V4L2 device or a USB3 Vision camera.
+pub trait LiveCamera: Sized + Send {
+    /// What every (re)opening shares (e.g. the USB context); `()` when nothing.
+    type Env: Send;
+
+    /// Opens the camera of `sensor`. Errors are one line naming the device and the sensor.
+    fn open(env: &mut Self::Env, sensor: &Sensor, options: &SourceOptions) -> Result<Self, SourceError>;
+
+    /// The device, for messages (e.g. `/dev/video0`).
+    fn name(&self) -> &str;
+
+    /// Reads the next image into `img`'s pixels (without marking it); returns its timestamp (ns).
+    fn read(&mut self, img: &mut SensorImage) -> Result<u64, ReadFailure>;
+}
+
+/// One sensor's camera slot: connected or waiting to be reopened.
+struct Slot<C> {
+    camera: Option<C>,
+    /// The device name of the last connection, for messages while disconnected.
+    name: String,
+    retry_at: Instant,
+    timeouts: u32,
+}
+
+/// The [`FrameSource`] of a live driver: one [`LiveCamera`] per sensor. See the module doc.
+pub struct LiveSource<C: LiveCamera> {
+    rig: Rig,
+    env: C::Env,
+    options: SourceOptions,
+    slots: Vec<Slot<C>>,
+    stats: SourceStats,
+    warnings: WarningLimiter,
+    sequence: u64,
+}
+
+impl<C: LiveCamera> fmt::Debug for LiveSource<C> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("LiveSource")
+            .field("rig", &self.rig.name)
+            .field("connected", &self.connected())
+            .field("sequence", &self.sequence)
+            .finish()
+    }
+}
+
+impl<C: LiveCamera> LiveSource<C> {
+    /// Opens every sensor's camera; the first that fails is the error (one line naming device
+    /// and sensor). The frame buffers are the caller's ([`FrameSet::for_rig`]); each camera sizes
+    /// its own scratch space here.
+    pub fn open_with_env(rig: Rig, mut env: C::Env, options: SourceOptions) -> Result<LiveSource<C>, SourceError> {
+        let now = Instant::now();
+        let mut slots = Vec::with_capacity(rig.sensors.len());
+        for sensor in &rig.sensors {
+            let camera = C::open(&mut env, sensor, &options)?;
+            slots.push(Slot {
+                name: camera.name().to_string(),
+                camera: Some(camera),
+                retry_at: now,
+                timeouts: 0,
+            });
+        }
+        Ok(LiveSource {
+            stats: SourceStats::new(rig.sensors.len()),
+            rig,
+            env,
+            options,
+            slots,
+            warnings: WarningLimiter::new(WARN_LIMIT),
+            sequence: 0,
+        })
+    }
+
+    /// Whether each sensor's camera is connected now, by sensor id.
+    pub fn is_connected(&self, sensor: usize) -> bool {
+        self.slots.get(sensor).is_some_and(|s| s.camera.is_some())
+    }
+
+    /// Sensors connected now.
+    pub fn connected(&self) -> usize {
+        self.slots.iter().filter(|s| s.camera.is_some()).count()
+    }
+
+    /// The camera of a sensor, if connected.
+    pub fn camera(&self, sensor: usize) -> Option<&C> {
+        self.slots.get(sensor).and_then(|s| s.camera.as_ref())
+    }
+
+    fn capture(&mut self, k: usize, img: &mut SensorImage) {
+        let now = Instant::now();
+        let slot = &mut self.slots[k];
+        if slot.camera.is_none() && now >= slot.retry_at {
+            match C::open(&mut self.env, &self.rig.sensors[k], &self.options) {
+                Ok(camera) => {
+                    eprintln!("sensor {k} ({}): connected again, capturing", camera.name());
+                    self.stats.warnings_printed += 1;
+                    slot.name.clear();
+                    slot.name.push_str(camera.name());
+                    slot.camera = Some(camera);
+                    slot.timeouts = 0;
+                }
+                Err(e) => {
+                    slot.retry_at = now + self.options.reopen_interval;
+                    self.warnings.warn(
+                        &mut self.stats,
+                        WarningKind::Image(ImageFault::Missing),
+                        format_args!(
+                            "{e} (still unavailable, retrying every {:?})",
+                            self.options.reopen_interval
+                        ),
+                    );
+                }
+            }
+        }
+        let Some(camera) = slot.camera.as_mut() else {
+            img.set_invalid(ImageFault::Missing, 0);
+            self.stats.sensors[k].count(ImageFault::Missing);
+            return;
+        };
+        match camera.read(img) {
+            Ok(ts) => {
+                img.set_valid(ts);
+                self.stats.sensors[k].delivered += 1;
+                slot.timeouts = 0;
+            }
+            Err(failure) => {
+                img.set_invalid(failure.fault, 0);
+                self.stats.sensors[k].count(failure.fault);
+                let timed_out = failure.detail == FailureDetail::TimedOut;
+                slot.timeouts = if timed_out { slot.timeouts + 1 } else { 0 };
+                let lost = failure.lost || slot.timeouts >= LOST_AFTER_TIMEOUTS;
+                if lost {
+                    // Dropping the camera closes the device.
+                    slot.camera = None;
+                    slot.retry_at = now + self.options.reopen_interval;
+                    slot.timeouts = 0;
+                    eprintln!(
+                        "sensor {k} ({}): lost ({}); going on without it, reopening every {:?}",
+                        slot.name, failure.detail, self.options.reopen_interval
+                    );
+                    self.stats.warnings_printed += 1;
+                } else {
+                    self.warnings.warn(
+                        &mut self.stats,
+                        WarningKind::Image(failure.fault),
+                        format_args!("sensor {k} ({}): {}", slot.name, failure.detail),
+                    );
+                }
+            }
+        }
+    }
+}
+
+impl<C: LiveCamera> FrameSource for LiveSource<C> {
+    fn rig(&self) -> &Rig {
+        &self.rig
+    }
+
+    fn next_frame(&mut self, out: &mut FrameSet) -> Result<bool, SourceError> {
+        if !out.fits(&self.rig) {
+            return Err(SourceError::FrameSetMismatch {
+                rig: self.rig.name.clone(),
+            });
+        }
+        if self.connected() == 0 {
+            // Nothing to read: wait for the next reopening attempt rather than spin.
+            let now = Instant::now();
+            if let Some(at) = self.slots.iter().map(|s| s.retry_at).min() {
+                if at > now {
+                    std::thread::sleep((at - now).min(self.options.reopen_interval));
+                }
+            }
+        }
+        for (k, img) in out.sensors_mut().iter_mut().enumerate() {
+            self.capture(k, img);
+        }
+        out.sequence = self.sequence;
+        self.sequence += 1;
+        self.stats.frames_delivered += 1;
+        Ok(true)
+    }
+
+    fn stats(&self) -> &SourceStats {
+        &self.stats
+    }
+}

@@ -1,0 +1,506 @@
+//! The mock camera: replays a recording from disk as if it came from the rig.
+//!
+//! In: a recording directory (docs/interfaces.md, "Recording"):
+//!
+//! ```text
+//! REC/rig.toml             the rig the recording was made with (required)
+//! REC/frames.csv           header `frame,sensor,timestamp_ns,path`; path relative to REC/ (required)
+//! REC/sensorK/NNNNNN.png   8-bit RGB PNG per sensor per frame
+//! REC/groundtruth.tum      optional T_world_rig per frame
+//! REC/model.obj            optional model the recording was made in
+//! ```
+//!
+//! Out: [`FrameSet`]s in frame-number order through [`FrameSource`], paced at the recorded
+//! timestamps ([`Pacing::RealTime`]) or as fast as decoding allows ([`Pacing::AsFastAsPossible`]).
+//!
+//! Everything is parsed at [`ReplaySource::open`]: the index rows are checked and sorted once, and a
+//! bad row (wrong field count, non-numeric field, unknown sensor, duplicate (frame, sensor), empty
+//! path) is skipped, counted in [`SourceStats::bad_rows`] and warned with its line number. A missing
+//! rig file, index file or malformed index header is an `Err` naming the file.
+//!
+//! Per frame, each sensor's PNG is read into a scratch byte buffer sized at open and decoded
+//! straight into the frame set's preallocated RGB8 buffer (grey, grey+alpha and RGBA PNGs are
+//! converted to RGB in place or through a second scratch buffer sized at open). A missing file or
+//! directory, a corrupt PNG, a PNG of the wrong size or of 16-bit depth makes that sensor invalid
+//! for that frame, counted and warned (the first few per kind); the stream goes on.
+//!
+//! Allocation: this module allocates nothing per frame of its own. The `image` crate's PNG decoder
+//! (`png` underneath) does allocate internally each time a decoder is created — its inflate state
+//! and row buffers — and offers no way to reuse them across images; the count is a small constant
+//! per image (`tests/replay.rs` measures it). Removing it needs a reusable decoder (a later issue).
+
+use super::{FrameSet, FrameSource, ImageFault, SensorImage, SourceError, SourceStats, WarningKind, WarningLimiter};
+use image::codecs::png::PngDecoder;
+use image::{ColorType, ImageDecoder, ImageError, Limits};
+use omnitrack_core::rig::Rig;
+use omnitrack_core::trajectory::{load_tum, Trajectory};
+use std::collections::HashSet;
+use std::fmt;
+use std::fs::File;
+use std::io::{self, Cursor, Read};
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+/// The exact header line of `frames.csv`.
+pub const FRAMES_HEADER: &str = "frame,sensor,timestamp_ns,path";
+
+/// Warnings of one kind printed before the rest are only counted.
+const WARN_LIMIT: u32 = 5;
+
+/// Most memory the PNG decoder may use for one image's metadata chunks (guards against a corrupt
+/// header asking for gigabytes).
+const DECODER_MAX_ALLOC: u64 = 64 << 20;
+
+/// How fast a recording is replayed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Pacing {
+    /// Each frame is delivered no earlier than its recorded time after the first frame (the
+    /// earliest sensor timestamp of a frame is its time); a frame that is already late is
+    /// delivered at once (no catching up by skipping).
+    RealTime,
+    /// No waiting: frames come as fast as they decode (benchmarks, offline evaluation).
+    AsFastAsPossible,
+}
+
+/// One index row kept after checking.
+#[derive(Debug, Clone)]
+struct Row {
+    frame: u64,
+    sensor: usize,
+    timestamp_ns: u64,
+    /// Absolute (REC joined with the row's path).
+    path: PathBuf,
+}
+
+/// One frame of the recording: its rows (sorted by sensor) and its time.
+#[derive(Debug, Clone)]
+struct FrameEntry {
+    frame: u64,
+    rows: Range<usize>,
+    /// Earliest timestamp of its rows.
+    timestamp_ns: u64,
+}
+
+/// File-backed [`FrameSource`]. See the module doc.
+#[derive(Debug)]
+pub struct ReplaySource {
+    dir: PathBuf,
+    rig: Rig,
+    pacing: Pacing,
+    rows: Vec<Row>,
+    frames: Vec<FrameEntry>,
+    next: usize,
+    ground_truth: Option<Trajectory>,
+    model_path: Option<PathBuf>,
+    /// Encoded bytes of the image being decoded; sized at open, grows only for an unusually
+    /// large file (and then keeps its size).
+    file_buf: Vec<u8>,
+    /// width × height × 4 of the largest sensor, for RGBA → RGB conversion.
+    rgba_buf: Box<[u8]>,
+    /// (when the first frame was delivered, its recorded time) for [`Pacing::RealTime`].
+    clock: Option<(Instant, u64)>,
+    stats: SourceStats,
+    warnings: WarningLimiter,
+}
+
+impl ReplaySource {
+    /// Opens a recording: reads `rig.toml`, `frames.csv`, `groundtruth.tum` if present, and notes
+    /// `model.obj` if present. Errors name the file and the problem in one line.
+    pub fn open(dir: &Path, pacing: Pacing) -> Result<ReplaySource, SourceError> {
+        if !dir.is_dir() {
+            return Err(SourceError::Io {
+                path: dir.to_path_buf(),
+                message: "recording directory does not exist or is not a directory".into(),
+            });
+        }
+        let rig = Rig::load(&dir.join("rig.toml"))?;
+        let mut stats = SourceStats::new(rig.sensors.len());
+        let mut warnings = WarningLimiter::new(WARN_LIMIT);
+
+        let index_path = dir.join("frames.csv");
+        let text = std::fs::read_to_string(&index_path).map_err(|e| SourceError::Io {
+            path: index_path.clone(),
+            message: format!("cannot read frame index: {e}"),
+        })?;
+        let mut rows = parse_index(&text, &index_path, dir, &rig, &mut stats, &mut warnings)?;
+        // Frame-number order, then sensor order; the sort is stable and (frame, sensor) unique.
+        rows.sort_by_key(|r| (r.frame, r.sensor));
+        let frames = group_frames(&rows);
+        warn_missing_directories(&rows, &mut stats, &mut warnings);
+
+        let gt_path = dir.join("groundtruth.tum");
+        let ground_truth = if gt_path.exists() {
+            Some(load_tum(&gt_path)?)
+        } else {
+            None
+        };
+        let model_path = Some(dir.join("model.obj")).filter(|p| p.is_file());
+
+        let max_pixels = rig
+            .sensors
+            .iter()
+            .map(|s| s.width as usize * s.height as usize)
+            .max()
+            .unwrap_or(0);
+        // An RGB PNG rarely exceeds its raw size plus a little; bigger files grow the buffer once.
+        let file_buf = Vec::with_capacity(max_pixels * 3 + (64 << 10));
+        let rgba_buf = vec![0u8; max_pixels * 4].into_boxed_slice();
+
+        Ok(ReplaySource {
+            dir: dir.to_path_buf(),
+            rig,
+            pacing,
+            rows,
+            frames,
+            next: 0,
+            ground_truth,
+            model_path,
+            file_buf,
+            rgba_buf,
+            clock: None,
+            stats,
+            warnings,
+        })
+    }
+
+    /// The recording directory.
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    pub fn pacing(&self) -> Pacing {
+        self.pacing
+    }
+
+    /// Number of frames in the recording (frames with at least one valid index row).
+    pub fn frame_count(&self) -> usize {
+        self.frames.len()
+    }
+
+    /// Frames not yet delivered.
+    pub fn remaining(&self) -> usize {
+        self.frames.len() - self.next
+    }
+
+    /// `groundtruth.tum` (`T_world_rig`), if the recording has one.
+    pub fn ground_truth(&self) -> Option<&Trajectory> {
+        self.ground_truth.as_ref()
+    }
+
+    /// `model.obj`, if the recording has one (not loaded: capture knows nothing of models).
+    pub fn model_path(&self) -> Option<&Path> {
+        self.model_path.as_deref()
+    }
+
+    /// Starts again from the first frame (the real-time clock restarts too; counters go on).
+    pub fn rewind(&mut self) {
+        self.next = 0;
+        self.clock = None;
+    }
+
+    /// Goes on from frame `frame` (the last frame's end if past it); the real-time clock restarts.
+    pub fn seek(&mut self, frame: usize) {
+        self.next = frame.min(self.frames.len());
+        self.clock = None;
+    }
+
+    /// Sleeps until the recorded time of a frame, relative to the first delivered frame.
+    fn pace(&mut self, timestamp_ns: u64) {
+        if self.pacing != Pacing::RealTime {
+            return;
+        }
+        match self.clock {
+            None => self.clock = Some((Instant::now(), timestamp_ns)),
+            Some((start, t0)) => {
+                let target = start + Duration::from_nanos(timestamp_ns.saturating_sub(t0));
+                let now = Instant::now();
+                if target > now {
+                    std::thread::sleep(target - now);
+                }
+            }
+        }
+    }
+}
+
+impl FrameSource for ReplaySource {
+    fn rig(&self) -> &Rig {
+        &self.rig
+    }
+
+    fn next_frame(&mut self, out: &mut FrameSet) -> Result<bool, SourceError> {
+        if !out.fits(&self.rig) {
+            return Err(SourceError::FrameSetMismatch {
+                rig: self.rig.name.clone(),
+            });
+        }
+        let Some(entry) = self.frames.get(self.next) else {
+            return Ok(false);
+        };
+        let (frame, rows, frame_time) = (entry.frame, entry.rows.clone(), entry.timestamp_ns);
+        self.next += 1;
+
+        for img in out.sensors_mut() {
+            img.set_invalid(ImageFault::Dropped, 0);
+        }
+        for row in &self.rows[rows] {
+            let img = out.sensor_mut(row.sensor);
+            match load_png(&row.path, &mut self.file_buf, &mut self.rgba_buf, img) {
+                Ok(()) => {
+                    img.set_valid(row.timestamp_ns);
+                    self.stats.sensors[row.sensor].delivered += 1;
+                }
+                Err((fault, problem)) => {
+                    img.set_invalid(fault, row.timestamp_ns);
+                    self.stats.sensors[row.sensor].count(fault);
+                    self.warnings.warn(
+                        &mut self.stats,
+                        WarningKind::Image(fault),
+                        format_args!(
+                            "{}: frame {frame}, sensor {}: {problem}; sensor skipped for this frame",
+                            row.path.display(),
+                            row.sensor
+                        ),
+                    );
+                }
+            }
+        }
+        for (stats, img) in self.stats.sensors.iter_mut().zip(out.sensors()) {
+            if img.fault == Some(ImageFault::Dropped) {
+                stats.dropped += 1;
+            }
+        }
+        out.sequence = frame;
+        self.pace(frame_time);
+        self.stats.frames_delivered += 1;
+        Ok(true)
+    }
+
+    fn stats(&self) -> &SourceStats {
+        &self.stats
+    }
+}
+
+/// What went wrong with one image, for the warning line.
+#[derive(Debug)]
+enum Problem {
+    Io(io::Error),
+    Decode(ImageError),
+    Size { found: (u32, u32), expected: (u32, u32) },
+    Format(ColorType),
+}
+
+impl fmt::Display for Problem {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Problem::Io(e) if e.kind() == io::ErrorKind::NotFound => f.write_str("file not found"),
+            Problem::Io(e) => write!(f, "cannot read: {e}"),
+            Problem::Decode(e) => write!(f, "not a valid PNG: {e}"),
+            Problem::Size { found, expected } => {
+                write!(
+                    f,
+                    "image is {}x{}, sensor is {}x{}",
+                    found.0, found.1, expected.0, expected.1
+                )
+            }
+            Problem::Format(c) => write!(
+                f,
+                "pixel format {c:?} cannot be used (8-bit RGB, RGBA or grey expected)"
+            ),
+        }
+    }
+}
+
+/// Reads the PNG at `path` into `img`'s buffer as RGB8. `file_buf` and `rgba` are scratch space
+/// sized at open. Leaves `img`'s flags alone (the caller sets them).
+fn load_png(
+    path: &Path,
+    file_buf: &mut Vec<u8>,
+    rgba: &mut [u8],
+    img: &mut SensorImage,
+) -> Result<(), (ImageFault, Problem)> {
+    file_buf.clear();
+    File::open(path)
+        .and_then(|mut f| f.read_to_end(file_buf))
+        .map_err(|e| (ImageFault::Missing, Problem::Io(e)))?;
+
+    let corrupt = |e: ImageError| (ImageFault::Corrupt, Problem::Decode(e));
+    let mut limits = Limits::default();
+    limits.max_alloc = Some(DECODER_MAX_ALLOC);
+    let decoder = PngDecoder::with_limits(Cursor::new(&file_buf[..]), limits).map_err(corrupt)?;
+    let found = decoder.dimensions();
+    let expected = (img.width(), img.height());
+    if found != expected {
+        return Err((ImageFault::WrongSize, Problem::Size { found, expected }));
+    }
+    let n = expected.0 as usize * expected.1 as usize;
+    let pixels = img.pixels_mut();
+    match decoder.color_type() {
+        ColorType::Rgb8 => decoder.read_image(pixels).map_err(corrupt),
+        ColorType::L8 => {
+            decoder.read_image(&mut pixels[..n]).map_err(corrupt)?;
+            // Expand in place from the back: pixel i's source byte (i) is never overwritten before
+            // it is read, since writes for pixels ≥ i land at 3i.. ≥ i.
+            for i in (0..n).rev() {
+                let g = pixels[i];
+                pixels[3 * i..3 * i + 3].fill(g);
+            }
+            Ok(())
+        }
+        ColorType::La8 => {
+            decoder.read_image(&mut pixels[..2 * n]).map_err(corrupt)?;
+            // Same in-place expansion: pixel i reads 2i, writes 3i..3i+3 (≥ 2i + 1 for i ≥ 1).
+            for i in (0..n).rev() {
+                let g = pixels[2 * i];
+                pixels[3 * i..3 * i + 3].fill(g);
+            }
+            Ok(())
+        }
+        ColorType::Rgba8 => {
+            let src = &mut rgba[..4 * n];
+            decoder.read_image(src).map_err(corrupt)?;
+            for (dst, src) in pixels.chunks_exact_mut(3).zip(src.chunks_exact(4)) {
+                dst.copy_from_slice(&src[..3]);
+            }
+            Ok(())
+        }
+        other => Err((ImageFault::WrongFormat, Problem::Format(other))),
+    }
+}
+
+/// Parses `frames.csv`: a wrong header is an error; bad rows are skipped, counted and warned.
+fn parse_index(
+    text: &str,
+    index_path: &Path,
+    dir: &Path,
+    rig: &Rig,
+    stats: &mut SourceStats,
+    warnings: &mut WarningLimiter,
+) -> Result<Vec<Row>, SourceError> {
+    let mut lines = text.lines().enumerate();
+    let header = lines
+        .next()
+        .map(|(_, l)| l.trim_start_matches('\u{feff}').trim())
+        .unwrap_or("");
+    if header != FRAMES_HEADER {
+        let found = if header.is_empty() {
+            "an empty first line".to_string()
+        } else {
+            format!("'{header}'")
+        };
+        return Err(SourceError::Format {
+            path: index_path.to_path_buf(),
+            line: Some(1),
+            message: format!("expected header '{FRAMES_HEADER}', found {found}"),
+        });
+    }
+    let file = index_path.display();
+    let mut seen: HashSet<(u64, usize)> = HashSet::new();
+    let mut rows = Vec::new();
+    for (i, line) in lines {
+        let line_no = i + 1;
+        let line = line.trim();
+        if line.is_empty() {
+            continue;
+        }
+        let fields: Vec<&str> = line.split(',').map(str::trim).collect();
+        let bad = |stats: &mut SourceStats, warnings: &mut WarningLimiter, what: fmt::Arguments<'_>| {
+            warnings.warn(
+                stats,
+                WarningKind::BadRow,
+                format_args!("{file}:{line_no}: {what}; row skipped"),
+            );
+        };
+        if fields.len() != 4 {
+            stats.bad_rows.field_count += 1;
+            bad(
+                stats,
+                warnings,
+                format_args!("expected 4 fields ({FRAMES_HEADER}), found {}", fields.len()),
+            );
+            continue;
+        }
+        let (Ok(frame), Ok(sensor), Ok(timestamp_ns)) = (
+            fields[0].parse::<u64>(),
+            fields[1].parse::<usize>(),
+            fields[2].parse::<u64>(),
+        ) else {
+            stats.bad_rows.not_a_number += 1;
+            bad(
+                stats,
+                warnings,
+                format_args!("frame, sensor and timestamp_ns must be non-negative integers"),
+            );
+            continue;
+        };
+        if sensor >= rig.sensors.len() {
+            stats.bad_rows.unknown_sensor += 1;
+            bad(
+                stats,
+                warnings,
+                format_args!("sensor {sensor} is not in the rig ({} sensors)", rig.sensors.len()),
+            );
+            continue;
+        }
+        if fields[3].is_empty() {
+            stats.bad_rows.empty_path += 1;
+            bad(stats, warnings, format_args!("empty path"));
+            continue;
+        }
+        if !seen.insert((frame, sensor)) {
+            stats.bad_rows.duplicate += 1;
+            bad(
+                stats,
+                warnings,
+                format_args!("second row for frame {frame}, sensor {sensor} (the first is kept)"),
+            );
+            continue;
+        }
+        rows.push(Row {
+            frame,
+            sensor,
+            timestamp_ns,
+            path: dir.join(fields[3]),
+        });
+    }
+    Ok(rows)
+}
+
+/// Groups rows sorted by (frame, sensor) into frames.
+fn group_frames(rows: &[Row]) -> Vec<FrameEntry> {
+    let mut frames: Vec<FrameEntry> = Vec::new();
+    for (i, row) in rows.iter().enumerate() {
+        match frames.last_mut() {
+            Some(f) if f.frame == row.frame => {
+                f.rows.end = i + 1;
+                f.timestamp_ns = f.timestamp_ns.min(row.timestamp_ns);
+            }
+            _ => frames.push(FrameEntry {
+                frame: row.frame,
+                rows: i..i + 1,
+                timestamp_ns: row.timestamp_ns,
+            }),
+        }
+    }
+    frames
+}
+
+/// Warns once per image directory that does not exist (its images then count as missing, frame by
+/// frame).
+fn warn_missing_directories(rows: &[Row], stats: &mut SourceStats, warnings: &mut WarningLimiter) {
+    let mut checked: HashSet<&Path> = HashSet::new();
+    for row in rows {
+        let Some(parent) = row.path.parent() else { continue };
+        if checked.insert(parent) && !parent.is_dir() {
+            let count = rows.iter().filter(|r| r.path.parent() == Some(parent)).count();
+            warnings.warn(
+                stats,
+                WarningKind::Directory,
+                format_args!(
+                    "{}: directory does not exist; its {count} indexed images will count as missing",
+                    parent.display()
+                ),
+            );
+        }
+    }
+}

@@ -1,0 +1,346 @@
+//! Poses out to other processes on the same computer over iceoryx2 zero-copy shared memory.
+//!
+//! In: a [`PoseSample`] per frame (built from the tracker's `T_world_rig`, its covariance and
+//! counters with [`PoseSample::from_pose`]) and now and then a [`StatusSample`]. Out: the
+//! publish–subscribe services `omnitrack/pose` and `omnitrack/status` (docs/interfaces.md, "Pose
+//! service"). The publisher knows the pose message only: nothing of frames, edges or the tracker.
+//!
+//! Each service keeps a history of one sample, so a subscriber that starts late gets the latest
+//! pose at once (on the publisher's next publish or `update_connections`, see below); each
+//! subscriber has a buffer of [`SUBSCRIBER_BUFFER`] samples and on overflow the oldest is
+//! replaced (a slow reader sees the newest poses, the tracker never blocks). Beside each
+//! publish–subscribe service is an event service of the same name: the publisher notifies it
+//! after every send so that a subscriber can sleep until a sample arrives
+//! ([`SampleSubscriber::wait`]) instead of polling.
+//!
+//! The sample is loaned from the shared-memory pool preallocated at [`SamplePublisher::create`],
+//! written in place and sent. One heap allocation per publish remains, inside iceoryx2 0.10: the
+//! loan wraps the chunk's bookkeeping in a small `Arc` (`ChunkMutSharedState::new`), freed at
+//! send; the public API has no way around it (`send_copy` loans the same way). Receiving,
+//! notifying and [`SamplePublisher::update_connections`] allocate nothing. `tests/publish.rs`
+//! counts both so that any further allocation is caught.
+//!
+//! History is handed to a late subscriber by the publisher when it next updates its connections:
+//! on every publish, or on [`SamplePublisher::update_connections`], which a publisher that has
+//! nothing to send for a while should call now and then.
+//!
+//! Creating a publisher or subscriber first removes what crashed earlier runs left in `/dev/shm`
+//! (dead nodes and their ports), and sets iceoryx2's log level to `Error` unless `IOX2_LOG_LEVEL`
+//! says otherwise (so no process warns about the optional config file). The ports use
+//! `ipc_threadsafe` services: a publisher may be created on one thread and moved to another.
+//! No signal handlers are installed: Ctrl-C ends a process as usual, and the next start cleans up.
+
+mod listen;
+mod sample;
+
+use std::fmt::Debug;
+use std::sync::Once;
+use std::time::{Duration, Instant};
+
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::port::update_connections::UpdateConnections;
+use iceoryx2::prelude::{
+    ipc_threadsafe, set_log_level_from_env_or, LogLevel, Node, NodeBuilder, NodeName, ServiceName, SignalHandlingMode,
+    ZeroCopySend,
+};
+use iceoryx2::service::port_factory::{event as event_factory, publish_subscribe as pubsub_factory};
+
+pub use listen::{format_pose_line, listen};
+pub use sample::{PoseSample, PoseStatus, SearchState, Stage, StatusSample, STATUS_MAX_SENSORS, STATUS_STAGES};
+
+/// Name of the pose service (docs/interfaces.md).
+pub const POSE_SERVICE: &str = "omnitrack/pose";
+/// Name of the status service.
+pub const STATUS_SERVICE: &str = "omnitrack/status";
+/// Samples a late subscriber receives at once: the latest one.
+pub const HISTORY_SIZE: usize = 1;
+/// Samples buffered per subscriber before the oldest is overwritten (≈ 0.25 s at 30 Hz).
+pub const SUBSCRIBER_BUFFER: usize = 8;
+/// Subscribers a service accepts at once.
+pub const MAX_SUBSCRIBERS: usize = 16;
+/// Publishers a service accepts at once (one tracker, plus one spare for a hand-over).
+pub const MAX_PUBLISHERS: usize = 2;
+
+/// The iceoryx2 service flavour used for all ports: inter-process, ports are `Send`.
+pub type Ipc = ipc_threadsafe::Service;
+
+/// A message that can go through [`SamplePublisher`] / [`SampleSubscriber`]: plain `#[repr(C)]`
+/// data with a stable iceoryx2 type name.
+pub trait Message: Debug + Copy + ZeroCopySend + 'static {}
+impl Message for PoseSample {}
+impl Message for StatusSample {}
+
+/// What went wrong talking to iceoryx2, with the step and the service it was for.
+#[derive(Debug, thiserror::Error)]
+#[error("iceoryx2: {step} for service '{service}': {detail}")]
+pub struct PublishError {
+    /// The step that failed (e.g. "create node", "open service", "send").
+    pub step: &'static str,
+    /// The service name.
+    pub service: String,
+    /// iceoryx2's error.
+    pub detail: String,
+}
+
+impl PublishError {
+    fn new(step: &'static str, service: &str, detail: impl Debug) -> Self {
+        PublishError {
+            step,
+            service: service.to_string(),
+            detail: format!("{detail:?}"),
+        }
+    }
+}
+
+static LOG_LEVEL: Once = Once::new();
+
+/// Sets iceoryx2's log level once per process: `IOX2_LOG_LEVEL` if set, else `Error`. Called by
+/// every constructor here; call it yourself before using iceoryx2 directly.
+pub fn quiet_iceoryx2_logs() {
+    LOG_LEVEL.call_once(|| set_log_level_from_env_or(LogLevel::Error));
+}
+
+/// Creates a node (no signal handlers) and removes the resources of dead nodes (crashed earlier
+/// runs). Returns the node and how many dead nodes were cleaned.
+fn create_node(name: &str, service: &str) -> Result<(Node<Ipc>, u64), PublishError> {
+    quiet_iceoryx2_logs();
+    let node_name = NodeName::new(name).map_err(|e| PublishError::new("node name", service, e))?;
+    let node = NodeBuilder::new()
+        .name(&node_name)
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<Ipc>()
+        .map_err(|e| PublishError::new("create node", service, e))?;
+    let cleaned = node.try_cleanup_dead_nodes();
+    Ok((node, cleaned.cleanups))
+}
+
+fn service_name(service: &str) -> Result<ServiceName, PublishError> {
+    ServiceName::new(service).map_err(|e| PublishError::new("service name", service, e))
+}
+
+fn open_pubsub<T: Message>(
+    node: &Node<Ipc>,
+    service: &str,
+) -> Result<pubsub_factory::PortFactory<Ipc, T, ()>, PublishError> {
+    node.service_builder(&service_name(service)?)
+        .publish_subscribe::<T>()
+        .history_size(HISTORY_SIZE)
+        .subscriber_max_buffer_size(SUBSCRIBER_BUFFER)
+        .enable_safe_overflow(true)
+        .max_subscribers(MAX_SUBSCRIBERS)
+        .max_publishers(MAX_PUBLISHERS)
+        .open_or_create()
+        .map_err(|e| PublishError::new("open or create publish-subscribe service", service, e))
+}
+
+fn open_event(node: &Node<Ipc>, service: &str) -> Result<event_factory::PortFactory<Ipc>, PublishError> {
+    node.service_builder(&service_name(service)?)
+        .event()
+        .open_or_create()
+        .map_err(|e| PublishError::new("open or create event service", service, e))
+}
+
+/// Publishes samples of one message type on one service. Create once at start-up; every
+/// [`publish`](Self::publish) after that is allocation-free.
+pub struct SamplePublisher<T: Message> {
+    // Field order is drop order: ports before their services, services before the node.
+    publisher: Publisher<Ipc, T, ()>,
+    notifier: Notifier<Ipc>,
+    _service: pubsub_factory::PortFactory<Ipc, T, ()>,
+    _events: event_factory::PortFactory<Ipc>,
+    _node: Node<Ipc>,
+    service: String,
+    dead_nodes_cleaned: u64,
+}
+
+/// Publisher of [`PoseSample`]s (service [`POSE_SERVICE`] in production).
+pub type PosePublisher = SamplePublisher<PoseSample>;
+/// Publisher of [`StatusSample`]s (service [`STATUS_SERVICE`] in production).
+pub type StatusPublisher = SamplePublisher<StatusSample>;
+
+impl<T: Message> SamplePublisher<T> {
+    /// Opens (or creates) `service` with history 1, a subscriber buffer of [`SUBSCRIBER_BUFFER`]
+    /// and overflow on, plus its event service, and creates the publisher and notifier ports.
+    pub fn create(service: &str) -> Result<Self, PublishError> {
+        let (node, dead_nodes_cleaned) = create_node("omnitrack-publisher", service)?;
+        let pubsub = open_pubsub::<T>(&node, service)?;
+        let events = open_event(&node, service)?;
+        let publisher = pubsub
+            .publisher_builder()
+            .max_loaned_samples(1)
+            .create()
+            .map_err(|e| PublishError::new("create publisher", service, e))?;
+        let notifier = events
+            .notifier_builder()
+            .create()
+            .map_err(|e| PublishError::new("create notifier", service, e))?;
+        Ok(SamplePublisher {
+            publisher,
+            notifier,
+            _service: pubsub,
+            _events: events,
+            _node: node,
+            service: service.to_string(),
+            dead_nodes_cleaned,
+        })
+    }
+
+    /// Loans a sample from shared memory, writes `value` into it, sends it to every subscriber
+    /// and wakes those waiting on the event service. Returns the number of subscribers reached.
+    pub fn publish(&self, value: &T) -> Result<usize, PublishError> {
+        let sample = self
+            .publisher
+            .loan_uninit()
+            .map_err(|e| PublishError::new("loan", &self.service, e))?;
+        let sample = sample.write_payload(*value);
+        let reached = sample.send().map_err(|e| PublishError::new("send", &self.service, e))?;
+        self.notifier
+            .notify()
+            .map_err(|e| PublishError::new("notify", &self.service, e))?;
+        Ok(reached)
+    }
+
+    /// Connects subscribers that appeared since the last publish and hands each the history
+    /// sample (the latest one). Every [`publish`](Self::publish) does this first; call it when no
+    /// sample is due for a while (e.g. while initialising, every 100 ms) so a late subscriber gets
+    /// the latest sample without waiting for the next publish. Allocation-free.
+    pub fn update_connections(&self) -> Result<(), PublishError> {
+        self.publisher
+            .update_connections()
+            .map_err(|e| PublishError::new("update connections", &self.service, e))
+    }
+
+    /// The service name this publisher sends on.
+    pub fn service(&self) -> &str {
+        &self.service
+    }
+
+    /// How many dead nodes (crashed earlier runs) were cleaned up when this publisher was created.
+    pub fn dead_nodes_cleaned(&self) -> u64 {
+        self.dead_nodes_cleaned
+    }
+}
+
+impl PosePublisher {
+    /// Builds a [`PoseSample`] with [`PoseSample::from_pose`] and publishes it.
+    #[allow(clippy::too_many_arguments)]
+    pub fn publish_pose(
+        &self,
+        timestamp_ns: u64,
+        sequence: u64,
+        status: PoseStatus,
+        pose: &omnitrack_core::geometry::Pose,
+        covariance: &nalgebra::Matrix6<f64>,
+        inliers: u32,
+        xi_rad2: f64,
+    ) -> Result<usize, PublishError> {
+        self.publish(&PoseSample::from_pose(
+            timestamp_ns,
+            sequence,
+            status,
+            pose,
+            covariance,
+            inliers,
+            xi_rad2,
+        ))
+    }
+}
+
+/// Receives samples of one message type from one service, by polling or by waiting on the
+/// service's event (the publisher notifies after each send).
+pub struct SampleSubscriber<T: Message> {
+    subscriber: Subscriber<Ipc, T, ()>,
+    listener: Listener<Ipc>,
+    _service: pubsub_factory::PortFactory<Ipc, T, ()>,
+    _events: event_factory::PortFactory<Ipc>,
+    _node: Node<Ipc>,
+    service: String,
+}
+
+/// Subscriber of [`PoseSample`]s.
+pub type PoseSubscriber = SampleSubscriber<PoseSample>;
+/// Subscriber of [`StatusSample`]s.
+pub type StatusSubscriber = SampleSubscriber<StatusSample>;
+
+impl<T: Message> SampleSubscriber<T> {
+    /// Opens (or creates, so that a subscriber may start before the tracker) `service` with the
+    /// same settings as the publisher, and creates the subscriber and listener ports. If the
+    /// service already holds a sample, the first [`receive`](Self::receive) returns it.
+    pub fn create(service: &str) -> Result<Self, PublishError> {
+        let (node, _) = create_node("omnitrack-subscriber", service)?;
+        let pubsub = open_pubsub::<T>(&node, service)?;
+        let events = open_event(&node, service)?;
+        let subscriber = pubsub
+            .subscriber_builder()
+            .buffer_size(SUBSCRIBER_BUFFER)
+            .create()
+            .map_err(|e| PublishError::new("create subscriber", service, e))?;
+        let listener = events
+            .listener_builder()
+            .create()
+            .map_err(|e| PublishError::new("create listener", service, e))?;
+        Ok(SampleSubscriber {
+            subscriber,
+            listener,
+            _service: pubsub,
+            _events: events,
+            _node: node,
+            service: service.to_string(),
+        })
+    }
+
+    /// The oldest buffered sample, copied out of shared memory, or `None` when there is none.
+    /// Never blocks.
+    pub fn receive(&self) -> Result<Option<T>, PublishError> {
+        match self.subscriber.receive() {
+            Ok(Some(sample)) => Ok(Some(*sample.payload())),
+            Ok(None) => Ok(None),
+            Err(e) => Err(PublishError::new("receive", &self.service, e)),
+        }
+    }
+
+    /// Waits at most `timeout` for a sample, sleeping on the event service between checks;
+    /// `None` when none came in time.
+    pub fn wait(&self, timeout: Duration) -> Result<Option<T>, PublishError> {
+        let deadline = Instant::now() + timeout;
+        loop {
+            if let Some(s) = self.receive()? {
+                return Ok(Some(s));
+            }
+            let now = Instant::now();
+            if now >= deadline {
+                return Ok(None);
+            }
+            // A notification may have been consumed earlier without its sample being taken (or a
+            // sample may arrive from a publisher that does not notify): never sleep longer than
+            // a short slice, so the wait stays bounded and still sees such samples.
+            let slice = (deadline - now).min(Duration::from_millis(50));
+            self.listener
+                .timed_wait(|_| {}, slice)
+                .map_err(|e| PublishError::new("wait on event", &self.service, e))?;
+        }
+    }
+
+    /// Polls for a sample until `timeout`: spins (with `yield`) rather than sleeping; lowest
+    /// latency, one busy core.
+    pub fn poll(&self, timeout: Duration) -> Result<Option<T>, PublishError> {
+        let deadline = Instant::now() + timeout;
+        loop {
+            if let Some(s) = self.receive()? {
+                return Ok(Some(s));
+            }
+            if Instant::now() >= deadline {
+                return Ok(None);
+            }
+            std::thread::yield_now();
+        }
+    }
+
+    /// The service name this subscriber listens on.
+    pub fn service(&self) -> &str {
+        &self.service
+    }
+}

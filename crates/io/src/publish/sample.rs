@@ -1,0 +1,311 @@
+//! The messages on the wire: [`PoseSample`] (service `omnitrack/pose`) and [`StatusSample`]
+//! (service `omnitrack/status`).
+//!
+//! Both are `#[repr(C)]` plain data with a stable iceoryx2 type name; a consumer in another
+//! language (see `tools/examples/listen_pose.py`) declares the same C struct field for field and
+//! the same type name, and iceoryx2 refuses to connect it when size, alignment or name differ.
+//! Changing a field means a new type name (`.v2`), never a silent edit of `.v1`.
+
+use iceoryx2::prelude::ZeroCopySend;
+use nalgebra::Matrix6;
+
+use omnitrack_core::geometry::{rotation_to_wxyz, Pose};
+
+/// The tracker's state as carried in [`PoseSample::status`] and [`StatusSample::tracker_state`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[repr(u8)]
+pub enum PoseStatus {
+    /// No pose yet: searching the initial volume. The pose fields carry no information.
+    Initializing = 0,
+    /// The pose is the tracker's current estimate.
+    Tracking = 1,
+    /// Tracking was lost; the pose fields hold the last good pose, re-initialisation is running.
+    Lost = 2,
+}
+
+impl PoseStatus {
+    /// The lower-case word used by `omnitrack listen`: `initializing`, `tracking`, `lost`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            PoseStatus::Initializing => "initializing",
+            PoseStatus::Tracking => "tracking",
+            PoseStatus::Lost => "lost",
+        }
+    }
+}
+
+impl From<PoseStatus> for u8 {
+    fn from(s: PoseStatus) -> u8 {
+        s as u8
+    }
+}
+
+impl TryFrom<u8> for PoseStatus {
+    /// The byte that is not a known status.
+    type Error = u8;
+
+    fn try_from(v: u8) -> Result<Self, u8> {
+        match v {
+            0 => Ok(PoseStatus::Initializing),
+            1 => Ok(PoseStatus::Tracking),
+            2 => Ok(PoseStatus::Lost),
+            other => Err(other),
+        }
+    }
+}
+
+impl std::fmt::Display for PoseStatus {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// One pose of the rig, `T_world_rig`, as published on `omnitrack/pose` (docs/interfaces.md,
+/// "Pose service"). C layout, 384 bytes, alignment 8:
+///
+/// | offset | field | type |
+/// | --- | --- | --- |
+/// | 0 | `timestamp_ns` | u64 |
+/// | 8 | `sequence` | u64 |
+/// | 16 | `status` | u8 (then 7 bytes padding) |
+/// | 24 | `position_m` | [f64; 3] |
+/// | 48 | `rotation_wxyz` | [f64; 4] |
+/// | 80 | `covariance` | [f64; 36] |
+/// | 368 | `inliers` | u32 (then 4 bytes padding) |
+/// | 376 | `xi_rad2` | f64 |
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[type_name("omnitrack.PoseSample.v1")]
+#[repr(C)]
+pub struct PoseSample {
+    /// Capture time of the frame the pose was solved from, in nanoseconds (the capture clock).
+    pub timestamp_ns: u64,
+    /// Frame counter.
+    pub sequence: u64,
+    /// [`PoseStatus`] as a byte: 0 initializing, 1 tracking, 2 lost.
+    pub status: u8,
+    /// t of `T_world_rig`, metres, model coordinates.
+    pub position_m: [f64; 3],
+    /// R of `T_world_rig` as a unit quaternion `[w, x, y, z]`, w ≥ 0.
+    pub rotation_wxyz: [f64; 4],
+    /// 6×6 covariance, row-major over tx, ty, tz, rx, ry, rz (rotation as a small-angle vector in
+    /// the world frame); units m², m·rad, rad².
+    pub covariance: [f64; 36],
+    /// Accepted correspondences used by the solution.
+    pub inliers: u32,
+    /// Koch–Teller ξ of the solution: mean squared angle between observed and predicted planes, rad².
+    pub xi_rad2: f64,
+}
+
+impl Default for PoseSample {
+    /// Initializing, identity pose, zero covariance, all counters 0.
+    fn default() -> Self {
+        PoseSample {
+            timestamp_ns: 0,
+            sequence: 0,
+            status: PoseStatus::Initializing as u8,
+            position_m: [0.0; 3],
+            rotation_wxyz: [1.0, 0.0, 0.0, 0.0],
+            covariance: [0.0; 36],
+            inliers: 0,
+            xi_rad2: 0.0,
+        }
+    }
+}
+
+impl PoseSample {
+    /// A sample from the tracker's result: `pose` is `T_world_rig`, `covariance` is over
+    /// (tx, ty, tz, rx, ry, rz) and is written row-major.
+    pub fn from_pose(
+        timestamp_ns: u64,
+        sequence: u64,
+        status: PoseStatus,
+        pose: &Pose,
+        covariance: &Matrix6<f64>,
+        inliers: u32,
+        xi_rad2: f64,
+    ) -> Self {
+        let t = &pose.translation.vector;
+        let mut cov = [0.0; 36];
+        for r in 0..6 {
+            for c in 0..6 {
+                cov[r * 6 + c] = covariance[(r, c)];
+            }
+        }
+        PoseSample {
+            timestamp_ns,
+            sequence,
+            status: status as u8,
+            position_m: [t.x, t.y, t.z],
+            rotation_wxyz: rotation_to_wxyz(&pose.rotation),
+            covariance: cov,
+            inliers,
+            xi_rad2,
+        }
+    }
+
+    /// The status byte as a [`PoseStatus`]; `Err(byte)` when it is none of the known values.
+    pub fn pose_status(&self) -> Result<PoseStatus, u8> {
+        PoseStatus::try_from(self.status)
+    }
+
+    /// The pose back as `T_world_rig`; `Err` when the quaternion is not unit or not finite.
+    pub fn pose(&self) -> Result<Pose, String> {
+        omnitrack_core::geometry::pose_from_parts(self.position_m, self.rotation_wxyz)
+    }
+
+    /// The covariance back as a matrix (rows and columns tx, ty, tz, rx, ry, rz).
+    pub fn covariance_matrix(&self) -> Matrix6<f64> {
+        Matrix6::from_row_slice(&self.covariance)
+    }
+}
+
+/// What the tracker's last search for a pose made of its volume, as carried in
+/// [`StatusSample::search`]: why a tracker that publishes no pose has none.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[repr(u8)]
+pub enum SearchState {
+    /// No search since start (or the tracker has tracked since its last one).
+    None = 0,
+    /// The last search covered the volume it was given (the hint, or the whole model).
+    AsGiven = 1,
+    /// The volume held no valid visibility node: the last search went out to the nearest ones,
+    /// over [`StatusSample::search_widened_to_m`] about the volume's centre.
+    Widened = 2,
+    /// The last search had no cell at all to search (a model without valid nodes).
+    NoCells = 3,
+}
+
+impl From<SearchState> for u8 {
+    fn from(s: SearchState) -> u8 {
+        s as u8
+    }
+}
+
+impl TryFrom<u8> for SearchState {
+    /// The byte that is not a known search state.
+    type Error = u8;
+
+    fn try_from(v: u8) -> Result<Self, u8> {
+        match v {
+            0 => Ok(SearchState::None),
+            1 => Ok(SearchState::AsGiven),
+            2 => Ok(SearchState::Widened),
+            3 => Ok(SearchState::NoCells),
+            other => Err(other),
+        }
+    }
+}
+
+/// Most sensors a [`StatusSample`] reports on.
+pub const STATUS_MAX_SENSORS: usize = 16;
+/// Number of stage-timing slots in a [`StatusSample`] (see [`Stage`]).
+pub const STATUS_STAGES: usize = 8;
+
+/// The named pipeline stages whose timings a [`StatusSample`] carries, by slot index.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[repr(u8)]
+pub enum Stage {
+    /// Frame grab and hand-over into the frame pool (all sensors).
+    Capture = 0,
+    /// Edge + hue extraction of a whole multi-sensor frame.
+    Edges = 1,
+    /// Correspondence maintenance / initialisation matching.
+    Match = 2,
+    /// Pose solve (robust sampling + refinement + covariance).
+    Solve = 3,
+    /// Loan, write and send of the pose sample.
+    Publish = 4,
+    /// Whole frame: capture time to pose sent.
+    Frame = 5,
+}
+
+impl Stage {
+    /// All named stages, in slot order.
+    pub const ALL: [Stage; 6] = [
+        Stage::Capture,
+        Stage::Edges,
+        Stage::Match,
+        Stage::Solve,
+        Stage::Publish,
+        Stage::Frame,
+    ];
+
+    /// Slot index in [`StatusSample::stage_p50_us`] / [`StatusSample::stage_p99_us`].
+    pub fn index(self) -> usize {
+        self as usize
+    }
+
+    /// Lower-case name: `capture`, `edges`, `match`, `solve`, `publish`, `frame`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Stage::Capture => "capture",
+            Stage::Edges => "edges",
+            Stage::Match => "match",
+            Stage::Solve => "solve",
+            Stage::Publish => "publish",
+            Stage::Frame => "frame",
+        }
+    }
+}
+
+/// Health of the running tracker, published on `omnitrack/status` (a few times a second is
+/// plenty). C layout, 280 bytes, alignment 8:
+///
+/// | offset | field | type |
+/// | --- | --- | --- |
+/// | 0 | `timestamp_ns` | u64 |
+/// | 8 | `sequence` | u64 |
+/// | 16 | `tracker_state` | u8 ([`PoseStatus`]) |
+/// | 17 | `sensor_count` | u8 |
+/// | 18 | `search` | u8 ([`SearchState`], then 1 byte padding) |
+/// | 20 | `frame_rate_hz` | [f32; 16] |
+/// | 84 | `search_widened_to_m` | f32 |
+/// | 88 | `frames_dropped` | [u64; 16] |
+/// | 216 | `stage_p50_us` | [u32; 8] |
+/// | 248 | `stage_p99_us` | [u32; 8] |
+///
+/// v2 (2026-11-27) put the search's state in what was v1's padding: same size, new name, since
+/// a v1 writer leaves those bytes undefined.
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[type_name("omnitrack.StatusSample.v2")]
+#[repr(C)]
+pub struct StatusSample {
+    /// When this status was taken, nanoseconds (same clock as [`PoseSample::timestamp_ns`]).
+    pub timestamp_ns: u64,
+    /// Status counter.
+    pub sequence: u64,
+    /// [`PoseStatus`] byte of the tracker.
+    pub tracker_state: u8,
+    /// How many of the per-sensor slots are in use (≤ [`STATUS_MAX_SENSORS`]).
+    pub sensor_count: u8,
+    /// [`SearchState`] byte of the tracker's last search.
+    pub search: u8,
+    /// Frames per second delivered by each sensor (slot = sensor index).
+    pub frame_rate_hz: [f32; STATUS_MAX_SENSORS],
+    /// With [`SearchState::Widened`]: the diameter (m) of the volume actually searched, about
+    /// the given volume's centre; 0 otherwise.
+    pub search_widened_to_m: f32,
+    /// Frames dropped per sensor since start (latest-frame-wins drops, counted, never silent).
+    pub frames_dropped: [u64; STATUS_MAX_SENSORS],
+    /// Median time per [`Stage`] slot, microseconds (0 = not measured).
+    pub stage_p50_us: [u32; STATUS_STAGES],
+    /// 99th percentile time per [`Stage`] slot, microseconds (0 = not measured).
+    pub stage_p99_us: [u32; STATUS_STAGES],
+}
+
+impl Default for StatusSample {
+    fn default() -> Self {
+        StatusSample {
+            timestamp_ns: 0,
+            sequence: 0,
+            tracker_state: PoseStatus::Initializing as u8,
+            sensor_count: 0,
+            search: SearchState::None as u8,
+            frame_rate_hz: [0.0; STATUS_MAX_SENSORS],
+            search_widened_to_m: 0.0,
+            frames_dropped: [0; STATUS_MAX_SENSORS],
+            stage_p50_us: [0; STATUS_STAGES],
+            stage_p99_us: [0; STATUS_STAGES],
+        }
+    }
+}

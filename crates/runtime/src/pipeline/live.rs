@@ -1,0 +1,210 @@
+//! Per-sensor capture: a [`SensorCapture`] per rig sensor, each read on its own thread, and
+//! [`LiveSensor`], the one for any [`LiveCamera`] driver (V4L2, USB3 Vision).
+//!
+//! [`LiveSensor`] keeps the behaviour of the capture module's whole-rig `LiveSource`, per sensor:
+//! a failed read marks the image invalid with its fault; a device that is gone (unplugged, I/O
+//! error, [`LOST_AFTER_TIMEOUTS`] timeouts in a row) is closed, logged, and reopened every
+//! `reopen_interval` while the other sensors go on; coming back is logged too. What every
+//! (re)opening shares (e.g. the USB context) sits behind a mutex, taken only to open.
+
+use super::PipelineSource;
+use omnitrack_core::rig::{Rig, Sensor};
+use omnitrack_io::capture::open::{FailureDetail, LiveCamera, LOST_AFTER_TIMEOUTS};
+use omnitrack_io::capture::{open_source_with, FrameSource, ImageFault, SensorImage, SourceError, SourceOptions};
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
+
+/// Warnings of one fault kind per sensor logged at `warn` before the rest go to `debug`.
+const WARN_LIMIT: u32 = 5;
+
+/// One sensor's images, read on a thread of its own.
+pub trait SensorCapture: Send {
+    /// Sensor id (index in the rig).
+    fn sensor(&self) -> usize;
+
+    /// Reads the next image into `img` (sized for this sensor) and marks it: valid with its
+    /// capture time (ns, a clock shared by all sensors of the rig), or invalid with its fault.
+    /// `Ok(false)`: this sensor's stream has ended. A per-image failure is never an `Err`.
+    fn capture(&mut self, img: &mut SensorImage) -> Result<bool, SourceError>;
+}
+
+/// The [`SensorCapture`] of one [`LiveCamera`]. See the module doc.
+pub struct LiveSensor<C: LiveCamera> {
+    sensor: Sensor,
+    env: Arc<Mutex<C::Env>>,
+    options: SourceOptions,
+    camera: Option<C>,
+    /// The device name of the last connection, for messages while disconnected.
+    name: String,
+    retry_at: Instant,
+    timeouts: u32,
+    warned: [u32; ImageFault::ALL.len()],
+}
+
+impl<C: LiveCamera> std::fmt::Debug for LiveSensor<C> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("LiveSensor")
+            .field("sensor", &self.sensor.id)
+            .field("device", &self.name)
+            .field("connected", &self.camera.is_some())
+            .finish()
+    }
+}
+
+impl<C: LiveCamera> LiveSensor<C> {
+    /// Whether the camera is connected now.
+    pub fn is_connected(&self) -> bool {
+        self.camera.is_some()
+    }
+
+    fn warn(&mut self, fault: ImageFault, detail: &FailureDetail) {
+        let n = &mut self.warned[fault.index()];
+        *n = n.saturating_add(1);
+        let k = self.sensor.id;
+        if *n <= WARN_LIMIT {
+            tracing::warn!(sensor = k, device = %self.name, %fault, "{detail}");
+        } else {
+            tracing::debug!(sensor = k, device = %self.name, %fault, "{detail}");
+        }
+    }
+
+    fn reopen(&mut self, now: Instant) {
+        let opened = {
+            let mut env = self.env.lock().unwrap_or_else(|e| e.into_inner());
+            C::open(&mut env, &self.sensor, &self.options)
+        };
+        match opened {
+            Ok(camera) => {
+                tracing::warn!(
+                    sensor = self.sensor.id,
+                    device = camera.name(),
+                    "connected again, capturing"
+                );
+                self.name.clear();
+                self.name.push_str(camera.name());
+                self.camera = Some(camera);
+                self.timeouts = 0;
+            }
+            Err(e) => {
+                self.retry_at = now + self.options.reopen_interval;
+                let n = &mut self.warned[ImageFault::Missing.index()];
+                *n = n.saturating_add(1);
+                if *n <= WARN_LIMIT {
+                    tracing::warn!(sensor = self.sensor.id, interval = ?self.options.reopen_interval, "{e} (still unavailable, retrying)");
+                }
+            }
+        }
+    }
+}
+
+impl<C: LiveCamera> SensorCapture for LiveSensor<C> {
+    fn sensor(&self) -> usize {
+        self.sensor.id
+    }
+
+    fn capture(&mut self, img: &mut SensorImage) -> Result<bool, SourceError> {
+        let now = Instant::now();
+        if self.camera.is_none() {
+            if now < self.retry_at {
+                // Nothing to read: wait for the reopening attempt rather than spin.
+                std::thread::sleep((self.retry_at - now).min(self.options.reopen_interval));
+            }
+            self.reopen(Instant::now());
+        }
+        let Some(camera) = self.camera.as_mut() else {
+            img.set_invalid(ImageFault::Missing, 0);
+            return Ok(true);
+        };
+        match camera.read(img) {
+            Ok(ts) => {
+                img.set_valid(ts);
+                self.timeouts = 0;
+            }
+            Err(failure) => {
+                img.set_invalid(failure.fault, 0);
+                let timed_out = failure.detail == FailureDetail::TimedOut;
+                self.timeouts = if timed_out { self.timeouts + 1 } else { 0 };
+                if failure.lost || self.timeouts >= LOST_AFTER_TIMEOUTS {
+                    // Dropping the camera closes the device.
+                    self.camera = None;
+                    self.retry_at = now + self.options.reopen_interval;
+                    self.timeouts = 0;
+                    tracing::warn!(
+                        sensor = self.sensor.id,
+                        device = %self.name,
+                        interval = ?self.options.reopen_interval,
+                        "lost ({}); going on without it, reopening",
+                        failure.detail
+                    );
+                } else {
+                    self.warn(failure.fault, &failure.detail);
+                }
+            }
+        }
+        Ok(true)
+    }
+}
+
+/// Opens every sensor's camera of `rig` with driver `C` (one [`LiveSensor`] each, read on its own
+/// thread by the pipeline). The first camera that fails is the error: one line naming device and
+/// sensor.
+pub fn live_sensors<C: LiveCamera + 'static>(
+    rig: &Rig,
+    env: C::Env,
+    options: &SourceOptions,
+) -> Result<PipelineSource, SourceError>
+where
+    C::Env: 'static,
+{
+    let env = Arc::new(Mutex::new(env));
+    let now = Instant::now();
+    let mut sensors: Vec<Box<dyn SensorCapture>> = Vec::with_capacity(rig.sensors.len());
+    for sensor in &rig.sensors {
+        let camera = {
+            let mut e = env.lock().unwrap_or_else(|e| e.into_inner());
+            C::open(&mut e, sensor, options)?
+        };
+        sensors.push(Box::new(LiveSensor::<C> {
+            sensor: sensor.clone(),
+            env: Arc::clone(&env),
+            options: *options,
+            name: camera.name().to_string(),
+            camera: Some(camera),
+            retry_at: now,
+            timeouts: 0,
+            warned: [0; ImageFault::ALL.len()],
+        }));
+    }
+    Ok(PipelineSource::Sensors {
+        rig: rig.clone(),
+        sensors,
+    })
+}
+
+/// Opens the source named by `spec` (`replay:DIR`, `v4l`, `usb`) for the pipeline: live drivers
+/// built into this binary as one [`SensorCapture`] per sensor (one capture thread each), anything
+/// else as the whole-rig source of [`open_source_with`] (one capture thread), whose errors —
+/// including a live source left out of the build, with the cargo command that enables it — are
+/// one line each.
+pub fn open_pipeline_source(
+    spec: &str,
+    rig: Option<&Rig>,
+    options: &SourceOptions,
+) -> Result<PipelineSource, SourceError> {
+    match (spec.trim(), rig) {
+        #[cfg(feature = "v4l")]
+        ("v4l", Some(rig)) => live_sensors::<omnitrack_io::capture::v4l2::V4l2Camera>(rig, (), options),
+        #[cfg(feature = "usb")]
+        ("usb", Some(rig)) => {
+            let env = omnitrack_io::capture::usb::UsbEnv::new(rig)?;
+            live_sensors::<omnitrack_io::capture::usb::UsbCamera>(rig, env, options)
+        }
+        _ => open_source_with(spec, rig, options).map(PipelineSource::from),
+    }
+}
+
+impl From<Box<dyn FrameSource + Send>> for PipelineSource {
+    fn from(source: Box<dyn FrameSource + Send>) -> Self {
+        PipelineSource::Rig(source)
+    }
+}

@@ -1,0 +1,340 @@
+//! Stage timings: fixed-size log-linear histograms (no allocation after construction), the
+//! pipeline's stages with their budgets, and per-sensor counters shared between threads.
+
+use omnitrack_config::BudgetConfig;
+use omnitrack_io::publish::Stage;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Duration;
+
+/// Sub-buckets per power of two: 2^5 = 32, so a bucket is at most 1/32 ≈ 3 % wide.
+const SUB_BITS: u32 = 5;
+const SUB: usize = 1 << SUB_BITS;
+/// Largest exponent kept apart: 2^41 ns ≈ 37 min; longer durations share the last bucket.
+const MAX_EXP: u32 = 40;
+/// Buckets of a [`Histogram`]: 32 exact ones (0–31 ns), then 32 per power of two up to 2^41 ns.
+pub const BUCKETS: usize = SUB + (MAX_EXP - SUB_BITS + 1) as usize * SUB;
+
+/// Durations (nanoseconds) in [`BUCKETS`] log-linear buckets: quantiles within ~3 %, the maximum
+/// and the mean exact. Allocates once, in [`Histogram::new`].
+#[derive(Clone)]
+pub struct Histogram {
+    counts: Box<[u64]>,
+    total: u64,
+    sum_ns: u128,
+    max_ns: u64,
+}
+
+impl std::fmt::Debug for Histogram {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Histogram")
+            .field("count", &self.total)
+            .field("p50", &self.quantile(0.5))
+            .field("p99", &self.quantile(0.99))
+            .field("max", &self.max())
+            .finish()
+    }
+}
+
+impl Default for Histogram {
+    fn default() -> Self {
+        Histogram::new()
+    }
+}
+
+fn bucket(ns: u64) -> usize {
+    if ns < SUB as u64 {
+        return ns as usize;
+    }
+    let e = 63 - ns.leading_zeros();
+    if e > MAX_EXP {
+        return BUCKETS - 1;
+    }
+    let m = ((ns >> (e - SUB_BITS)) as usize) & (SUB - 1);
+    SUB + (e - SUB_BITS) as usize * SUB + m
+}
+
+/// Largest value that falls into bucket `i`.
+fn bucket_upper(i: usize) -> u64 {
+    if i < SUB {
+        return i as u64;
+    }
+    let e = ((i - SUB) / SUB) as u32 + SUB_BITS;
+    let m = ((i - SUB) % SUB) as u64;
+    ((SUB as u64 + m + 1) << (e - SUB_BITS)) - 1
+}
+
+impl Histogram {
+    pub fn new() -> Histogram {
+        Histogram {
+            counts: vec![0; BUCKETS].into_boxed_slice(),
+            total: 0,
+            sum_ns: 0,
+            max_ns: 0,
+        }
+    }
+
+    pub fn record(&mut self, d: Duration) {
+        let ns = u64::try_from(d.as_nanos()).unwrap_or(u64::MAX);
+        self.counts[bucket(ns)] += 1;
+        self.total += 1;
+        self.sum_ns += u128::from(ns);
+        self.max_ns = self.max_ns.max(ns);
+    }
+
+    pub fn count(&self) -> u64 {
+        self.total
+    }
+
+    pub fn max(&self) -> Duration {
+        Duration::from_nanos(self.max_ns)
+    }
+
+    pub fn mean(&self) -> Duration {
+        if self.total == 0 {
+            return Duration::ZERO;
+        }
+        Duration::from_nanos((self.sum_ns / u128::from(self.total)) as u64)
+    }
+
+    /// The `q` quantile (0 ≤ q ≤ 1): the upper edge of the bucket holding it, never above the
+    /// maximum; zero when empty.
+    pub fn quantile(&self, q: f64) -> Duration {
+        if self.total == 0 {
+            return Duration::ZERO;
+        }
+        let target = ((q.clamp(0.0, 1.0) * self.total as f64).ceil() as u64).max(1);
+        let mut seen = 0;
+        for (i, &c) in self.counts.iter().enumerate() {
+            seen += c;
+            if seen >= target {
+                return Duration::from_nanos(bucket_upper(i).min(self.max_ns));
+            }
+        }
+        self.max()
+    }
+}
+
+/// The timed stages of the pipeline.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum PipelineStage {
+    /// One grab: a whole-rig `next_frame` (replay: the PNG decodes and the pacing wait), or one
+    /// sensor's read. Budget `capture_ms`.
+    Capture,
+    /// Edge + hue extraction of the whole frame. Budget `edges_ms`.
+    Edges,
+    /// The tracker's correspondence matching (part of `Track`; no budget of its own).
+    Match,
+    /// The tracker's pose solve (part of `Track`; no budget of its own).
+    Solve,
+    /// `Tracker::process` as a whole. Budget `track_ms`.
+    Track,
+    /// Loan, write and send of the pose sample. Budget `publish_ms`.
+    Publish,
+    /// Hand-over of the frame into the pool (capture complete) → pose sent. Budget `frame_ms`.
+    Latency,
+}
+
+impl PipelineStage {
+    /// How many timed stages there are.
+    pub const COUNT: usize = 7;
+
+    pub const ALL: [PipelineStage; PipelineStage::COUNT] = [
+        PipelineStage::Capture,
+        PipelineStage::Edges,
+        PipelineStage::Match,
+        PipelineStage::Solve,
+        PipelineStage::Track,
+        PipelineStage::Publish,
+        PipelineStage::Latency,
+    ];
+
+    pub fn index(self) -> usize {
+        self as usize
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            PipelineStage::Capture => "capture",
+            PipelineStage::Edges => "edges",
+            PipelineStage::Match => "match",
+            PipelineStage::Solve => "solve",
+            PipelineStage::Track => "track",
+            PipelineStage::Publish => "publish",
+            PipelineStage::Latency => "latency",
+        }
+    }
+
+    /// The stage's budget in tracker.toml `[budgets]`, if it has one.
+    pub fn budget(self, b: &BudgetConfig) -> Option<Duration> {
+        let ms = match self {
+            PipelineStage::Capture => b.capture_ms,
+            PipelineStage::Edges => b.edges_ms,
+            PipelineStage::Track => b.track_ms,
+            PipelineStage::Publish => b.publish_ms,
+            PipelineStage::Latency => b.frame_ms,
+            PipelineStage::Match | PipelineStage::Solve => return None,
+        };
+        Some(Duration::from_secs_f64(ms / 1e3))
+    }
+
+    /// The slot of the status sample that carries this stage.
+    pub fn status_stage(self) -> Option<Stage> {
+        match self {
+            PipelineStage::Capture => Some(Stage::Capture),
+            PipelineStage::Edges => Some(Stage::Edges),
+            PipelineStage::Match => Some(Stage::Match),
+            PipelineStage::Solve => Some(Stage::Solve),
+            PipelineStage::Publish => Some(Stage::Publish),
+            PipelineStage::Latency => Some(Stage::Frame),
+            PipelineStage::Track => None,
+        }
+    }
+}
+
+/// One stage's timings against its budget.
+#[derive(Debug, Clone, Default)]
+pub struct StageClock {
+    pub histogram: Histogram,
+    pub budget: Option<Duration>,
+    /// Measurements above the budget.
+    pub overruns: u64,
+}
+
+impl StageClock {
+    pub fn new(budget: Option<Duration>) -> StageClock {
+        StageClock {
+            histogram: Histogram::new(),
+            budget,
+            overruns: 0,
+        }
+    }
+
+    /// Records `d`; true when it overran the budget.
+    pub fn record(&mut self, d: Duration) -> bool {
+        self.histogram.record(d);
+        let over = self.budget.is_some_and(|b| d > b);
+        self.overruns += u64::from(over);
+        over
+    }
+
+    pub fn summary(&self) -> StageSummary {
+        let h = &self.histogram;
+        StageSummary {
+            count: h.count(),
+            p50: h.quantile(0.5),
+            p99: h.quantile(0.99),
+            max: h.max(),
+            mean: h.mean(),
+            budget: self.budget,
+            overruns: self.overruns,
+        }
+    }
+}
+
+/// One stage over a whole run.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct StageSummary {
+    pub count: u64,
+    pub p50: Duration,
+    pub p99: Duration,
+    pub max: Duration,
+    pub mean: Duration,
+    pub budget: Option<Duration>,
+    pub overruns: u64,
+}
+
+/// What happened to one sensor's images, counted by the thread that decided it. Every image a
+/// source produced lands in exactly one of these.
+#[derive(Debug, Default)]
+pub(crate) struct SensorCounters {
+    pub delivered: AtomicU64,
+    pub overwritten: AtomicU64,
+    pub faults: AtomicU64,
+    pub sync_missed: AtomicU64,
+}
+
+impl SensorCounters {
+    pub fn add(counter: &AtomicU64, n: u64) {
+        counter.fetch_add(n, Ordering::Relaxed);
+    }
+
+    pub fn snapshot(&self) -> SensorSummary {
+        SensorSummary {
+            delivered: self.delivered.load(Ordering::Relaxed),
+            overwritten: self.overwritten.load(Ordering::Relaxed),
+            faults: self.faults.load(Ordering::Relaxed),
+            sync_missed: self.sync_missed.load(Ordering::Relaxed),
+        }
+    }
+}
+
+/// One sensor over a run (or so far).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct SensorSummary {
+    /// Valid images that reached the tracker.
+    pub delivered: u64,
+    /// Valid images lost because a newer frame replaced theirs while the tracker was busy
+    /// (latest frame wins), or because a second image of the same instant replaced them.
+    pub overwritten: u64,
+    /// Images the source marked invalid (dropped, missing, corrupt, wrong size or format, the
+    /// camera lost).
+    pub faults: u64,
+    /// Images that missed their instant's assembly window (per-sensor capture only): too late,
+    /// too early, or never came while the other sensors' images did.
+    pub sync_missed: u64,
+}
+
+impl SensorSummary {
+    /// Every image of this sensor that did not reach the tracker: what the status sample's
+    /// `frames_dropped` carries.
+    pub fn lost(&self) -> u64 {
+        self.overwritten + self.faults + self.sync_missed
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn buckets_are_contiguous_and_tight() {
+        let mut prev_upper = None;
+        for i in 0..BUCKETS - 1 {
+            let up = bucket_upper(i);
+            assert_eq!(bucket(up), i, "upper edge of {i}");
+            if let Some(p) = prev_upper {
+                assert_eq!(bucket(p + 1), i, "first value of {i}");
+            }
+            prev_upper = Some(up);
+        }
+        for ns in [0u64, 1, 31, 32, 33, 63, 64, 1000, 123_456, 33_000_000] {
+            let up = bucket_upper(bucket(ns));
+            assert!(up >= ns && (up - ns) as f64 <= ns as f64 / 31.0 + 1.0, "{ns} → {up}");
+        }
+    }
+
+    #[test]
+    fn quantiles_come_within_the_bucket_width() {
+        let mut h = Histogram::new();
+        for us in 1..=1000u64 {
+            h.record(Duration::from_micros(us));
+        }
+        let p50 = h.quantile(0.5).as_secs_f64() * 1e6;
+        let p99 = h.quantile(0.99).as_secs_f64() * 1e6;
+        assert!((500.0..=500.0 * 1.04).contains(&p50), "{p50}");
+        assert!((990.0..=1000.0).contains(&p99), "{p99}");
+        assert_eq!(h.max(), Duration::from_micros(1000));
+        assert_eq!(h.count(), 1000);
+        assert_eq!(Histogram::new().quantile(0.5), Duration::ZERO);
+    }
+
+    #[test]
+    fn overruns_are_counted_against_the_budget() {
+        let mut c = StageClock::new(Some(Duration::from_millis(10)));
+        assert!(!c.record(Duration::from_millis(9)));
+        assert!(!c.record(Duration::from_millis(10)));
+        assert!(c.record(Duration::from_millis(11)));
+        assert_eq!(c.summary().overruns, 1);
+        assert_eq!(c.summary().count, 3);
+    }
+}

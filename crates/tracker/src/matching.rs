@@ -1,0 +1,298 @@
+//! Edge-to-segment matching at a pose, shared by initialisation and maintenance: the predicted
+//! plane of a model segment in each sensor, the angle α between it and an observed edge plane
+//! (Koch–Teller Fig. 2), the angular overlap of edge and segment within that plane, and the hue
+//! distance of two signatures (KT §4.2.1, wrapped hue space).
+//!
+//! Everything here works on borrowed slices and fixed-size arrays: nothing allocates.
+
+use nalgebra::{Point3, Vector3};
+use omnitrack_core::geometry::{Correspondence, Pose};
+use omnitrack_edges::{Edge, HueSignature};
+
+/// Most sensors a rig may have for the fixed per-sensor arrays of the matcher.
+pub const MAX_SENSORS: usize = 16;
+
+/// A model segment as seen from a pose: its end points in the rig frame and, per sensor, the
+/// unit normal of the plane through the sensor's centre and the segment.
+#[derive(Debug, Clone, Copy)]
+pub struct Predicted {
+    pub ends_rig: [Vector3<f64>; 2],
+    pub normals: [Vector3<f64>; MAX_SENSORS],
+    /// Angle (rad) the segment subtends at the rig centre.
+    pub length_rad: f64,
+}
+
+impl Predicted {
+    /// The segment `ends` (world) seen from `t_world_rig` by sensors centred at `centres` (rig
+    /// frame, at most [`MAX_SENSORS`]).
+    #[inline]
+    pub fn new(ends: &[Point3<f64>; 2], t_world_rig: &Pose, centres: &[Point3<f64>]) -> Predicted {
+        let a = t_world_rig.inverse_transform_point(&ends[0]).coords;
+        let b = t_world_rig.inverse_transform_point(&ends[1]).coords;
+        let mut normals = [Vector3::zeros(); MAX_SENSORS];
+        for (n, c) in normals.iter_mut().zip(centres) {
+            let m = (a - c.coords).cross(&(b - c.coords));
+            let norm = m.norm();
+            if norm > 1e-12 {
+                *n = m / norm;
+            }
+        }
+        let length_rad = a.cross(&b).norm().atan2(a.dot(&b));
+        Predicted {
+            ends_rig: [a, b],
+            normals,
+            length_rad,
+        }
+    }
+}
+
+/// Fraction of the shorter of (edge, segment) that the other covers, measured as angles about
+/// the sensor centre `c` within the predicted plane (normal `n`). 0 when they do not overlap.
+#[inline]
+pub fn overlap(pred: &Predicted, c: &Point3<f64>, n: &Vector3<f64>, edge: &Edge) -> f64 {
+    let (common, shorter, _) = shared_angle(pred, c, n, edge);
+    if common <= 0.0 || shorter <= 0.0 {
+        0.0
+    } else {
+        (common / shorter).min(1.0)
+    }
+}
+
+/// Wrapped distance of two hues in [0, 1).
+#[inline]
+fn hue_gap(a: f32, b: f32) -> f32 {
+    let d = (a - b).abs();
+    d.min(1.0 - d)
+}
+
+/// Hue distance of two signatures (KT §4.2.1): the larger of the two sides' wrapped mean
+/// differences, for the better of the two ways the sides can pair up (an edge's end order, and
+/// so which side is "left", is not stable between frames). A side without a meaningful hue on
+/// either signature (grey, dark) does not constrain; two signatures with no comparable side
+/// have distance 0.
+pub fn hue_distance(a: &HueSignature, b: &HueSignature) -> f32 {
+    let side = |x: f32, y: f32| if x.is_nan() || y.is_nan() { 0.0 } else { hue_gap(x, y) };
+    let straight = side(a.left_mean, b.left_mean).max(side(a.right_mean, b.right_mean));
+    let swapped = side(a.left_mean, b.right_mean).max(side(a.right_mean, b.left_mean));
+    straight.min(swapped)
+}
+
+/// Whether two signatures have a side with a meaningful hue on both (in either pairing of
+/// sides), so that [`hue_distance`] says something.
+pub fn hue_comparable(a: &HueSignature, b: &HueSignature) -> bool {
+    let both = |x: f32, y: f32| !x.is_nan() && !y.is_nan();
+    both(a.left_mean, b.left_mean)
+        || both(a.right_mean, b.right_mean)
+        || both(a.left_mean, b.right_mean)
+        || both(a.right_mean, b.left_mean)
+}
+
+/// What to demand of a match.
+#[derive(Debug, Clone, Copy)]
+pub struct Gate {
+    /// cos of the largest α accepted.
+    pub cos_alpha: f64,
+    /// Least [`overlap`] accepted.
+    pub min_overlap: f64,
+    /// Largest [`hue_distance`] to the given signature, if any.
+    pub hue: Option<(HueSignature, f32)>,
+    /// The held edge's normal turned towards its brighter side ([`super::HeldEdge::bright_normal`]):
+    /// where hue cannot compare the two edges (a grey image, grey surfaces), the brighter side
+    /// must stay the same.
+    pub polarity: Option<Vector3<f64>>,
+}
+
+impl Gate {
+    /// A gate on geometry alone: the planes within `angle_rad`, overlapping by half, no hue or
+    /// polarity test.
+    pub fn geometric(angle_rad: f64) -> Gate {
+        Gate {
+            cos_alpha: angle_rad.cos(),
+            min_overlap: 0.5,
+            hue: None,
+            polarity: None,
+        }
+    }
+
+    /// Whether `e` passes the hue gate and, where hue cannot compare the two edges, the
+    /// polarity gate.
+    #[inline]
+    fn signature_matches(&self, e: &Edge) -> bool {
+        let Some((sig, max)) = &self.hue else {
+            return true;
+        };
+        if hue_distance(sig, &e.hue) > *max {
+            return false;
+        }
+        match &self.polarity {
+            Some(bright) if !hue_comparable(sig, &e.hue) => {
+                e.polarity != 0 && bright.dot(&e.plane.normal) * f64::from(e.polarity) >= 0.0
+            }
+            _ => true,
+        }
+    }
+}
+
+/// The edge (index into `edges`) with the smallest α to the predicted segment that passes the
+/// gate, with its α (rad).
+pub fn best_edge(pred: &Predicted, centres: &[Point3<f64>], edges: &[Edge], gate: &Gate) -> Option<(usize, f64)> {
+    let mut best: Option<(usize, f64)> = None;
+    for (i, e) in edges.iter().enumerate() {
+        let s = e.sensor as usize;
+        if s >= centres.len() {
+            continue;
+        }
+        let n = &pred.normals[s];
+        let cos = n.dot(&e.plane.normal).abs();
+        if cos < gate.cos_alpha || best.is_some_and(|(_, c)| cos <= c) {
+            continue;
+        }
+        if !gate.signature_matches(e) {
+            continue;
+        }
+        if overlap(pred, &centres[s], n, e) < gate.min_overlap {
+            continue;
+        }
+        best = Some((i, cos));
+    }
+    best.map(|(i, cos)| (i, cos.min(1.0).acos()))
+}
+
+/// [`best_edge`], and how much of the predicted segment the edges passing the gate cover: the
+/// sum over them of the angle they share with the segment (about their sensor's centre, in its
+/// predicted plane) over the segment's angle, at most 1. A segment explained by a whole edge
+/// covers 1; one that a short piece of texture happens to lie along covers little, however well
+/// that piece's plane agrees.
+pub fn best_edge_and_cover(
+    pred: &Predicted,
+    centres: &[Point3<f64>],
+    edges: &[Edge],
+    gate: &Gate,
+) -> (Option<(usize, f64)>, f64) {
+    let mut best: Option<(usize, f64)> = None;
+    let mut covered = 0.0;
+    for (i, e) in edges.iter().enumerate() {
+        let s = e.sensor as usize;
+        if s >= centres.len() {
+            continue;
+        }
+        let n = &pred.normals[s];
+        let cos = n.dot(&e.plane.normal).abs();
+        if cos < gate.cos_alpha || !gate.signature_matches(e) {
+            continue;
+        }
+        let (common, shorter, seg) = shared_angle(pred, &centres[s], n, e);
+        if common <= 0.0 || shorter <= 0.0 || common / shorter < gate.min_overlap {
+            continue;
+        }
+        covered += common / seg;
+        if best.is_none_or(|(_, c)| cos > c) {
+            best = Some((i, cos));
+        }
+    }
+    (best.map(|(i, cos)| (i, cos.min(1.0).acos())), covered.min(1.0))
+}
+
+/// (angle shared by edge and segment, the shorter one's angle, the segment's angle) about `c`
+/// in the plane of normal `n`.
+#[inline]
+fn shared_angle(pred: &Predicted, c: &Point3<f64>, n: &Vector3<f64>, edge: &Edge) -> (f64, f64, f64) {
+    let a = pred.ends_rig[0] - c.coords;
+    let b = pred.ends_rig[1] - c.coords;
+    let Some(u) = a.try_normalize(1e-12) else {
+        return (0.0, 0.0, 0.0);
+    };
+    let w = n.cross(&u);
+    let angle = |x: &Vector3<f64>| x.dot(&w).atan2(x.dot(&u));
+    let seg_hi = angle(&b);
+    let (s_lo, s_hi) = if seg_hi >= 0.0 { (0.0, seg_hi) } else { (seg_hi, 0.0) };
+    let e0 = angle(&edge.plane.ends[0]);
+    let e1 = angle(&edge.plane.ends[1]);
+    let (e_lo, e_hi) = if e0 <= e1 { (e0, e1) } else { (e1, e0) };
+    let common = s_hi.min(e_hi) - s_lo.max(e_lo);
+    let shorter = (s_hi - s_lo).min(e_hi - e_lo);
+    (common, shorter, s_hi - s_lo)
+}
+
+/// The correspondence of an edge and a model segment.
+#[inline]
+pub fn correspondence(edge: &Edge, segment: &[Point3<f64>; 2]) -> Correspondence {
+    Correspondence {
+        edge: edge.plane,
+        segment: *segment,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{Point2, Translation3, UnitQuaternion};
+    use omnitrack_core::geometry::EdgePlane;
+
+    fn sig(l: f32, r: f32) -> HueSignature {
+        HueSignature {
+            left_mean: l,
+            left_var: 0.0,
+            right_mean: r,
+            right_var: 0.0,
+            left_kept: 1.0,
+            right_kept: 1.0,
+        }
+    }
+
+    #[test]
+    fn hue_distance_wraps_at_red_ignores_grey_sides_and_either_side_order() {
+        assert!((hue_distance(&sig(0.99, 0.5), &sig(0.01, 0.5)) - 0.02).abs() < 1e-6);
+        assert!(hue_distance(&sig(0.2, 0.6), &sig(0.6, 0.2)) < 1e-6);
+        assert!((hue_distance(&sig(0.2, f32::NAN), &sig(0.3, 0.9)) - 0.1).abs() < 1e-6);
+        assert_eq!(hue_distance(&sig(f32::NAN, f32::NAN), &sig(0.3, 0.9)), 0.0);
+    }
+
+    #[test]
+    fn the_true_edge_of_a_segment_matches_with_zero_alpha_and_full_overlap() {
+        let pose = Pose::from_parts(
+            Translation3::new(1.0, 2.0, 1.2),
+            UnitQuaternion::from_euler_angles(0.0, 0.0, 0.4),
+        );
+        let seg = [Point3::new(4.0, 0.0, 0.0), Point3::new(4.0, 0.0, 2.5)];
+        let centres = [Point3::new(0.05, 0.0, 0.0), Point3::new(0.0, 0.05, 0.0)];
+        let c = centres[1];
+        let a = pose.inverse_transform_point(&seg[0]) - c;
+        let b = pose.inverse_transform_point(&seg[1]) - c;
+        // The edge covers the middle half of the segment.
+        let mid = |t: f64| a * (1.0 - t) + b * t;
+        let plane = EdgePlane::from_rays(c, &mid(0.25), &mid(0.75)).unwrap();
+        let edge = Edge {
+            sensor: 1,
+            plane,
+            px: [Point2::origin(); 2],
+            length_rad: 0.3,
+            strength: 1.0,
+            hue: sig(0.1, 0.5),
+            edgels: 10,
+            polarity: 0,
+            rms_rad: 0.0,
+            gaps: Default::default(),
+            n_gaps: 0,
+            shown: Default::default(),
+            n_shown: 0,
+        };
+        let pred = Predicted::new(&seg, &pose, &centres);
+        let gate = Gate {
+            cos_alpha: 10f64.to_radians().cos(),
+            min_overlap: 0.5,
+            hue: Some((sig(0.12, 0.5), 0.03)),
+            polarity: None,
+        };
+        let (i, alpha) = best_edge(&pred, &centres, &[edge], &gate).unwrap();
+        assert_eq!(i, 0);
+        assert!(alpha < 1e-6);
+        assert!((overlap(&pred, &c, &pred.normals[1], &edge) - 1.0).abs() < 1e-9);
+        // A hue far from the signature fails the gate.
+        let strict = Gate {
+            hue: Some((sig(0.3, 0.5), 0.03)),
+            ..gate
+        };
+        assert!(best_edge(&pred, &centres, &[edge], &strict).is_none());
+    }
+}

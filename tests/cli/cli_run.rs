@@ -1,0 +1,129 @@
+//! `omnitrack run` as a black box: bad arguments and inputs are one line and a non-zero exit,
+//! and a short replay writes a TUM trajectory (docs/interfaces.md, "Command line").
+
+use crate::common::omnitrack;
+
+fn last_line(s: &str) -> &str {
+    s.trim_end().lines().last().unwrap_or("")
+}
+
+#[test]
+fn bad_arguments_and_inputs_are_one_line_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = dir.path().join("room.obj");
+    std::fs::write(&model, "v 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2 3\n").unwrap();
+    let model = model.to_str().unwrap();
+    let missing = dir.path().join("nope");
+    let replay = format!("replay:{}", missing.display());
+    for (args, expected) in [
+        (vec!["--source", "bogus"], "unknown source"),
+        (vec!["--source", "replay:"], "recording directory"),
+        (vec!["--source", &replay], "nope"),
+        (vec!["--source", &replay, "--init", "1,2"], "x,y,z"),
+        (
+            vec!["--source", &replay, "--init", "1,2,3,-1"],
+            "radius must be positive",
+        ),
+        (vec!["--source", &replay, "--init", "a,b,c"], "numbers"),
+    ] {
+        let mut full = vec!["run", "--model", model, "--no-publish"];
+        full.extend(args.iter().copied());
+        let (code, stdout, stderr) = omnitrack(&full);
+        assert_ne!(code, 0, "{full:?} should fail");
+        assert!(stdout.is_empty(), "{full:?} printed on stdout: {stdout}");
+        let line = last_line(&stderr);
+        assert!(
+            line.contains(expected),
+            "{full:?}: {line:?} should mention {expected:?}"
+        );
+        assert!(!stderr.contains("panicked"), "{full:?} panicked: {stderr}");
+    }
+}
+
+/// clap's usage errors are one line too (its own report spans the problem, a tip and the usage);
+/// `--help` still prints the whole help on stdout.
+#[test]
+fn usage_errors_are_one_line() {
+    for (args, expected) in [
+        (vec!["run", "--bogus"], "'--bogus'"),
+        (vec!["run"], "--model"),
+        (vec!["pose"], "--lines"),
+        (vec!["visibility"], "build, query"),
+        (vec![], "no command given"),
+    ] {
+        let (code, stdout, stderr) = omnitrack(&args);
+        assert_eq!(code, 2, "{args:?}: {stderr}");
+        assert!(stdout.is_empty(), "{args:?} printed on stdout: {stdout}");
+        assert_eq!(stderr.trim_end().lines().count(), 1, "{args:?}: {stderr}");
+        assert!(
+            stderr.contains(expected),
+            "{args:?}: {stderr:?} should mention {expected:?}"
+        );
+    }
+    let (code, stdout, _) = omnitrack(&["run", "--help"]);
+    assert_eq!(code, 0);
+    assert!(stdout.contains("--trajectory"), "{stdout}");
+}
+
+#[cfg(feature = "desk")]
+#[test]
+fn a_short_replay_writes_a_tum_trajectory_near_the_truth() {
+    use omnitrack::trajectory::load_tum;
+    let lab = crate::common::lab_recording(6);
+    let (dir, rec, truth) = (&lab.dir, &lab.rec, &lab.truth);
+    let t0 = truth[0].pose.translation.vector;
+    // A 1.5 m radius around a point 0.8 m from the true start.
+    let init = format!("{},{},{},1.5", t0.x + 0.8, t0.y, t0.z);
+    let out = dir.path().join("est.tum");
+    let (code, stdout, stderr) = omnitrack(&[
+        "run",
+        "--model",
+        rec.join("model.obj").to_str().unwrap(),
+        "--source",
+        &format!("replay:{}", rec.display()),
+        "--init",
+        &init,
+        "--trajectory",
+        out.to_str().unwrap(),
+        "--no-publish",
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    assert!(stdout.is_empty());
+    let est = load_tum(&out).unwrap();
+    assert!(est.len() >= 5, "{} poses: {stderr}", est.len());
+    for e in &est {
+        let g = truth.iter().find(|g| g.timestamp_ns == e.timestamp_ns).unwrap();
+        let d = (e.pose.translation.vector - g.pose.translation.vector).norm();
+        assert!(d < 0.15, "{d} m off at {}", e.timestamp_ns);
+    }
+}
+
+/// A hint whose volume holds no valid node (20 m above the lab) is searched out to the nearest
+/// nodes and says so; a run that gives no pose ends with one line saying why. One frame: a
+/// search's answers are confirmed on later frames, so none can commit.
+#[cfg(feature = "desk")]
+#[test]
+fn a_hint_with_no_valid_node_is_widened_and_a_run_without_a_pose_says_why() {
+    let lab = crate::common::lab_recording(6);
+    let t0 = lab.truth[0].pose.translation.vector;
+    let init = format!("{},{},{},0.5", t0.x, t0.y, t0.z + 20.0);
+    let (code, _, stderr) = omnitrack(&[
+        "run",
+        "--model",
+        lab.rec.join("model.obj").to_str().unwrap(),
+        "--source",
+        &format!("replay:{}", lab.rec.display()),
+        "--init",
+        &init,
+        "--frames",
+        "1",
+        "--no-publish",
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    assert!(
+        stderr.contains("no valid visibility node in the search volume; searched the nearest"),
+        "{stderr}"
+    );
+    let last = last_line(&stderr);
+    assert!(last.starts_with("omnitrack: no pose: "), "{stderr}");
+}

@@ -1,0 +1,8 @@
+//! Integration tests of the `omnitrack` command line, run as a user runs it: one test binary for several files, so that they link once.
+
+#[path = "../common/mod.rs"]
+mod common;
+
+mod cli_pose;
+mod cli_run;
+mod cli_visibility;
