@@ -272,6 +272,7 @@ fn run(command: Command) -> Result<(), String> {
         }
         Command::Listen { count } => {
             omnitrack::publish::listen(omnitrack::publish::POSE_SERVICE, count, &mut std::io::stdout().lock())
+                .map_err(|e| e.to_string())
         }
         Command::Segments { model } => {
             let m = Model::load(&model).map_err(|e| e.to_string())?;
@@ -419,7 +420,7 @@ fn run_tracker(a: RunArgs) -> Result<(), String> {
     use omnitrack::runtime::pipeline::{
         init_logging, open_pipeline_source, run_pipeline, FrameSink, PipelineOptions, TumSink,
     };
-    use omnitrack::runtime::{FrameRecord, RunOptions};
+    use omnitrack::runtime::{FrameRecord, RunOptions, SinkError};
     use omnitrack::tracker::TrackerEvent;
 
     /// Progress lines on standard error and, if asked, the TUM trajectory.
@@ -432,7 +433,7 @@ fn run_tracker(a: RunArgs) -> Result<(), String> {
         widened: u64,
     }
     impl FrameSink for RunSink {
-        fn frame(&mut self, r: &FrameRecord) -> Result<(), String> {
+        fn frame(&mut self, r: &FrameRecord) -> Result<(), SinkError> {
             match r.result.event {
                 Some(TrackerEvent::Searched(rep)) => {
                     self.searches += 1;
@@ -468,7 +469,7 @@ fn run_tracker(a: RunArgs) -> Result<(), String> {
                 None => Ok(()),
             }
         }
-        fn finish(&mut self) -> Result<(), String> {
+        fn finish(&mut self) -> Result<(), SinkError> {
             match &mut self.tum {
                 Some(t) => t.finish(),
                 None => Ok(()),
@@ -501,7 +502,12 @@ fn run_tracker(a: RunArgs) -> Result<(), String> {
         load_or_build_table(&a.model, &model, a.visibility.as_deref(), &cfg).map_err(|e| e.to_string())?;
     eprintln!("omnitrack: {origin}");
     let mut sink = RunSink {
-        tum: a.trajectory.as_deref().map(TumSink::create).transpose()?,
+        tum: a
+            .trajectory
+            .as_deref()
+            .map(TumSink::create)
+            .transpose()
+            .map_err(|e| e.to_string())?,
         searches: 0,
         empty: 0,
         widened: 0,

@@ -24,7 +24,7 @@ use omnitrack::runtime::pipeline::{
     inside_publish, live_sensors, run_pipeline, FrameSink, PipelineOptions, PipelineStage, PipelineThread, RunEnd,
     TumSink,
 };
-use omnitrack::runtime::{FrameRecord, RunOptions};
+use omnitrack::runtime::{FrameRecord, RunError, RunOptions, SinkError};
 use omnitrack::tracker::SearchVolume;
 use omnitrack::trajectory::{load_tum, Stamped};
 use omnitrack::visibility::VisibilityTable;
@@ -220,7 +220,7 @@ struct Recorder {
 }
 
 impl FrameSink for Recorder {
-    fn frame(&mut self, r: &FrameRecord) -> Result<(), String> {
+    fn frame(&mut self, r: &FrameRecord) -> Result<(), SinkError> {
         self.records.push(*r);
         if let Some(t) = self.tum.as_mut() {
             t.frame(r)?;
@@ -232,7 +232,7 @@ impl FrameSink for Recorder {
         }
         Ok(())
     }
-    fn finish(&mut self) -> Result<(), String> {
+    fn finish(&mut self) -> Result<(), SinkError> {
         self.tum.as_mut().map_or(Ok(()), |t| t.finish())
     }
 }
@@ -445,7 +445,7 @@ fn nothing_allocates_on_the_frame_path_over_300_frames() {
         stop: Arc<AtomicBool>,
     }
     impl FrameSink for Window {
-        fn frame(&mut self, r: &FrameRecord) -> Result<(), String> {
+        fn frame(&mut self, r: &FrameRecord) -> Result<(), SinkError> {
             self.records.push(*r);
             if self.records.len() == START {
                 WINDOW.store(true, Ordering::Relaxed);
@@ -584,7 +584,7 @@ fn sigterm_stops_the_run_cleanly() {
     opts.handle_signals = true;
     struct RaiseAfter(usize, usize);
     impl FrameSink for RaiseAfter {
-        fn frame(&mut self, _: &FrameRecord) -> Result<(), String> {
+        fn frame(&mut self, _: &FrameRecord) -> Result<(), SinkError> {
             self.0 += 1;
             if self.0 == self.1 {
                 signal_hook::low_level::raise(signal_hook::consts::SIGTERM).unwrap();
@@ -604,6 +604,48 @@ fn sigterm_stops_the_run_cleanly() {
     assert_eq!(summary.reason, RunEnd::Stopped);
     assert!(opts.stop.load(Ordering::Relaxed));
     assert!(summary.frames_processed < 100);
+}
+
+/// A sink that cannot take more: the run stops with the sink's own error, whole (its type and
+/// message), and the frames it took before stay taken.
+#[test]
+fn a_sink_error_stops_the_run_and_comes_back_whole() {
+    let _serial = serial();
+    let f = fixture();
+    let opts = options(f, "sinkerr");
+    #[derive(Debug)]
+    struct Full;
+    impl std::fmt::Display for Full {
+        fn fmt(&self, out: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+            out.write_str("disk full")
+        }
+    }
+    impl std::error::Error for Full {}
+    let mut taken = 0usize;
+    let mut sink = |_: &FrameRecord| -> Result<(), SinkError> {
+        taken += 1;
+        if taken == 3 {
+            return Err(Box::new(Full));
+        }
+        Ok(())
+    };
+    let err = run_pipeline(
+        replay(&ping_pong(f, 200)),
+        &f.model,
+        &f.table,
+        &TrackerConfig::default(),
+        &opts,
+        &mut sink,
+    )
+    .unwrap_err();
+    match err {
+        RunError::Sink(e) => {
+            assert!(e.is::<Full>(), "the sink's error type is kept: {e:?}");
+            assert_eq!(e.to_string(), "disk full");
+        }
+        other => panic!("expected the sink's error, got {other}"),
+    }
+    assert_eq!(taken, 3, "no frame is handed over after the sink failed");
 }
 
 // ---- per-sensor capture ----------------------------------------------------------------------

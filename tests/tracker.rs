@@ -72,7 +72,7 @@ fn replay(f: &LabRecording) -> (ReplaySource, Rig, TrackerConfig, FrameSet, Edge
 fn run_hinted(
     f: &LabRecording,
     source: &mut dyn FrameSource,
-    sink: &mut dyn FnMut(&FrameRecord, &Tracker) -> Result<(), String>,
+    sink: &mut dyn FnMut(&FrameRecord, &Tracker) -> Result<(), omnitrack::runtime::SinkError>,
 ) -> TrackerStats {
     let opts = RunOptions {
         hint: Some(hint(f)),

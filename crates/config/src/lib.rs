@@ -75,6 +75,10 @@ pub struct MaintenanceConfig {
     pub max_jump_m: f64,
     pub max_jump_deg: f64,
     pub relocalise_diameter_m: f64,
+    /// The deadline of that search (ms). It runs inside one frame, so it is a few frame budgets,
+    /// not the first start's `initialisation.time_budget_ms`: a walking rig is ~1 m on by the
+    /// next frame after a 1-second search, and then needs another.
+    pub relocalise_time_budget_ms: f64,
     /// A solved pose must explain (an edge within the inlier angle) at least this fraction of
     /// what recent good frames explained of VIS(T) (their running mean); 0 turns the check off.
     pub min_explained_ratio: f64,
@@ -224,6 +228,7 @@ impl Default for MaintenanceConfig {
             max_jump_m: 0.5,
             max_jump_deg: 15.0,
             relocalise_diameter_m: 1.0,
+            relocalise_time_budget_ms: 150.0,
             min_explained_ratio: 0.6,
         }
     }
@@ -337,15 +342,24 @@ impl TrackerConfig {
             file: file.to_string(),
             message: omnitrack_core::rig::one_line(&e.to_string()),
         })?;
-        config.validate().map_err(|message| ConfigError {
+        config.out_of_range().map_err(|message| ConfigError {
             file: file.to_string(),
             message,
         })?;
         Ok(config)
     }
 
-    /// Range checks that serde's types cannot express; the message names the key.
-    pub fn validate(&self) -> Result<(), String> {
+    /// Range checks that serde's types cannot express, for a config built in code (one read
+    /// from a file has passed them): the message names the key.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        self.out_of_range().map_err(|message| ConfigError {
+            file: "tracker config".to_string(),
+            message,
+        })
+    }
+
+    /// The first key out of its range, as the message of a [`ConfigError`].
+    fn out_of_range(&self) -> Result<(), String> {
         fn positive(key: &str, v: f64) -> Result<(), String> {
             if v.is_finite() && v > 0.0 {
                 Ok(())
@@ -476,6 +490,7 @@ impl TrackerConfig {
                 m.relocalise_diameter_m
             ));
         }
+        positive("maintenance.relocalise_time_budget_ms", m.relocalise_time_budget_ms)?;
         if !(0.0..1.0).contains(&m.min_explained_ratio) {
             return Err(format!(
                 "key 'maintenance.min_explained_ratio': must lie in [0, 1) (0 = off), found {}",

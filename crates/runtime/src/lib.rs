@@ -61,13 +61,17 @@ pub struct FrameRecord {
     pub result: FrameResult,
 }
 
+/// A sink's own error (an unwritable trajectory file, a closed socket, …), kept whole: the run
+/// stops with it, after the frames already handed over.
+pub type SinkError = Box<dyn std::error::Error + Send + Sync>;
+
 /// Why a run stopped early.
 #[derive(Debug, thiserror::Error)]
 pub enum RunError {
     #[error("{0}")]
     Source(#[from] SourceError),
     #[error("{0}")]
-    Sink(String),
+    Sink(SinkError),
 }
 
 /// Runs the tracker over `source` until it ends (or `max_frames`), handing every frame to
@@ -78,7 +82,7 @@ pub fn track(
     table: &VisibilityTable,
     cfg: &TrackerConfig,
     opts: &RunOptions,
-    sink: &mut dyn FnMut(&FrameRecord, &Tracker) -> Result<(), String>,
+    sink: &mut dyn FnMut(&FrameRecord, &Tracker) -> Result<(), SinkError>,
 ) -> Result<TrackerStats, RunError> {
     let rig = source.rig().clone();
     let mut frame = FrameSet::for_rig(&rig);

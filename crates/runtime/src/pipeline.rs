@@ -63,7 +63,7 @@ mod stats;
 pub use live::{live_sensors, open_pipeline_source, LiveSensor, SensorCapture};
 pub use stats::{Histogram, PipelineStage, SensorSummary, StageClock, StageSummary};
 
-use super::{FrameRecord, RunError, RunOptions};
+use super::{FrameRecord, RunError, RunOptions, SinkError};
 use crossbeam::channel::{bounded, Receiver, RecvTimeoutError, SendTimeoutError, Sender, TrySendError};
 use omnitrack_config::TrackerConfig;
 use omnitrack_core::geometry::Pose;
@@ -185,17 +185,28 @@ impl Default for PipelineOptions {
 /// Where processed frames go, on the caller's thread.
 pub trait FrameSink {
     /// One processed frame. An error stops the pipeline (the frames already handed over stay).
-    fn frame(&mut self, record: &FrameRecord) -> Result<(), String>;
+    fn frame(&mut self, record: &FrameRecord) -> Result<(), SinkError>;
     /// Called once after the last frame (also after a stop or an error): flush here.
-    fn finish(&mut self) -> Result<(), String> {
+    fn finish(&mut self) -> Result<(), SinkError> {
         Ok(())
     }
 }
 
-impl<F: FnMut(&FrameRecord) -> Result<(), String>> FrameSink for F {
-    fn frame(&mut self, record: &FrameRecord) -> Result<(), String> {
+impl<F: FnMut(&FrameRecord) -> Result<(), SinkError>> FrameSink for F {
+    fn frame(&mut self, record: &FrameRecord) -> Result<(), SinkError> {
         self(record)
     }
+}
+
+/// A trajectory file that could not be created or written.
+#[derive(Debug, thiserror::Error)]
+#[error("{}: cannot {action}: {source}", path.display())]
+pub struct TrajectoryFileError {
+    pub path: PathBuf,
+    /// `create` or `write`.
+    pub action: &'static str,
+    #[source]
+    pub source: std::io::Error,
 }
 
 /// A [`FrameSink`] writing the tracked poses as a TUM trajectory (the format of
@@ -209,11 +220,15 @@ pub struct TumSink {
 
 impl TumSink {
     /// Creates (truncates) `path` and writes the header comment.
-    pub fn create(path: &Path) -> Result<TumSink, String> {
-        let f = std::fs::File::create(path).map_err(|e| format!("{}: cannot create: {e}", path.display()))?;
+    pub fn create(path: &Path) -> Result<TumSink, TrajectoryFileError> {
+        let failed = |action, source| TrajectoryFileError {
+            path: path.to_path_buf(),
+            action,
+            source,
+        };
+        let f = std::fs::File::create(path).map_err(|e| failed("create", e))?;
         let mut out = std::io::BufWriter::with_capacity(64 << 10, f);
-        writeln!(out, "# timestamp_s tx ty tz qx qy qz qw (T_world_rig)")
-            .map_err(|e| format!("{}: cannot write: {e}", path.display()))?;
+        writeln!(out, "# timestamp_s tx ty tz qx qy qz qw (T_world_rig)").map_err(|e| failed("write", e))?;
         Ok(TumSink {
             path: path.to_path_buf(),
             out,
@@ -225,10 +240,18 @@ impl TumSink {
     pub fn poses(&self) -> u64 {
         self.poses
     }
+
+    fn write_failed(&self, source: std::io::Error) -> SinkError {
+        Box::new(TrajectoryFileError {
+            path: self.path.clone(),
+            action: "write",
+            source,
+        })
+    }
 }
 
 impl FrameSink for TumSink {
-    fn frame(&mut self, r: &FrameRecord) -> Result<(), String> {
+    fn frame(&mut self, r: &FrameRecord) -> Result<(), SinkError> {
         let Some(pose) = &r.result.pose else {
             return Ok(());
         };
@@ -236,17 +259,17 @@ impl FrameSink for TumSink {
             timestamp_ns: r.timestamp_ns,
             pose: *pose,
         };
-        omnitrack_core::trajectory::write_tum_line(&mut self.out, &stamped)
-            .and_then(|()| writeln!(self.out))
-            .map_err(|e| format!("{}: cannot write: {e}", self.path.display()))?;
+        if let Err(e) =
+            omnitrack_core::trajectory::write_tum_line(&mut self.out, &stamped).and_then(|()| writeln!(self.out))
+        {
+            return Err(self.write_failed(e));
+        }
         self.poses += 1;
         Ok(())
     }
 
-    fn finish(&mut self) -> Result<(), String> {
-        self.out
-            .flush()
-            .map_err(|e| format!("{}: cannot write: {e}", self.path.display()))
+    fn finish(&mut self) -> Result<(), SinkError> {
+        self.out.flush().map_err(|e| self.write_failed(e))
     }
 }
 
@@ -1099,7 +1122,7 @@ pub fn run_pipeline(
         "pipeline starting"
     );
 
-    let mut sink_error: Option<String> = None;
+    let mut sink_error: Option<SinkError> = None;
     let (outcome, source_stats, publisher_error) = std::thread::scope(|scope| {
         let shared = &shared;
         let pool = &pool;

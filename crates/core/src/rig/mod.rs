@@ -323,8 +323,8 @@ fn parse_sensor(entry: &Value, index: usize, count: usize) -> Result<Sensor, Pla
     })?;
     let q = numbers("rotation_wxyz", 4)?;
     let tr = numbers("translation_m", 3)?;
-    let t_rig_sensor =
-        pose_from_parts([tr[0], tr[1], tr[2]], [q[0], q[1], q[2], q[3]]).map_err(|m| fail("rotation_wxyz", m))?;
+    let t_rig_sensor = pose_from_parts([tr[0], tr[1], tr[2]], [q[0], q[1], q[2], q[3]])
+        .map_err(|m| fail("rotation_wxyz", m.to_string()))?;
     let device = match t.get("device") {
         None => None,
         Some(Value::String(s)) if !s.is_empty() => Some(s.clone()),

@@ -62,7 +62,7 @@ pub fn parse_tum(text: &str, file: &str) -> Result<Trajectory, TumError> {
                 .ok_or_else(|| err(n, format!("'{f}' is not a finite number")))?;
         }
         // TUM order is qx qy qz qw.
-        let pose = pose_from_parts([v[0], v[1], v[2]], [v[6], v[3], v[4], v[5]]).map_err(|m| err(n, m))?;
+        let pose = pose_from_parts([v[0], v[1], v[2]], [v[6], v[3], v[4], v[5]]).map_err(|m| err(n, m.to_string()))?;
         if let Some(last) = out.last() {
             if timestamp_ns < last.timestamp_ns {
                 return Err(err(n, "timestamp goes backwards".into()));

@@ -16,7 +16,7 @@
 use std::io::Write;
 use std::time::Duration;
 
-use super::{PoseSample, PoseStatus, PoseSubscriber};
+use super::{PoseSample, PoseStatus, PoseSubscriber, PublishError};
 
 /// Writes one sample as one line in the format above (without the newline).
 pub fn format_pose_line(s: &PoseSample, out: &mut dyn Write) -> std::io::Result<()> {
@@ -50,21 +50,32 @@ pub fn format_pose_line(s: &PoseSample, out: &mut dyn Write) -> std::io::Result<
     )
 }
 
+/// Why `omnitrack listen` stopped.
+#[derive(Debug, thiserror::Error)]
+pub enum ListenError {
+    /// The subscription failed (no shared memory, a service of another layout, …).
+    #[error("{0}")]
+    Service(#[from] PublishError),
+    /// The output went away (a closed pipe) or could not be written.
+    #[error("writing to output: {0}")]
+    Output(#[source] std::io::Error),
+}
+
 /// Subscribes to `service` and prints one line per received pose sample to `out` (format in the
 /// module doc), flushing after each; stops after `count` samples, or never when `None`. A sample
 /// already published before the call (history 1) is printed first. Waits on the service's event,
 /// so an idle listener sleeps.
-pub fn listen(service: &str, count: Option<u64>, out: &mut dyn Write) -> Result<(), String> {
-    let subscriber = PoseSubscriber::create(service).map_err(|e| e.to_string())?;
+pub fn listen(service: &str, count: Option<u64>, out: &mut dyn Write) -> Result<(), ListenError> {
+    let subscriber = PoseSubscriber::create(service)?;
     let mut printed = 0u64;
     while count.is_none_or(|n| printed < n) {
-        let Some(sample) = subscriber.wait(Duration::from_secs(1)).map_err(|e| e.to_string())? else {
+        let Some(sample) = subscriber.wait(Duration::from_secs(1))? else {
             continue;
         };
         format_pose_line(&sample, out)
             .and_then(|_| writeln!(out))
             .and_then(|_| out.flush())
-            .map_err(|e| format!("writing to output: {e}"))?;
+            .map_err(ListenError::Output)?;
         printed += 1;
     }
     Ok(())

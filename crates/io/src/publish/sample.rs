@@ -149,7 +149,7 @@ impl PoseSample {
     }
 
     /// The pose back as `T_world_rig`; `Err` when the quaternion is not unit or not finite.
-    pub fn pose(&self) -> Result<Pose, String> {
+    pub fn pose(&self) -> Result<Pose, omnitrack_core::geometry::PoseError> {
         omnitrack_core::geometry::pose_from_parts(self.position_m, self.rotation_wxyz)
     }
 
