@@ -181,7 +181,7 @@ impl Tracker<'_> {
             centre: Point3::from(predicted.translation.vector),
             diameter_m: Some(d),
         };
-        let budget = Duration::from_secs_f64(self.cfg.initialisation.time_budget_ms / 1e3);
+        let budget = Duration::from_secs_f64(self.cfg.maintenance.relocalise_time_budget_ms / 1e3);
         self.init.set_time_budget(budget);
         let turn_limit = self.max_turn_rad(timestamp_ns);
         let turned_from = self.last_good.map_or(predicted.rotation, |p| p.rotation);
