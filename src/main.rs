@@ -50,8 +50,8 @@ enum Command {
         #[arg(long, value_name = "FILE.csv")]
         lines: PathBuf,
         /// Solver: Kumar–Hanson's R_and_T, R_then_T or Med_R_and_T (lms), or the ξ simplex (xi).
-        #[arg(long, value_enum, default_value = "r_and_t")]
-        method: MethodArg,
+        #[arg(long, default_value = "r_and_t", value_parser = method_parser())]
+        method: Method,
         /// Starting pose tx,ty,tz,qw,qx,qy,qz (without it the solvers search rotation space).
         #[arg(long, value_name = "tx,ty,tz,qw,qx,qy,qz", allow_hyphen_values = true)]
         guess: Option<String>,
@@ -119,16 +119,11 @@ enum VisibilityCommand {
     },
 }
 
-#[derive(Clone, Copy, clap::ValueEnum)]
-enum MethodArg {
-    #[value(name = "r_and_t")]
-    RAndT,
-    #[value(name = "r_then_t")]
-    RThenT,
-    #[value(name = "lms")]
-    Lms,
-    #[value(name = "xi")]
-    Xi,
+/// `--method`: the solver's own names, listed in the help.
+fn method_parser() -> impl clap::builder::TypedValueParser<Value = Method> {
+    use clap::builder::TypedValueParser;
+    clap::builder::PossibleValuesParser::new(Method::ALL.map(Method::name))
+        .map(|name| name.parse::<Method>().expect("a listed name"))
 }
 
 fn main() -> ExitCode {
@@ -217,12 +212,6 @@ fn run(command: Command) -> Result<(), String> {
             let name = lines.display().to_string();
             let text = std::fs::read_to_string(&lines).map_err(|e| format!("{name}: cannot read: {e}"))?;
             let correspondences = omnitrack::lines::parse_lines(&text, &name, &rig).map_err(|e| e.to_string())?;
-            let method = match method {
-                MethodArg::RAndT => Method::RAndT,
-                MethodArg::RThenT => Method::RThenT,
-                MethodArg::Lms => Method::Lms,
-                MethodArg::Xi => Method::Xi,
-            };
             let solution = solver::solve(method, &correspondences, guess.as_ref(), &options, 0)
                 .map_err(|e| format!("{name}: no pose: {e}"))?;
             println!("{}", pose_json(&solution));

@@ -46,6 +46,38 @@ pub enum Method {
     Xi,
 }
 
+impl Method {
+    /// Every method, in the order `omnitrack pose --help` lists them.
+    pub const ALL: [Method; 4] = [Method::RAndT, Method::RThenT, Method::Lms, Method::Xi];
+
+    /// The method's name in tracker.toml and on the command line (`r_and_t`, …).
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::RThenT => "r_then_t",
+            Method::RAndT => "r_and_t",
+            Method::Lms => "lms",
+            Method::Xi => "xi",
+        }
+    }
+}
+
+/// A name that is none of [`Method::ALL`]'s.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("'{0}' is not a method (r_and_t, r_then_t, lms or xi)")]
+pub struct UnknownMethod(pub String);
+
+impl std::str::FromStr for Method {
+    type Err = UnknownMethod;
+
+    /// A method from its [`Method::name`].
+    fn from_str(s: &str) -> Result<Method, UnknownMethod> {
+        Method::ALL
+            .into_iter()
+            .find(|m| m.name() == s)
+            .ok_or_else(|| UnknownMethod(s.to_string()))
+    }
+}
+
 /// Tunables of the solvers (their defaults are the papers', as in `firmware_config/tracker.toml`).
 #[derive(Debug, Clone, PartialEq)]
 pub struct SolverOptions {
@@ -156,5 +188,20 @@ pub fn solve(
             };
             xi_solve(c, &start, o, &SimplexOptions::default())
         }
+    }
+}
+
+#[cfg(test)]
+mod method_names {
+    use super::{Method, UnknownMethod};
+
+    /// The command line's names are tracker.toml's (serde's) names, and each parses back.
+    #[test]
+    fn names_round_trip_and_match_the_config_file() {
+        for m in Method::ALL {
+            assert_eq!(m.name().parse::<Method>(), Ok(m));
+            assert_eq!(serde_json::to_string(&m).unwrap(), format!("\"{}\"", m.name()));
+        }
+        assert_eq!("ransac".parse::<Method>(), Err(UnknownMethod("ransac".into())));
     }
 }
