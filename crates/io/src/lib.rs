@@ -1,6 +1,6 @@
 //! omnitrack-io: frames in from the sensors, poses out to other processes.
 //!
-//! In: V4L2 and USB3 Vision devices (features `v4l`, `usb`) or a recording on disk. Out: six-sensor
+//! In: V4L2 and USB3 Vision devices (features `v4l`, `usb`) or a recording on disk. Out: multi-sensor
 //! frames with capture timestamps ([`capture`]); pose and status samples on iceoryx2 shared
 //! memory ([`publish`]). Depends on omnitrack-core only.
 
