@@ -3,8 +3,7 @@
 
 use nalgebra::{Isometry3, Matrix6, Point3, Translation3, Unit, UnitQuaternion, Vector3, Vector6};
 use omnitrack::geometry::{Correspondence, EdgePlane, Pose};
-use omnitrack::solver::kumar_hanson::line_residuals;
-use omnitrack::solver::points::point_residuals;
+use omnitrack::solver::{line_residuals, point_residuals};
 use omnitrack::solver::{
     covariance, med_r_and_t, med_r_and_t_landmarks, r_and_t, r_and_t_mixed, r_then_t, LineError, PointObservation,
     SolveError, SolverOptions,

@@ -64,7 +64,7 @@ pub struct MaintenanceConfig {
     pub time_budget_ms: f64,
     pub constant_velocity_prior: bool,
     /// The frame's final fit over its observed correspondences weighs them by Cauchy's loss
-    /// (`solver::robust`) instead of least squares (R_and_T only, not upright).
+    /// (`solver::refine::cauchy`) instead of least squares (R_and_T only, not upright).
     pub robust_final_fit: bool,
     /// How the consensus scores a sample's pose (`truncated`: MSAC, `median`: least median of
     /// squares).

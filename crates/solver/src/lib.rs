@@ -7,8 +7,13 @@
 //! optional pose guess, [`SolverOptions`]. Out: [`Solution`]: `T_world_rig`, its 6×6 covariance,
 //! the inliers used, ξ and the iteration count.
 //!
-//! Beyond the papers: [`robust::r_and_t_cauchy`], R_and_T by iteratively reweighted least
-//! squares with Cauchy's loss, for the tracker's final fit against a coarse model.
+//! Beyond the papers: [`r_and_t_cauchy`], R_and_T by iteratively reweighted least squares with
+//! Cauchy's loss, for the tracker's final fit against a coarse model.
+//!
+//! Layout: [`minimal`] (closed-form poses from minimal samples), [`refine`] (least squares from
+//! a start, and the covariance), [`robust`] (estimators for correspondences with outliers).
+//! Each imports only the ones before it: `minimal` none, `refine` none of the others, `robust`
+//! both.
 //!
 //! Internally the unknown is `T_rig_world = (Q, s)`, so that an end point P of a segment seen by
 //! a sensor centred at c gives Kumar–Hanson's residual `n · (Q P + s − c)`, linear in s — their
@@ -146,26 +151,22 @@ pub enum SolveError {
     NoSolution,
 }
 
-pub mod consensus;
-pub mod covariance;
-pub mod horn;
-pub mod kumar_hanson;
-pub mod lms;
-pub mod points;
+pub mod minimal;
+pub mod refine;
 pub mod robust;
-pub mod sampling;
-pub mod simplex;
-pub mod upright;
 
-pub use consensus::{ConsensusError, ConsensusOutcome, ConsensusSampler, SampleScore, SamplingBudget, StopReason};
-pub use covariance::{covariance, covariance_mixed};
-pub use kumar_hanson::{line_residuals, r_and_t, r_and_t_refine, r_and_t_refine_weighted, r_then_t, LineResiduals};
-pub use lms::{med_r_and_t, med_r_and_t_landmarks};
-pub use points::{r_and_t_mixed, PointObservation};
-pub use robust::r_and_t_cauchy;
-pub use sampling::sample_count;
-pub use simplex::{minimise_xi, minimise_xi_upright, xi_solve, SimplexOptions};
-pub use upright::refine_upright;
+pub use refine::cauchy::r_and_t_cauchy;
+pub use refine::covariance::{covariance, covariance_mixed};
+pub use refine::kumar_hanson::{r_and_t, r_and_t_refine, r_and_t_refine_weighted, r_then_t};
+pub use refine::points::r_and_t_mixed;
+pub use refine::residuals::{line_residuals, point_residuals, LineResiduals, PointObservation};
+pub use refine::simplex::{minimise_xi, minimise_xi_upright, xi_solve, SimplexOptions};
+pub use refine::upright::refine_upright;
+pub use robust::consensus::{
+    ConsensusError, ConsensusOutcome, ConsensusSampler, SampleScore, SamplingBudget, StopReason,
+};
+pub use robust::lms::{med_r_and_t, med_r_and_t_landmarks};
+pub use robust::sampling::sample_count;
 
 /// One entry point for every method (`omnitrack pose --method`, the tracker). `Xi` needs a
 /// starting pose for its simplex: the guess, or else R_and_T's from Horn's rotation samples.

@@ -185,7 +185,7 @@ pub struct Tracker<'m> {
     set_track: Vec<usize>,
     /// Per track: the edge matched this frame and its α.
     matched: Vec<Option<(u32, f64)>>,
-    /// The weights and residuals of the final robust fit (`solver::robust`).
+    /// The weights and residuals of the final robust fit (`solver::refine::cauchy`).
     robust_scratch: Vec<f64>,
     rng: SmallRng,
     state: TrackerState,

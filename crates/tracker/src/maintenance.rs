@@ -20,7 +20,7 @@
 //!    Checking at the solved pose (rather than at the prediction) means an unknown correspondence
 //!    is only promoted by an edge the consensus pose agrees with.
 //! 5. The final fit over the observed accepted correspondences, and its covariance (KH §5).
-//!    The fit weighs the lines by Cauchy's loss (`solver::robust`, `robust_final_fit`; beyond
+//!    The fit weighs the lines by Cauchy's loss (`solver::refine::cauchy`, `robust_final_fit`; beyond
 //!    the papers) rather than least squares: lines a coarse model places a little wrong (trims,
 //!    walls drawn a few centimetres off) sit inside the inlier angle and pulled the pose with
 //!    their whole squared residual. Measured (README, "Tracker"): `lab` 1.62 → 1.26 cm,
@@ -29,7 +29,7 @@
 //! 6. Lines 12–13: VIS(T_{t+1}) updates S_{t+1}.
 //!
 //! Step 3 scores samples by `maintenance.consensus_score` (the median α² by default,
-//! `solver::consensus`), and a relocalisation keeps the last interval's motion for the next
+//! `solver::robust::consensus`), and a relocalisation keeps the last interval's motion for the next
 //! prediction (`relocalise`).
 //!
 //! Nothing here allocates: all buffers belong to the [`Tracker`].
@@ -527,7 +527,7 @@ impl Tracker<'_> {
         if let Some(p) = pose {
             if self.set.len() >= 4 {
                 // Weighed by Cauchy's loss where configured: lines a coarse model places a
-                // little wrong pull less (`solver::robust`).
+                // little wrong pull less (`solver::refine::cauchy`).
                 pose = if mcfg.robust_final_fit && !upright && method == SolverMethod::RAndT {
                     omnitrack_solver::r_and_t_cauchy(&self.set, &p, &self.solver, &mut self.robust_scratch)
                 } else {

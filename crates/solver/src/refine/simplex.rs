@@ -14,7 +14,7 @@
 //! in the ground plane (x, y) and the yaw about world z are free; height, roll and pitch stay at
 //! the starting pose's.
 
-use super::{Solution, SolveError, SolverOptions};
+use crate::{Solution, SolveError, SolverOptions};
 use nalgebra::{Matrix3x6, Matrix6, Translation3, UnitQuaternion, Vector3};
 use omnitrack_core::geometry::{xi, Correspondence, Pose};
 

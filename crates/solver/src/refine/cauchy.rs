@@ -16,7 +16,7 @@
 //! Nothing here allocates; the caller's scratch holds the weights and a copy of the residuals.
 
 use super::kumar_hanson::r_and_t_refine_weighted;
-use super::SolverOptions;
+use crate::SolverOptions;
 use omnitrack_core::geometry::{Correspondence, Pose};
 
 /// Cauchy's tuning constant for 95 % asymptotic efficiency under Gaussian noise (Holland and

@@ -18,9 +18,8 @@
 //!
 //! Valid near the true pose only (KH's caveat): the analysis is local.
 
-use super::kumar_hanson::{line_residuals, unknowns_of};
-use super::points::{point_residuals, PointObservation};
-use super::{LineError, SolverOptions};
+use super::residuals::{line_residuals, point_residuals, unknowns_of, PointObservation};
+use crate::{LineError, SolverOptions};
 use nalgebra::{Matrix3, Matrix6, Matrix6x3, Vector3};
 use omnitrack_core::geometry::{Correspondence, Pose};
 

@@ -12,84 +12,11 @@
 //! lines go into the same 6×6 normal equations of eq. 21.
 
 use super::covariance::covariance_mixed;
-use super::kumar_hanson::{accumulate_line, all_finite, iterate, pose_of, unknowns_of, LineResiduals};
-use super::{LineError, Solution, SolveError, SolverOptions};
-use nalgebra::{Matrix6, Point3, Unit, UnitQuaternion, Vector3, Vector6};
+use super::residuals::{
+    accumulate_line, accumulate_point, all_finite, iterate, pose_of, unknowns_of, PointObservation,
+};
+use crate::{Solution, SolveError, SolverOptions};
 use omnitrack_core::geometry::{xi, Correspondence, Pose};
-
-/// A point landmark seen by one sensor.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct PointObservation {
-    /// Unit ray from the sensor centre towards the point, rig frame.
-    pub ray: Unit<Vector3<f64>>,
-    /// The sensor's optical centre, rig frame.
-    pub centre: Point3<f64>,
-    /// The point, world frame.
-    pub point: Point3<f64>,
-}
-
-/// An orthonormal pair perpendicular to `ray` (the normalised basis of eq. 14).
-#[inline]
-pub fn perpendicular_basis(ray: &Vector3<f64>) -> [Vector3<f64>; 2] {
-    let a = ray.abs();
-    let other = if a.x <= a.y && a.x <= a.z {
-        Vector3::x()
-    } else if a.y <= a.z {
-        Vector3::y()
-    } else {
-        Vector3::z()
-    };
-    let u1 = ray.cross(&other).normalize();
-    [u1, ray.cross(&u1)]
-}
-
-/// The two residuals of a point at `T_rig_world = (q, s)`: E_p1 when `error` is E1, E_p2
-/// otherwise, with Jacobians over (Δs, δω); and, per residual, the vector `a_k` with which a
-/// small change δ of the ray moves it (`a_k · δ`, for the covariance).
-#[inline]
-pub fn point_residuals(
-    p: &PointObservation,
-    q: &UnitQuaternion<f64>,
-    s: &Vector3<f64>,
-    error: LineError,
-) -> Option<(LineResiduals, [Vector3<f64>; 2])> {
-    let ray = p.ray.into_inner();
-    let u = perpendicular_basis(&ray);
-    let rotated = q * p.point.coords;
-    let x = rotated + s - p.centre.coords;
-    let w = match error {
-        LineError::E1 => 1.0,
-        LineError::E2 | LineError::E3 => 1.0 / x.norm_squared(),
-    };
-    let row = |u: &Vector3<f64>| {
-        let b = rotated.cross(u);
-        Vector6::new(u.x, u.y, u.z, b.x, b.y, b.z)
-    };
-    let res = LineResiduals {
-        r: [u[0].dot(&x), u[1].dot(&x)],
-        jacobian: [row(&u[0]), row(&u[1])],
-        weight: [w, w],
-    };
-    // Turning the ray by δ ⟂ ray carries its basis along: u_k' ≈ u_k − ray (u_k · δ).
-    let depth = ray.dot(&x);
-    (res.r.iter().all(|v| v.is_finite())).then_some((res, [-depth * u[0], -depth * u[1]]))
-}
-
-fn accumulate_point(
-    p: &PointObservation,
-    q: &UnitQuaternion<f64>,
-    s: &Vector3<f64>,
-    error: LineError,
-    h: &mut Matrix6<f64>,
-    g: &mut Vector6<f64>,
-) {
-    if let Some((res, _)) = point_residuals(p, q, s, error) {
-        for k in 0..2 {
-            h.ger(res.weight[k], &res.jacobian[k], &res.jacobian[k], 1.0);
-            g.axpy(res.weight[k] * res.r[k], &res.jacobian[k], 1.0);
-        }
-    }
-}
 
 /// R_and_T (§3.1) over lines and points together from `guess`: lines use `o.error`, points use
 /// E_p1 (eq. 14) when `o.error` is E1 and E_p2 (eq. 15) otherwise. `Solution.inliers` lists the

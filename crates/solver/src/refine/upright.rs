@@ -14,7 +14,7 @@
 //! `∂r/∂ψ = −n · Rᵀ (e_z × (P − t))`. E2 divides each residual by the end point's distance from
 //! the sensor centre (held fixed within a step), as in the 6-DOF solver.
 
-use super::{LineError, SolverOptions};
+use crate::{LineError, SolverOptions};
 use nalgebra::{Matrix3, Translation3, UnitQuaternion, Vector3};
 use omnitrack_core::geometry::{Correspondence, Pose};
 

@@ -35,7 +35,7 @@
 //! Everything is sized at construction ([`ConsensusSampler::new`]); [`ConsensusSampler::run`]
 //! allocates nothing (provided `fit` does not), which the tests count.
 
-use super::SolveError;
+use crate::SolveError;
 use omnitrack_core::geometry::{xi, Correspondence, Pose};
 use rand::rngs::SmallRng;
 use rand::Rng;
