@@ -700,12 +700,10 @@ pub fn query_json(table: &VisibilityTable, model: &Model, at: &Point3<f64>) -> S
 }
 
 /// Parses `x,y,z` (negative numbers allowed, e.g. `-1.5,2,1.6`).
-pub fn parse_point(text: &str) -> Result<Point3<f64>, String> {
+pub fn parse_point(text: &str) -> Result<Point3<f64>, PointError> {
     let parts: Vec<&str> = text.split(',').map(str::trim).collect();
     if parts.len() != 3 {
-        return Err(format!(
-            "--at {text:?}: expected x,y,z (three numbers separated by commas)"
-        ));
+        return Err(PointError::NotThree(text.to_string()));
     }
     let mut c = [0.0; 3];
     for (k, p) in parts.iter().enumerate() {
@@ -713,9 +711,21 @@ pub fn parse_point(text: &str) -> Result<Point3<f64>, String> {
             .parse::<f64>()
             .ok()
             .filter(|x| x.is_finite())
-            .ok_or_else(|| format!("--at {text:?}: {p:?} is not a number"))?;
+            .ok_or_else(|| PointError::NotANumber {
+                text: text.to_string(),
+                part: p.to_string(),
+            })?;
     }
     Ok(Point3::new(c[0], c[1], c[2]))
+}
+
+/// Why `--at` is not a position.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum PointError {
+    #[error("--at {0:?}: expected x,y,z (three numbers separated by commas)")]
+    NotThree(String),
+    #[error("--at {text:?}: {part:?} is not a number")]
+    NotANumber { text: String, part: String },
 }
 
 /// `omnitrack visibility query --visibility V --at x,y,z`: reads the table, reads the model it

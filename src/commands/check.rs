@@ -1,0 +1,73 @@
+//! `omnitrack check`: validates a rig, a model and a tracker config, and summarises each on
+//! standard error.
+
+use super::CommandResult;
+use omnitrack::config::TrackerConfig;
+use omnitrack::{Model, Rig};
+use std::path::PathBuf;
+
+/// `check`'s arguments: any of the three files.
+#[derive(clap::Args)]
+pub struct Args {
+    /// The rig file to validate.
+    #[arg(long, value_name = "RIG.toml")]
+    rig: Option<PathBuf>,
+    /// A building model (OBJ) to load, with its faces and segments summarised.
+    #[arg(long, value_name = "MODEL.obj")]
+    model: Option<PathBuf>,
+    /// A tracker config to validate (every key's type and range).
+    #[arg(long, value_name = "tracker.toml")]
+    config: Option<PathBuf>,
+}
+
+pub fn run(Args { rig, model, config }: Args) -> CommandResult {
+    if rig.is_none() && model.is_none() && config.is_none() {
+        return Err("check needs at least one of --rig, --model, --config".into());
+    }
+    if let Some(path) = rig {
+        let rig = Rig::load(&path)?;
+        eprintln!("{}: rig '{}', {} sensors", path.display(), rig.name, rig.sensors.len());
+        for s in &rig.sensors {
+            let c = s.centre();
+            eprintln!(
+                "  sensor {}: {}×{}, {} lens seeing {:.1}° off-axis at the corners, centre ({:.3}, {:.3}, {:.3}) m",
+                s.id,
+                s.width,
+                s.height,
+                lens_name(&s.lens),
+                s.max_off_axis().to_degrees(),
+                c.x,
+                c.y,
+                c.z
+            );
+        }
+    }
+    if let Some(path) = model {
+        let m = Model::load(&path)?;
+        eprintln!(
+            "{}: {} vertices, {} faces, {} segments ({} free); skipped {} degenerate faces, \
+             split {} non-planar faces, welded {} duplicate vertices, ignored {} records",
+            path.display(),
+            m.vertices.len(),
+            m.faces.len(),
+            m.segments.len(),
+            m.segments.iter().filter(|s| s.is_free()).count(),
+            m.stats.degenerate_faces,
+            m.stats.nonplanar_faces,
+            m.stats.welded_vertices,
+            m.stats.ignored_records
+        );
+    }
+    if let Some(path) = config {
+        TrackerConfig::load(&path)?;
+        eprintln!("{}: tracker config valid", path.display());
+    }
+    Ok(())
+}
+
+fn lens_name(lens: &omnitrack::geometry::Lens) -> &'static str {
+    match lens {
+        omnitrack::geometry::Lens::Pinhole(_) => "pinhole",
+        omnitrack::geometry::Lens::Kb4(_) => "kb4",
+    }
+}

@@ -1,0 +1,210 @@
+//! `omnitrack run`: frames from a source (replay, V4L2, USB3 Vision) through the threaded
+//! pipeline, poses on the iceoryx2 pose service and, if asked, a TUM trajectory; progress and
+//! the summary on standard error.
+
+use super::CommandResult;
+use omnitrack::config::TrackerConfig;
+use omnitrack::{Model, Rig};
+use std::path::PathBuf;
+
+/// `run`'s arguments (docs/interfaces.md).
+#[derive(clap::Args)]
+pub struct Args {
+    /// The rig (a replay recording's own rig.toml is used when this is omitted).
+    #[arg(long, value_name = "RIG.toml")]
+    rig: Option<PathBuf>,
+    /// The building model (OBJ, metres, z up).
+    #[arg(long, value_name = "MODEL.obj")]
+    model: PathBuf,
+    /// Prior visibility table (default: MODEL.vis beside the model, built if absent).
+    #[arg(long, value_name = "TABLE.vis")]
+    visibility: Option<PathBuf>,
+    /// replay:DIR, v4l or usb.
+    #[arg(long, value_name = "replay:DIR|v4l|usb")]
+    source: String,
+    /// Initial search volume: centre x,y,z and optionally its radius in metres (default: half
+    /// of [initialisation] search_diameter_m of tracker.toml, i.e. a 3 m volume).
+    #[arg(long, value_name = "x,y,z[,radius_m]", allow_hyphen_values = true)]
+    init: Option<String>,
+    /// Write the trajectory (TUM) here.
+    #[arg(long, value_name = "OUT.tum")]
+    trajectory: Option<PathBuf>,
+    /// Tracker tunables (default: the shipped firmware_config/tracker.toml values).
+    #[arg(long, value_name = "tracker.toml")]
+    config: Option<PathBuf>,
+    /// Stop after N frames.
+    #[arg(long)]
+    frames: Option<u64>,
+    /// Do not publish on iceoryx2.
+    #[arg(long)]
+    no_publish: bool,
+    /// Replay at the recorded frame rate (default: as fast as the tracker goes).
+    #[arg(long)]
+    realtime: bool,
+}
+
+/// `--init x,y,z[,radius_m]` (docs/interfaces.md): the search volume's centre and radius; without
+/// a radius, the configured diameter.
+fn parse_init(text: &str, default_diameter: f64) -> Result<omnitrack::tracker::SearchVolume, String> {
+    let v: Vec<f64> = text
+        .split(',')
+        .map(|x| x.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| format!("--init {text:?}: expected x,y,z or x,y,z,radius_m (numbers)"))?;
+    if !(v.len() == 3 || v.len() == 4) || v.iter().any(|x| !x.is_finite()) {
+        return Err(format!(
+            "--init {text:?}: expected x,y,z or x,y,z,radius_m (finite numbers)"
+        ));
+    }
+    let diameter = v.get(3).map(|r| 2.0 * r).unwrap_or(default_diameter);
+    if diameter <= 0.0 {
+        return Err(format!("--init {text:?}: the radius must be positive"));
+    }
+    Ok(omnitrack::tracker::SearchVolume {
+        centre: nalgebra::Point3::new(v[0], v[1], v[2]),
+        diameter_m: Some(diameter),
+    })
+}
+
+pub fn run(a: Args) -> CommandResult {
+    use omnitrack::capture::{Pacing, SourceOptions};
+    use omnitrack::publish::{POSE_SERVICE, STATUS_SERVICE};
+    use omnitrack::runtime::load_or_build_table;
+    use omnitrack::runtime::pipeline::{
+        init_logging, open_pipeline_source, run_pipeline, FrameSink, PipelineOptions, TumSink,
+    };
+    use omnitrack::runtime::{FrameRecord, RunOptions, SinkError};
+    use omnitrack::tracker::TrackerEvent;
+
+    /// Progress lines on standard error and, if asked, the TUM trajectory.
+    struct RunSink {
+        tum: Option<TumSink>,
+        /// Searches run, those that had no cell to search, and those widened to the nearest
+        /// valid nodes: why no pose came out, if none did.
+        searches: u64,
+        empty: u64,
+        widened: u64,
+    }
+    impl FrameSink for RunSink {
+        fn frame(&mut self, r: &FrameRecord) -> Result<(), SinkError> {
+            match r.result.event {
+                Some(TrackerEvent::Searched(rep)) => {
+                    self.searches += 1;
+                    self.empty += u64::from(rep.cells_in_volume == 0);
+                    if let Some(d) = rep.widened_to_m {
+                        self.widened += 1;
+                        eprintln!(
+                            "omnitrack: frame {}: no valid visibility node in the search volume; searched the nearest, {:.1} m about its centre",
+                            r.sequence, d
+                        );
+                    }
+                    eprintln!(
+                        "omnitrack: frame {}: searched {} of {} cells in {:.0} ms",
+                        r.sequence,
+                        rep.cells_searched,
+                        rep.cells_in_volume,
+                        rep.elapsed.as_secs_f64() * 1e3
+                    )
+                }
+                Some(TrackerEvent::Committed { candidates, .. }) => {
+                    eprintln!(
+                        "omnitrack: frame {}: tracking ({candidates} candidates weighed)",
+                        r.sequence
+                    )
+                }
+                Some(TrackerEvent::LostLock) => {
+                    eprintln!("omnitrack: frame {}: lost lock, re-initialising", r.sequence)
+                }
+                Some(TrackerEvent::Relocalised) | None => {}
+            }
+            match &mut self.tum {
+                Some(t) => t.frame(r),
+                None => Ok(()),
+            }
+        }
+        fn finish(&mut self) -> Result<(), SinkError> {
+            match &mut self.tum {
+                Some(t) => t.finish(),
+                None => Ok(()),
+            }
+        }
+    }
+
+    init_logging();
+    let cfg = match &a.config {
+        Some(p) => TrackerConfig::load(p)?,
+        None => TrackerConfig::default(),
+    };
+    let hint = a
+        .init
+        .as_deref()
+        .map(|t| parse_init(t, cfg.initialisation.search_diameter_m))
+        .transpose()?;
+    let rig = a.rig.as_deref().map(Rig::load).transpose()?;
+    let options = SourceOptions {
+        pacing: if a.realtime {
+            Pacing::RealTime
+        } else {
+            Pacing::AsFastAsPossible
+        },
+        ..SourceOptions::default()
+    };
+    let source = open_pipeline_source(&a.source, rig.as_ref(), &options)?;
+    let model = Model::load(&a.model)?;
+    let (table, origin) = load_or_build_table(&a.model, &model, a.visibility.as_deref(), &cfg)?;
+    eprintln!("omnitrack: {origin}");
+    let mut sink = RunSink {
+        tum: a.trajectory.as_deref().map(TumSink::create).transpose()?,
+        searches: 0,
+        empty: 0,
+        widened: 0,
+    };
+    let publish = (!a.no_publish).then_some(());
+    let opts = PipelineOptions {
+        run: RunOptions {
+            hint,
+            seed: 1,
+            max_frames: a.frames,
+        },
+        handle_signals: true,
+        pose_service: publish.map(|_| POSE_SERVICE.to_string()),
+        status_service: publish.map(|_| STATUS_SERVICE.to_string()),
+        // A replay not paced in real time would otherwise race ahead while the tracker works.
+        lossless: !a.realtime && a.source.starts_with("replay:"),
+        ..PipelineOptions::default()
+    };
+    let summary = run_pipeline(source, &model, &table, &cfg, &opts, &mut sink)?;
+    let stats = &summary.tracker;
+    eprintln!(
+        "omnitrack: {} frames, {} tracked ({:.1} %), {} losses, {} re-initialisations, {} relocalisations",
+        stats.frames,
+        stats.tracked,
+        100.0 * stats.tracked as f64 / stats.frames.max(1) as f64,
+        stats.losses,
+        stats.reinitialisations,
+        stats.relocalisations
+    );
+    eprintln!("omnitrack: {summary}");
+    if stats.tracked == 0 {
+        eprintln!(
+            "omnitrack: no pose: {}",
+            no_pose_reason(stats.frames, sink.searches, sink.empty, sink.widened)
+        );
+    }
+    Ok(())
+}
+
+/// Why a run gave no pose, in one line, from what its searches reported.
+fn no_pose_reason(frames: u64, searches: u64, empty: u64, widened: u64) -> String {
+    if frames == 0 {
+        "no frame came from the source".to_string()
+    } else if searches == 0 {
+        "no search finished".to_string()
+    } else if empty == searches {
+        "the visibility table has no valid node (nowhere in the model has room for a person to stand: check the model's floors and scale, or rebuild the table)".to_string()
+    } else if widened == searches {
+        format!("the search volume holds no valid visibility node; {searches} searches of the nearest nodes found no pose that explains the frames clearly (check the --init hint)")
+    } else {
+        format!("{searches} searches found no pose that explains the frames clearly enough to commit (a wrong pose is refused: a model that differs from the building, or a hint far from the rig?)")
+    }
+}
