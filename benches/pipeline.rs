@@ -16,7 +16,7 @@
 //!
 //! Run: `cargo bench --bench pipeline` (needs the `desk` feature, on by default). Options after
 //! `--`: `--frames N` (default 300), `--seed S` (default 11). Recordings are cached in
-//! `target/omnitrack-cache/` (or `$OMNITRACK_CACHE`), as for `benches/tracker.rs`.
+//! `target/omnitrack-cache/` (or `$OMNITRACK_CACHE`), as for `benches/tracker/`.
 
 #[cfg(feature = "desk")]
 mod bench {
