@@ -3,10 +3,9 @@
 
 use nalgebra::{Isometry3, Matrix6, Point3, Translation3, Unit, UnitQuaternion, Vector3, Vector6};
 use omnitrack::geometry::{Correspondence, EdgePlane, Pose};
-use omnitrack::solver::{line_residuals, point_residuals};
 use omnitrack::solver::{
-    covariance, med_r_and_t, med_r_and_t_landmarks, r_and_t, r_and_t_mixed, r_then_t, LineError, PointObservation,
-    SolveError, SolverOptions,
+    covariance, line_residuals, med_r_and_t, med_r_and_t_landmarks, point_residuals, r_and_t, r_and_t_mixed, r_then_t,
+    LineError, PointObservation, SolveError, SolverOptions,
 };
 use omnitrack::Rig;
 use rand::rngs::SmallRng;

@@ -92,6 +92,6 @@ fn demo_refuses_zero_frames_in_one_line() {
         progress: false,
         ..DemoOptions::default()
     };
-    let e = run_demo(&opts).unwrap_err();
+    let e = run_demo(&opts).unwrap_err().to_string();
     assert!(!e.contains('\n') && e.contains("frame"), "{e}");
 }

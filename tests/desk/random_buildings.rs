@@ -101,7 +101,7 @@ fn pins_parse_and_unknown_ones_say_what_is_allowed() {
     let b = RandomBuilding::generate(4, &Choices::parse("courtyard,hand-held").unwrap());
     assert_eq!(b.outline, Outline::Courtyard);
     assert_eq!(b.motion, omnitrack::desk::scenario::Motion::HandHeld6Dof);
-    let err = Choices::parse("L,hexagon").unwrap_err();
+    let err = Choices::parse("L,hexagon").unwrap_err().to_string();
     assert!(
         err.contains("\"hexagon\"") && err.contains("courtyard") && !err.contains('\n'),
         "{err}"

@@ -173,7 +173,7 @@ fn check_path_rejects_walking_through_a_wall() {
     // Two points in adjacent offices of building A, straight through the partition at x = 8.
     t[0].pose.translation.vector = nalgebra::Vector3::new(6.0, 5.0, 1.2);
     t[1].pose.translation.vector = nalgebra::Vector3::new(10.0, 5.0, 1.2);
-    let e = check_path(&plan, &t).unwrap_err();
+    let e = check_path(&plan, &t).unwrap_err().to_string();
     assert!(e.contains("wall"), "{e}");
     // Outside the building.
     t[1].pose.translation.vector = nalgebra::Vector3::new(6.0, -3.0, 1.2);

@@ -12,19 +12,20 @@
 //! ([`load_or_build_table`]) → tracking from a 3 m search volume around a point 1 m off the true
 //! start ([`track`]) → evaluation ([`eval::evaluate`]) → pictures ([`pictures`]).
 
-use crate::eval::{self, EvalOptions, Evaluation};
-use crate::pictures::{self, CorrespondenceState, ErrorTrace, OmniOptions, PlanOptions, StateTrace};
-use crate::recording::{cached_scenario, RecordingOptions};
+use crate::eval::{self, EvalError, EvalOptions, Evaluation};
+use crate::pictures::{self, CorrespondenceState, ErrorTrace, OmniOptions, PictureError, PlanOptions, StateTrace};
+use crate::recording::{cached_scenario, RecordingError, RecordingOptions};
 use crate::scenario::{Scenario, ScenarioName};
 use indicatif::{ProgressBar, ProgressStyle};
 use nalgebra::{Point3, Vector3};
 use omnitrack_config::TrackerConfig;
 use omnitrack_core::geometry::Pose;
-use omnitrack_core::model::Model;
-use omnitrack_core::rig::Rig;
+use omnitrack_core::model::{Model, ModelError};
+use omnitrack_core::rig::{Rig, RigError};
 use omnitrack_core::trajectory::Stamped;
-use omnitrack_io::capture::{FrameSet, FrameSource, Pacing, ReplaySource};
-use omnitrack_runtime::{load_or_build_table, track, RunOptions};
+use omnitrack_io::capture::{FrameSet, FrameSource, Pacing, ReplaySource, SourceError};
+use omnitrack_runtime::{load_or_build_table, track, RunError, RunOptions};
+use omnitrack_tracker::visibility::VisibilityError;
 use omnitrack_tracker::SearchVolume;
 use std::collections::HashMap;
 use std::fmt;
@@ -143,8 +144,59 @@ pub struct DemoReport {
     pub times: StageTimes,
 }
 
+/// Why the demo stopped; displays as one line.
+#[derive(Debug, thiserror::Error)]
+pub enum DemoError {
+    #[error("the demo needs at least one frame")]
+    NoFrames,
+    /// The cache directory given, or one the demo made inside the cache.
+    #[error(transparent)]
+    Cache(#[from] CacheError),
+    /// `$OMNITRACK_CACHE` names a directory that does not work: reported, not papered over.
+    #[error("$OMNITRACK_CACHE: {0}")]
+    CacheVariable(CacheError),
+    /// Every fallback failed, each for the reason listed.
+    #[error("no usable cache directory (set $OMNITRACK_CACHE): {}", join(.tried))]
+    NoCache { tried: Vec<CacheError> },
+    #[error("{}: no groundtruth.tum", .recording.display())]
+    NoGroundTruth { recording: PathBuf },
+    #[error("{}: empty ground truth", .recording.display())]
+    EmptyGroundTruth { recording: PathBuf },
+    #[error("{}: recording ended before frame {frame}", .recording.display())]
+    RecordingEnded { recording: PathBuf, frame: u64 },
+    #[error(transparent)]
+    Rig(#[from] RigError),
+    #[error(transparent)]
+    Recording(#[from] RecordingError),
+    #[error(transparent)]
+    Model(#[from] ModelError),
+    #[error(transparent)]
+    Visibility(#[from] VisibilityError),
+    #[error(transparent)]
+    Replay(#[from] SourceError),
+    #[error(transparent)]
+    Tracking(#[from] RunError),
+    #[error(transparent)]
+    Evaluation(#[from] EvalError),
+    #[error(transparent)]
+    Picture(#[from] PictureError),
+}
+
+/// A directory that cannot serve as the cache.
+#[derive(Debug, thiserror::Error)]
+pub enum CacheError {
+    #[error("{}: cannot create directory: {source}", .dir.display())]
+    Create { dir: PathBuf, source: std::io::Error },
+    #[error("{}: not writable: {source}", .dir.display())]
+    NotWritable { dir: PathBuf, source: std::io::Error },
+}
+
+fn join(problems: &[CacheError]) -> String {
+    problems.iter().map(ToString::to_string).collect::<Vec<_>>().join("; ")
+}
+
 /// Where recordings and pictures are kept, and why there.
-fn choose_cache_dir(explicit: Option<&Path>) -> Result<(PathBuf, String), String> {
+fn choose_cache_dir(explicit: Option<&Path>) -> Result<(PathBuf, String), DemoError> {
     if let Some(dir) = explicit {
         prepare_cache(dir)?;
         return Ok((dir.to_path_buf(), "as given".into()));
@@ -152,7 +204,7 @@ fn choose_cache_dir(explicit: Option<&Path>) -> Result<(PathBuf, String), String
     let env = |name: &str| std::env::var_os(name).filter(|v| !v.is_empty()).map(PathBuf::from);
     if let Some(dir) = env("OMNITRACK_CACHE") {
         // An explicit setting that does not work is an error to report, not to paper over.
-        prepare_cache(&dir).map_err(|e| format!("$OMNITRACK_CACHE: {e}"))?;
+        prepare_cache(&dir).map_err(DemoError::CacheVariable)?;
         return Ok((dir, "$OMNITRACK_CACHE".into()));
     }
     let mut candidates: Vec<(PathBuf, String)> = Vec::new();
@@ -192,21 +244,28 @@ fn choose_cache_dir(explicit: Option<&Path>) -> Result<(PathBuf, String), String
             Err(e) => problems.push(e),
         }
     }
-    Err(format!(
-        "no usable cache directory (set $OMNITRACK_CACHE): {}",
-        problems.join("; ")
-    ))
+    Err(DemoError::NoCache { tried: problems })
 }
 
 /// Creates `dir` and checks it is writable by writing its cache tag, which also keeps backup
 /// tools out of it (https://bford.info/cachedir/).
-fn prepare_cache(dir: &Path) -> Result<(), String> {
-    std::fs::create_dir_all(dir).map_err(|e| format!("{}: cannot create directory: {e}", dir.display()))?;
+fn prepare_cache(dir: &Path) -> Result<(), CacheError> {
+    create_dir(dir)?;
     std::fs::write(
         dir.join("CACHEDIR.TAG"),
         "Signature: 8a477f597d28d172789f06886806bc55\n# omnitrack demo cache: recordings, tables, pictures\n",
     )
-    .map_err(|e| format!("{}: not writable: {e}", dir.display()))
+    .map_err(|source| CacheError::NotWritable {
+        dir: dir.to_path_buf(),
+        source,
+    })
+}
+
+fn create_dir(dir: &Path) -> Result<(), CacheError> {
+    std::fs::create_dir_all(dir).map_err(|source| CacheError::Create {
+        dir: dir.to_path_buf(),
+        source,
+    })
 }
 
 /// The cache label of a scenario: its own plan if it is not the built-in one of its name, so
@@ -276,19 +335,22 @@ fn state_traces(per_frame: &[(f64, HashMap<u32, CorrespondenceState>)], frames: 
 }
 
 /// The images of frame `index` of a recording, read again (the tracking run keeps none).
-fn reread_frame(dir: &Path, index: u64) -> Result<Vec<image::RgbImage>, String> {
-    let mut source = ReplaySource::open(dir, Pacing::AsFastAsPossible).map_err(|e| e.to_string())?;
+fn reread_frame(dir: &Path, index: u64) -> Result<Vec<image::RgbImage>, DemoError> {
+    let mut source = ReplaySource::open(dir, Pacing::AsFastAsPossible)?;
     let mut frame = FrameSet::for_rig(source.rig());
     for _ in 0..=index {
-        if !source.next_frame(&mut frame).map_err(|e| e.to_string())? {
-            return Err(format!("{}: recording ended before frame {index}", dir.display()));
+        if !source.next_frame(&mut frame)? {
+            return Err(DemoError::RecordingEnded {
+                recording: dir.to_path_buf(),
+                frame: index,
+            });
         }
     }
     Ok(pictures::frame_images(&frame))
 }
 
 /// Runs the demo (see the module doc).
-pub fn run_demo(opts: &DemoOptions) -> Result<DemoReport, String> {
+pub fn run_demo(opts: &DemoOptions) -> Result<DemoReport, DemoError> {
     let started = Instant::now();
     let say = |line: String| {
         if opts.progress {
@@ -296,12 +358,12 @@ pub fn run_demo(opts: &DemoOptions) -> Result<DemoReport, String> {
         }
     };
     if opts.frames == 0 {
-        return Err("the demo needs at least one frame".into());
+        return Err(DemoError::NoFrames);
     }
     let scenario = &opts.scenario;
     let rig = match &opts.rig {
         Some(r) => r.clone(),
-        None => Rig::from_toml_str(SHIPPED_RIG, SHIPPED_RIG_NAME).map_err(|e| e.to_string())?,
+        None => Rig::from_toml_str(SHIPPED_RIG, SHIPPED_RIG_NAME)?,
     };
     let (cache_dir, cache_origin) = choose_cache_dir(opts.cache_dir.as_deref())?;
     say(format!("cache directory {} ({cache_origin})", cache_dir.display()));
@@ -322,8 +384,7 @@ pub fn run_demo(opts: &DemoOptions) -> Result<DemoReport, String> {
         &rig,
         &RecordingOptions::default(),
         |done, _| render_bar.set_position(done as u64),
-    )
-    .map_err(|e| e.to_string())?;
+    )?;
     render_bar.finish_and_clear();
     let recording_time = t.elapsed();
     say(format!(
@@ -338,22 +399,26 @@ pub fn run_demo(opts: &DemoOptions) -> Result<DemoReport, String> {
 
     let t = Instant::now();
     let model_path = recording_dir.join("model.obj");
-    let model = Model::load(&model_path).map_err(|e| e.to_string())?;
+    let model = Model::load(&model_path)?;
     let cfg = TrackerConfig::default();
-    let (table, table_origin) = load_or_build_table(&model_path, &model, None, &cfg).map_err(|e| e.to_string())?;
+    let (table, table_origin) = load_or_build_table(&model_path, &model, None, &cfg)?;
     let table_time = t.elapsed();
     say(table_origin.clone());
 
     let t = Instant::now();
-    let mut source = ReplaySource::open(&recording_dir, Pacing::AsFastAsPossible).map_err(|e| e.to_string())?;
+    let mut source = ReplaySource::open(&recording_dir, Pacing::AsFastAsPossible)?;
     let truth: Vec<Stamped> = source
         .ground_truth()
-        .ok_or_else(|| format!("{}: no groundtruth.tum", recording_dir.display()))?
+        .ok_or_else(|| DemoError::NoGroundTruth {
+            recording: recording_dir.clone(),
+        })?
         .to_vec();
     let first_truth = truth
         .first()
         .map(|s| Point3::from(s.pose.translation.vector))
-        .ok_or_else(|| format!("{}: empty ground truth", recording_dir.display()))?;
+        .ok_or_else(|| DemoError::EmptyGroundTruth {
+            recording: recording_dir.clone(),
+        })?;
     let hint = SearchVolume {
         centre: first_truth + Vector3::from(HINT_OFFSET),
         diameter_m: Some(HINT_DIAMETER_M),
@@ -389,8 +454,7 @@ pub fn run_demo(opts: &DemoOptions) -> Result<DemoReport, String> {
         states.push((time_s, now));
         track_bar.inc(1);
         Ok(())
-    })
-    .map_err(|e| e.to_string())?;
+    })?;
     track_bar.finish_and_clear();
     let tracking_time = t.elapsed();
     say(format!(
@@ -405,12 +469,12 @@ pub fn run_demo(opts: &DemoOptions) -> Result<DemoReport, String> {
     let evaluation: Option<Evaluation> = if estimate.is_empty() {
         None
     } else {
-        Some(eval::evaluate(&truth, &estimate, &EvalOptions::default()).map_err(|e| e.to_string())?)
+        Some(eval::evaluate(&truth, &estimate, &EvalOptions::default())?)
     };
 
     let t = Instant::now();
     let out_dir = cache_dir.join("demo");
-    std::fs::create_dir_all(&out_dir).map_err(|e| format!("{}: cannot create directory: {e}", out_dir.display()))?;
+    create_dir(&out_dir)?;
     let mut written = Vec::new();
     let mut skipped = Vec::new();
     let title = format!(
@@ -427,7 +491,7 @@ pub fn run_demo(opts: &DemoOptions) -> Result<DemoReport, String> {
         title: format!("Ground truth and estimate over the floor plan: {title}"),
         ..PlanOptions::default()
     };
-    pictures::plan_view(&path, &model, &truth, &estimate, &errors, &plan).map_err(|e| e.to_string())?;
+    pictures::plan_view(&path, &model, &truth, &estimate, &errors, &plan)?;
     written.push(Picture {
         name: "plan view",
         path,
@@ -445,7 +509,7 @@ pub fn run_demo(opts: &DemoOptions) -> Result<DemoReport, String> {
                     .map(|s| s.segments.iter().map(|&i| i as usize).collect()),
                 ..OmniOptions::default()
             };
-            pictures::omni_view(&path, &rig, &images, &model, &pose, &omni).map_err(|e| e.to_string())?;
+            pictures::omni_view(&path, &rig, &images, &model, &pose, &omni)?;
             written.push(Picture {
                 name: "omni view",
                 path,
@@ -461,8 +525,7 @@ pub fn run_demo(opts: &DemoOptions) -> Result<DemoReport, String> {
                 label: "ATE, no alignment",
                 errors: &ev.ate.per_pose,
             };
-            pictures::error_over_time(&path, &format!("Error over time: {title}"), &[trace], ERROR_PLOT_SIZE)
-                .map_err(|e| e.to_string())?;
+            pictures::error_over_time(&path, &format!("Error over time: {title}"), &[trace], ERROR_PLOT_SIZE)?;
             written.push(Picture {
                 name: "error over time",
                 path,
@@ -481,8 +544,7 @@ pub fn run_demo(opts: &DemoOptions) -> Result<DemoReport, String> {
             &format!("Correspondence states (Figure 14): {title}"),
             &traces,
             STATES_PLOT_SIZE,
-        )
-        .map_err(|e| e.to_string())?;
+        )?;
         written.push(Picture {
             name: "correspondence states",
             path,

@@ -137,6 +137,22 @@ impl Default for Appearance {
     }
 }
 
+/// A spec [`Appearance::from_spec`] cannot read; displays as one line starting with the spec.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum SpecError {
+    #[error("{spec}: {preset:?} is not default, realistic or plain")]
+    UnknownPreset { spec: String, preset: String },
+    #[error("{spec}: {part:?} is not field=value")]
+    NotFieldValue { spec: String, part: String },
+    #[error("{spec}: {value:?} is not a number")]
+    NotANumber { spec: String, value: String },
+    /// Negative or not finite: every level is off at 0 and grows from there.
+    #[error("{spec}: {field} = {value} is not a level (finite, 0 or more)")]
+    NotALevel { spec: String, field: String, value: String },
+    #[error("{spec}: no level {field:?}")]
+    UnknownLevel { spec: String, field: String },
+}
+
 impl Appearance {
     /// Every effect off: distinct flat surface colours, nothing else.
     pub fn plain() -> Self {
@@ -203,23 +219,36 @@ impl Appearance {
     /// An appearance from a spec: `default`, `realistic` or `plain`, then any `+field=value`
     /// overrides of its levels (`realistic+blur_px=0+trims=0`), so that a bench can take one
     /// effect out of a preset and see what it did.
-    pub fn from_spec(spec: &str) -> Result<Appearance, String> {
+    pub fn from_spec(spec: &str) -> Result<Appearance, SpecError> {
         let mut parts = spec.split('+');
         let mut a = match parts.next().unwrap_or_default() {
             "default" => Appearance::default(),
             "realistic" => Appearance::realistic(),
             "plain" => Appearance::plain(),
-            other => return Err(format!("{spec}: {other:?} is not default, realistic or plain")),
+            other => {
+                return Err(SpecError::UnknownPreset {
+                    spec: spec.to_string(),
+                    preset: other.to_string(),
+                })
+            }
         };
         for part in parts {
-            let (field, v) = part
-                .split_once('=')
-                .ok_or_else(|| format!("{spec}: {part:?} is not field=value"))?;
-            let x: f64 = v.parse().map_err(|_| format!("{spec}: {v:?} is not a number"))?;
+            let (field, v) = part.split_once('=').ok_or_else(|| SpecError::NotFieldValue {
+                spec: spec.to_string(),
+                part: part.to_string(),
+            })?;
+            let x: f64 = v.parse().map_err(|_| SpecError::NotANumber {
+                spec: spec.to_string(),
+                value: v.to_string(),
+            })?;
             // Every level is off at 0 and grows from there: a negative or non-finite one would
             // render nonsense (or, as a blur radius, never finish).
             if !(x.is_finite() && x >= 0.0) {
-                return Err(format!("{spec}: {field} = {v} is not a level (finite, 0 or more)"));
+                return Err(SpecError::NotALevel {
+                    spec: spec.to_string(),
+                    field: field.to_string(),
+                    value: v.to_string(),
+                });
             }
             let level = match field {
                 "seed" => {
@@ -252,7 +281,12 @@ impl Appearance {
                 "wall_offset_m" => &mut a.wall_offset_m,
                 "lens_falloff" => &mut a.lens_falloff,
                 "blur_px" => &mut a.blur_px,
-                _ => return Err(format!("{spec}: no level {field:?}")),
+                _ => {
+                    return Err(SpecError::UnknownLevel {
+                        spec: spec.to_string(),
+                        field: field.to_string(),
+                    })
+                }
             };
             *level = x;
         }

@@ -19,7 +19,7 @@ pub mod appearance;
 pub mod fixtures;
 pub mod scene;
 
-pub use appearance::Appearance;
+pub use appearance::{Appearance, SpecError};
 pub use omnitrack_core::model::bvh::{brute_force_closest, model_triangles, Aabb, Bvh, Ray, Triangle, TriangleBvh};
 pub use omnitrack_core::model::triangulate::{ear_clip, triangulate_polygon};
 pub use scene::{Pattern, Person, Scene, Surface, SurfaceKind};

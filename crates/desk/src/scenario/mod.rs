@@ -17,7 +17,7 @@ pub mod path;
 pub mod plans;
 pub mod random;
 
-pub use path::{check_path, doorways_passed, BODY_CLEARANCE_M};
+pub use path::{check_path, doorways_passed, PathError, BODY_CLEARANCE_M};
 
 use crate::floorplan::{self, FloorPlan, FloorPlanError};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
