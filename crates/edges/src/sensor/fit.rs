@@ -1,0 +1,274 @@
+//! One chain's rays → candidate pieces: split where the chain bends off a great circle
+//! (Douglas–Peucker on the sphere), neighbouring pieces merged back while still one plane, cut
+//! again where two planes fit far better than one (the two-line test), each piece's plane refitted
+//! without its outliers.
+//!
+//! In: the chain loaded by [`chain`](super::chain) (rays, positions, gradients, moment prefix
+//! sums) and the image (for the hue strips). Out: [`Candidate`]s in the [`Workspace`], each with
+//! its moments, plane, end rays, strength, polarity count and hue sums; when the buffer is full,
+//! the weakest gives way.
+
+use super::plane::{edgel_weight, plane_normal, plane_residual, two_lines_apart, weighted_outer, Moments};
+use super::{Candidate, Workspace};
+use crate::hue::HueAcc;
+use crate::MAX_GAPS;
+use nalgebra::Vector3;
+
+impl Workspace {
+    fn moments(&self, a: usize, b: usize) -> Moments {
+        let (p, q) = (&self.prefix[a], &self.prefix[b + 1]);
+        std::array::from_fn(|k| q[k] - p[k])
+    }
+
+    /// Largest |n · r| over edgels a..=b.
+    fn max_dev(&self, n: &Vector3<f64>, a: usize, b: usize) -> (f64, usize) {
+        let mut best = (0.0, a);
+        for k in a..=b {
+            let d = n.dot(&self.ray[k]).abs();
+            if d > best.0 {
+                best = (d, k);
+            }
+        }
+        best
+    }
+
+    #[inline(never)]
+    pub(super) fn fit_chain(&mut self, rgb: &[u8]) {
+        let n = self.ray.len();
+        let min_n = self.params.min_chain_edgels;
+        if n < min_n {
+            return;
+        }
+        let tol = self.params.split_tolerance_rad.sin();
+        // Split (Douglas–Peucker on the sphere: deviation from the end rays' great circle).
+        self.pieces.clear();
+        self.stack.clear();
+        self.stack.push((0, n as u32 - 1));
+        while let Some((a, b)) = self.stack.pop() {
+            let (a, b) = (a as usize, b as usize);
+            if b + 1 - a < min_n {
+                continue;
+            }
+            let c = self.ray[a].cross(&self.ray[b]);
+            let cn = c.norm();
+            if cn < 1e-9 {
+                continue;
+            }
+            let (dev, k) = self.max_dev(&(c / cn), a, b);
+            if dev > tol && k > a && k < b {
+                self.stack.push((k as u32, b as u32));
+                self.stack.push((a as u32, k as u32));
+            } else {
+                self.pieces.push((a as u32, b as u32));
+            }
+        }
+        // Merge neighbouring pieces whose union is still one plane.
+        let mut out = 0;
+        let pieces = std::mem::take(&mut self.pieces);
+        let mut pieces = pieces;
+        for k in 0..pieces.len() {
+            let (a, b) = pieces[k];
+            if out > 0 {
+                let (pa, pb) = pieces[out - 1];
+                if pb >= a.saturating_sub(1) {
+                    let m = self.moments(pa as usize, b as usize);
+                    if let Some(nrm) = plane_normal(&m) {
+                        if self.max_dev(&nrm, pa as usize, b as usize).0 <= tol {
+                            pieces[out - 1] = (pa, b);
+                            continue;
+                        }
+                    }
+                }
+            }
+            pieces[out] = (a, b);
+            out += 1;
+        }
+        pieces.truncate(out);
+        // The chord test misses two lines that meet at a shallow angle or run side by side a
+        // pixel or two apart (a wall corner continued by a box's edge): with the two-line test
+        // on, each piece is also cut where two planes fit it much better than one.
+        self.stack.clear();
+        self.stack.extend(pieces.iter().rev().copied());
+        while let Some((a, b)) = self.stack.pop() {
+            if let Some(k) = self.two_lines(a as usize, b as usize) {
+                self.stack.push((k as u32 + 1, b));
+                self.stack.push((a, k as u32));
+            } else {
+                self.add_piece(a as usize, b as usize, rgb);
+            }
+        }
+        self.pieces = pieces;
+    }
+
+    /// Where edgels a..=b are two lines rather than one (see [`two_lines_apart`]): the last
+    /// edgel of the first line at the cut that lowers the residual most. None when the test is
+    /// off (`EdgeParams::two_line_excess` 0).
+    fn two_lines(&self, a: usize, b: usize) -> Option<usize> {
+        let min_n = self.params.min_chain_edgels.max(3);
+        let len = b + 1 - a;
+        let excess = self.params.two_line_excess;
+        if excess <= 0.0 || len < 2 * min_n {
+            return None;
+        }
+        let m = self.moments(a, b);
+        let rss = plane_residual(&m, &plane_normal(&m)?).max(0.0);
+        let tol = self.params.split_tolerance_rad.sin();
+        if !two_lines_apart(rss, 0.0, m[6], len, tol, excess) {
+            return None;
+        }
+        let split_rss = |k: usize| -> f64 {
+            let (ml, mr) = (self.moments(a, k), self.moments(k + 1, b));
+            match (plane_normal(&ml), plane_normal(&mr)) {
+                (Some(nl), Some(nr)) => plane_residual(&ml, &nl).max(0.0) + plane_residual(&mr, &nr).max(0.0),
+                _ => f64::INFINITY,
+            }
+        };
+        // Coarse scan, then every edgel around the best coarse cut.
+        let (first, last) = (a + min_n - 1, b - min_n);
+        let step = (len / 32).max(1);
+        let mut best = (f64::INFINITY, first);
+        for k in (first..=last).step_by(step) {
+            let r = split_rss(k);
+            if r < best.0 {
+                best = (r, k);
+            }
+        }
+        let centre = best.1;
+        for k in centre.saturating_sub(step - 1).max(first)..=(centre + step - 1).min(last) {
+            let r = split_rss(k);
+            if r < best.0 {
+                best = (r, k);
+            }
+        }
+        two_lines_apart(rss, best.0, m[6], len, tol, excess).then_some(best.1)
+    }
+
+    /// Moments, count and plane normal of edgels a..=b without the outliers of their plane
+    /// (rays more than `OUTLIER_SIGMAS` RMS off it: edgels bent by a junction or a neighbouring
+    /// edge, noise), refitted at most twice.
+    fn robust_fit(&self, a: usize, b: usize) -> Option<(Moments, u32, Vector3<f64>)> {
+        let all = self.moments(a, b);
+        let total = b + 1 - a;
+        let (mut m, mut count) = (all, total);
+        let mut n = plane_normal(&m)?;
+        let floor = OUTLIER_FLOOR_RAD.sin();
+        for _ in 0..2 {
+            let rms = (plane_residual(&m, &n) / m[6]).max(0.0).sqrt();
+            let cut = (OUTLIER_SIGMAS * rms).max(floor);
+            let mut kept = all;
+            let mut k_count = total;
+            for (r, &g) in self.ray[a..=b].iter().zip(&self.emag[a..=b]) {
+                if n.dot(r).abs() > cut {
+                    let o = weighted_outer(r, edgel_weight(g));
+                    for (x, y) in kept.iter_mut().zip(o) {
+                        *x -= y;
+                    }
+                    k_count -= 1;
+                }
+            }
+            if k_count == count || k_count < self.params.min_chain_edgels.max(3) {
+                break;
+            }
+            let Some(k_n) = plane_normal(&kept) else { break };
+            (m, count, n) = (kept, k_count, k_n);
+        }
+        Some((m, count as u32, n))
+    }
+
+    /// Fits, measures and (if long enough) records one piece of the chain as a candidate.
+    #[inline(never)]
+    fn add_piece(&mut self, a: usize, b: usize, rgb: &[u8]) {
+        let Some((m, fitted, mut nrm)) = self.robust_fit(a, b) else {
+            return;
+        };
+        let (ra, rb) = (self.ray[a], self.ray[b]);
+        if nrm.dot(&ra.cross(&rb)) < 0.0 {
+            nrm = -nrm;
+        }
+        let r1 = (ra - nrm * nrm.dot(&ra)).normalize();
+        let r2 = (rb - nrm * nrm.dot(&rb)).normalize();
+        // Pieces down to half the minimum length are kept for merging across chains; `select`
+        // drops what is still short after it.
+        let span = r1.dot(&r2).clamp(-1.0, 1.0).acos();
+        if span < 0.5 * self.min_len_rad {
+            return;
+        }
+        // Hue strips and polarity; left of the walk from edgel a to edgel b.
+        let (pa, pb) = (self.pos[a], self.pos[b]);
+        let left = [pb[1] - pa[1], -(pb[0] - pa[0])];
+        let mut lacc = HueAcc::default();
+        let mut racc = HueAcc::default();
+        let mut bright_left = 0i32;
+        let mut strength = 0.0f32;
+        let count = b + 1 - a;
+        let step = count.div_ceil(self.params.hue_samples_per_edge.max(1)).max(1);
+        for k in a..=b {
+            strength += self.emag[k];
+            let g = self.grad[k];
+            let side = g[0] * left[0] + g[1] * left[1];
+            bright_left += if side > 0.0 { 1 } else { -1 };
+            if (k - a) % step != 0 {
+                continue;
+            }
+            let gn = (g[0] * g[0] + g[1] * g[1]).sqrt();
+            if gn == 0.0 {
+                continue;
+            }
+            let s = if side >= 0.0 { 1.0 } else { -1.0 } / gn;
+            let (dx, dy) = (g[0] * s, g[1] * s); // unit, pointing to the left side
+            let p = self.pos[k];
+            for t in 0..self.strip_px {
+                let d = self.params.hue_strip_offset_px + t as f32;
+                for (sign, acc) in [(1.0f32, &mut lacc), (-1.0, &mut racc)] {
+                    // +1 keeps the value positive, so truncation rounds.
+                    let x = (p[0] + sign * d * dx + 1.5) as usize;
+                    let y = (p[1] + sign * d * dy + 1.5) as usize;
+                    if x < 1 || y < 1 || x > self.w || y > self.h {
+                        continue;
+                    }
+                    let i = ((y - 1) * self.w + x - 1) * 3;
+                    self.hue.accumulate(acc, [rgb[i], rgb[i + 1], rgb[i + 2]]);
+                }
+            }
+        }
+        let cand = Candidate {
+            m,
+            count: fitted,
+            n: nrm,
+            r1,
+            r2,
+            strength: strength / 64.0,
+            support: span,
+            bright_left,
+            left: lacc,
+            right: racc,
+            gaps: [[Vector3::zeros(); 2]; MAX_GAPS],
+            n_gaps: 0,
+            alive: true,
+            changed: false,
+            merged_now: false,
+        };
+        self.stats.candidates += 1;
+        if self.cands.len() < self.cands.capacity() {
+            self.cands.push(cand);
+        } else {
+            // Full: replace the weakest if this one is stronger.
+            self.stats.candidates_dropped += 1;
+            let (k, weakest) = self
+                .cands
+                .iter()
+                .enumerate()
+                .min_by(|x, y| x.1.strength.total_cmp(&y.1.strength))
+                .map(|(k, c)| (k, c.strength))
+                .unwrap_or((0, f32::INFINITY));
+            if cand.strength > weakest {
+                self.cands[k] = cand;
+            }
+        }
+    }
+}
+
+/// Rays further off their piece's plane than this many RMS are left out of its fit…
+const OUTLIER_SIGMAS: f64 = 2.5;
+/// …but never rays within this (rad) of it.
+const OUTLIER_FLOOR_RAD: f64 = 0.02 * std::f64::consts::PI / 180.0;

@@ -1,0 +1,225 @@
+//! The capture threads: one for a whole-rig [`FrameSource`], or one per [`SensorCapture`] plus
+//! the assembly thread ([`assembly`]).
+//!
+//! In: the source. Out: frames in pool slots posted through the [`Handover`] (whole-rig), or
+//! [`Arrival`]s of images in each sensor's own buffers ([`SensorImages`]) for the assembly, which
+//! posts the frames; faults and the source's failure are counted in the [`Shared`] state.
+
+use super::assembly;
+use super::live::SensorCapture;
+use super::pool::{Handover, Pool};
+use super::shared::{lock, Shared};
+use super::stats::SensorCounters;
+use super::{PipelineSource, PipelineThread, TICK};
+use crossbeam::channel::{bounded, Receiver, RecvTimeoutError, Sender};
+use omnitrack_config::BudgetConfig;
+use omnitrack_core::rig::Rig;
+use omnitrack_io::capture::{FrameSource, SensorImage, SourceStats};
+use std::sync::{Mutex, MutexGuard};
+use std::thread::{Scope, ScopedJoinHandle};
+use std::time::{Duration, Instant};
+
+/// Image buffers per sensor for per-sensor capture.
+const IMAGES_PER_SENSOR: usize = 4;
+
+/// The capture thread of a whole-rig source. Returns the source's counters.
+fn capture_rig(source: &mut dyn FrameSource, shared: &Shared, pool: &Pool, handover: Handover) -> SourceStats {
+    shared.thread_started(PipelineThread::Capture { sensor: None });
+    let mut seq = 0u64;
+    while let Some(h) = pool.take(shared) {
+        let mut slot = pool.slot(h);
+        let started = Instant::now();
+        let got = source.next_frame(&mut slot.frame);
+        shared.record_capture(started.elapsed());
+        match got {
+            Ok(true) => {
+                for (img, c) in slot.frame.sensors().iter().zip(shared.sensors.iter()) {
+                    if !img.valid {
+                        SensorCounters::add(&c.faults, 1);
+                    }
+                }
+                slot.seq = seq;
+                slot.arrived = Instant::now();
+                seq += 1;
+                drop(slot);
+                if !handover.post(shared, pool, h) {
+                    break;
+                }
+            }
+            Ok(false) => {
+                drop(slot);
+                pool.release(h);
+                tracing::info!(frames = seq, "source ended");
+                break;
+            }
+            Err(e) => {
+                drop(slot);
+                pool.release(h);
+                shared.fail(e);
+                break;
+            }
+        }
+    }
+    source.stats().clone()
+}
+
+/// One sensor's image buffers (per-sensor capture) and the list of free ones.
+pub(super) struct SensorImages {
+    pub(super) images: Box<[Mutex<SensorImage>]>,
+    free_tx: Sender<usize>,
+    free_rx: Receiver<usize>,
+}
+
+impl SensorImages {
+    pub(super) fn new(rig: &Rig, k: usize) -> SensorImages {
+        let s = &rig.sensors[k];
+        let (free_tx, free_rx) = bounded(IMAGES_PER_SENSOR);
+        let images = (0..IMAGES_PER_SENSOR)
+            .map(|i| {
+                free_tx.send(i).expect("room for every handle");
+                Mutex::new(SensorImage::new(s.id, s.width, s.height))
+            })
+            .collect();
+        SensorImages {
+            images,
+            free_tx,
+            free_rx,
+        }
+    }
+
+    pub(super) fn image(&self, i: usize) -> MutexGuard<'_, SensorImage> {
+        lock(&self.images[i])
+    }
+
+    fn take(&self, shared: &Shared) -> Option<usize> {
+        loop {
+            if shared.stopping() {
+                return None;
+            }
+            match self.free_rx.recv_timeout(TICK) {
+                Ok(i) => return Some(i),
+                Err(RecvTimeoutError::Timeout) => continue,
+                Err(RecvTimeoutError::Disconnected) => return None,
+            }
+        }
+    }
+
+    pub(super) fn release(&self, i: usize) {
+        let _ = self.free_tx.try_send(i);
+    }
+}
+
+/// An image of one sensor, ready in its buffer `slot`.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Arrival {
+    pub(super) sensor: usize,
+    pub(super) slot: usize,
+    pub(super) arrived: Instant,
+}
+
+/// The capture thread of one sensor.
+fn capture_sensor(
+    capture: &mut dyn SensorCapture,
+    k: usize,
+    shared: &Shared,
+    images: &SensorImages,
+    arrivals: Sender<Arrival>,
+) {
+    shared.thread_started(PipelineThread::Capture { sensor: Some(k) });
+    while let Some(i) = images.take(shared) {
+        let mut img = images.image(i);
+        let started = Instant::now();
+        let got = capture.capture(&mut img);
+        shared.record_capture(started.elapsed());
+        match got {
+            Ok(true) => {
+                if !img.valid {
+                    SensorCounters::add(&shared.sensors[k].faults, 1);
+                }
+                drop(img);
+                let a = Arrival {
+                    sensor: k,
+                    slot: i,
+                    arrived: Instant::now(),
+                };
+                // Room for every buffer of every sensor: never blocks for long.
+                if arrivals.send(a).is_err() {
+                    break;
+                }
+            }
+            Ok(false) => {
+                drop(img);
+                images.release(i);
+                tracing::info!(sensor = k, "sensor stream ended");
+                break;
+            }
+            Err(e) => {
+                drop(img);
+                images.release(i);
+                shared.fail(e);
+                break;
+            }
+        }
+    }
+}
+
+/// Starts the capture side: one thread for a whole-rig source; for per-sensor sources one per
+/// sensor and the assembly thread. `handover` goes to the one thread that posts frames (the
+/// whole-rig capture or the assembly). Each handle yields the whole-rig source's counters (`None`
+/// from the others).
+pub(super) fn spawn_capture<'scope>(
+    scope: &'scope Scope<'scope, '_>,
+    source: &'scope mut PipelineSource,
+    shared: &'scope Shared<'_>,
+    pool: &'scope Pool,
+    sensor_images: &'scope [SensorImages],
+    handover: Handover,
+    budgets: &BudgetConfig,
+) -> Vec<ScopedJoinHandle<'scope, Option<SourceStats>>> {
+    let n = sensor_images.len();
+    let mut capture_handles = Vec::new();
+    match source {
+        PipelineSource::Rig(src) => {
+            let src: &mut (dyn FrameSource + Send) = src.as_mut();
+            capture_handles.push(
+                std::thread::Builder::new()
+                    .name("omnitrack-capture".into())
+                    .spawn_scoped(scope, move || Some(capture_rig(src, shared, pool, handover)))
+                    .expect("spawn the capture thread"),
+            );
+        }
+        PipelineSource::Sensors { sensors, .. } => {
+            let (arrivals_tx, arrivals_rx) = bounded::<Arrival>(n * IMAGES_PER_SENSOR);
+            for (k, capture) in sensors.iter_mut().enumerate() {
+                let images = &sensor_images[k];
+                let tx = arrivals_tx.clone();
+                let capture: &mut dyn SensorCapture = capture.as_mut();
+                capture_handles.push(
+                    std::thread::Builder::new()
+                        .name(format!("omnitrack-capture-{k}"))
+                        .spawn_scoped(scope, move || {
+                            capture_sensor(capture, k, shared, images, tx);
+                            None
+                        })
+                        .expect("spawn a capture thread"),
+                );
+            }
+            drop(arrivals_tx);
+            let images = sensor_images;
+            let tolerance = Duration::from_secs_f64(budgets.frame_sync_tolerance_ms / 1e3);
+            let wait = Duration::from_secs_f64(budgets.frame_assembly_wait_ms / 1e3);
+            capture_handles.push(
+                std::thread::Builder::new()
+                    .name("omnitrack-assembly".into())
+                    .spawn_scoped(scope, move || {
+                        shared.thread_started(PipelineThread::Assembly);
+                        let mut a = assembly::Assembler::new(shared, pool, images, handover, tolerance, wait);
+                        a.run(arrivals_rx);
+                        None
+                    })
+                    .expect("spawn the assembly thread"),
+            );
+        }
+    }
+    capture_handles
+}

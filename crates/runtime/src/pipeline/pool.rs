@@ -1,0 +1,140 @@
+//! The frame pool and the hand-over to the tracker: frame sets allocated at start-up, passed
+//! between threads by index (a handle) through bounded crossbeam channels.
+//!
+//! In: a free handle, filled by capture or assembly. Out: the handle posted to the process
+//! thread, where the latest frame wins (a pending one is replaced, counted as dropped and freed),
+//! or, lossless, where capture waits.
+
+use super::shared::{lock, Shared};
+use super::stats::SensorCounters;
+use super::TICK;
+use crossbeam::channel::{bounded, Receiver, RecvTimeoutError, SendTimeoutError, Sender, TrySendError};
+use omnitrack_core::rig::Rig;
+use omnitrack_io::capture::FrameSet;
+use std::sync::atomic::Ordering;
+use std::sync::{Mutex, MutexGuard};
+use std::time::Instant;
+
+/// A frame of the pool and what the pipeline knows of it.
+pub(super) struct Slot {
+    pub(super) frame: FrameSet,
+    /// The pipeline's frame counter (gaps = dropped frames).
+    pub(super) seq: u64,
+    /// When it was handed into the pool.
+    pub(super) arrived: Instant,
+}
+
+/// The preallocated frame sets and the list of free ones (handles = indices).
+pub(super) struct Pool {
+    slots: Box<[Mutex<Slot>]>,
+    free_tx: Sender<usize>,
+    pub(super) free_rx: Receiver<usize>,
+}
+
+impl Pool {
+    pub(super) fn new(rig: &Rig, size: usize) -> Pool {
+        let (free_tx, free_rx) = bounded(size);
+        let now = Instant::now();
+        let slots = (0..size)
+            .map(|i| {
+                free_tx.send(i).expect("room for every handle");
+                Mutex::new(Slot {
+                    frame: FrameSet::for_rig(rig),
+                    seq: 0,
+                    arrived: now,
+                })
+            })
+            .collect();
+        Pool {
+            slots,
+            free_tx,
+            free_rx,
+        }
+    }
+
+    pub(super) fn slot(&self, h: usize) -> MutexGuard<'_, Slot> {
+        lock(&self.slots[h])
+    }
+
+    /// A free frame, waiting for one; `None` once the pipeline stops.
+    pub(super) fn take(&self, shared: &Shared) -> Option<usize> {
+        loop {
+            if shared.stopping() {
+                return None;
+            }
+            match self.free_rx.recv_timeout(TICK) {
+                Ok(h) => return Some(h),
+                Err(RecvTimeoutError::Timeout) => continue,
+                Err(RecvTimeoutError::Disconnected) => return None,
+            }
+        }
+    }
+
+    pub(super) fn release(&self, h: usize) {
+        // Never full: there are as many places as handles.
+        let _ = self.free_tx.try_send(h);
+    }
+}
+
+/// The producer's side of the hand-over to the tracker: a channel of one handle, and a receiver
+/// to take back a frame that a newer one replaces.
+pub(super) struct Handover {
+    pub(super) tx: Sender<usize>,
+    pub(super) rx: Receiver<usize>,
+}
+
+impl Handover {
+    /// Hands frame `h` to the tracker: the latest frame wins (or, lossless, waits). False once
+    /// the pipeline stops.
+    pub(super) fn post(&self, shared: &Shared, pool: &Pool, h: usize) -> bool {
+        shared.frames_captured.fetch_add(1, Ordering::Relaxed);
+        let mut h = h;
+        if shared.lossless {
+            loop {
+                match self.tx.send_timeout(h, TICK) {
+                    Ok(()) => return true,
+                    Err(SendTimeoutError::Timeout(x)) => {
+                        if shared.stopping() {
+                            pool.release(x);
+                            return false;
+                        }
+                        h = x;
+                    }
+                    Err(SendTimeoutError::Disconnected(x)) => {
+                        pool.release(x);
+                        return false;
+                    }
+                }
+            }
+        }
+        loop {
+            match self.tx.try_send(h) {
+                Ok(()) => return true,
+                Err(TrySendError::Full(x)) => {
+                    h = x;
+                    if let Ok(old) = self.rx.try_recv() {
+                        self.drop_frame(shared, pool, old);
+                    }
+                }
+                Err(TrySendError::Disconnected(x)) => {
+                    pool.release(x);
+                    return false;
+                }
+            }
+        }
+    }
+
+    /// A frame replaced before the tracker took it: counted, back to the pool.
+    fn drop_frame(&self, shared: &Shared, pool: &Pool, h: usize) {
+        {
+            let slot = pool.slot(h);
+            for (img, c) in slot.frame.sensors().iter().zip(shared.sensors.iter()) {
+                if img.valid {
+                    SensorCounters::add(&c.overwritten, 1);
+                }
+            }
+        }
+        shared.frames_dropped.fetch_add(1, Ordering::Relaxed);
+        pool.release(h);
+    }
+}

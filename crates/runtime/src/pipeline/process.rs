@@ -1,0 +1,363 @@
+//! The process thread: per frame, edges (the detector has its own workers) and the tracker, then
+//! the pose sample; on schedule, the status sample.
+//!
+//! In: frame handles from the hand-over ([`Handover`](super::pool::Handover)). Out: the frame
+//! back to the pool before publishing, a [`PoseSample`] per frame (the last good pose while not
+//! tracking), a [`StatusSample`] every `budgets.status_interval_ms`, a [`FrameRecord`] per frame to
+//! the sink's channel, and the [`ProcessOutcome`] at the end.
+
+use super::pool::Pool;
+use super::publishing::{create_publisher, publishing};
+use super::shared::{lock, Shared};
+use super::stats::SensorCounters;
+use super::{PipelineOptions, PipelineStage, PipelineThread, RunEnd, StageClock, TICK};
+use crate::FrameRecord;
+use crossbeam::channel::{Receiver, RecvTimeoutError, Sender};
+use omnitrack_config::TrackerConfig;
+use omnitrack_core::geometry::Pose;
+use omnitrack_core::model::Model;
+use omnitrack_core::rig::Rig;
+use omnitrack_edges::EdgeDetector;
+use omnitrack_io::publish::{
+    PosePublisher, PoseSample, PoseStatus, SearchState, StatusPublisher, StatusSample, STATUS_MAX_SENSORS,
+    STATUS_STAGES,
+};
+use omnitrack_tracker::visibility::VisibilityTable;
+use omnitrack_tracker::{FrameResult, Tracker, TrackerEvent, TrackerState, TrackerStats};
+use std::sync::atomic::Ordering;
+use std::time::{Duration, Instant};
+
+/// Publish errors logged at `warn` before the rest are only counted.
+const WARN_LIMIT: u64 = 5;
+
+/// What the process thread hands back.
+pub(super) struct ProcessOutcome {
+    pub(super) reason: RunEnd,
+    pub(super) clocks: Vec<StageClock>,
+    pub(super) tracker: TrackerStats,
+    pub(super) frames_processed: u64,
+    pub(super) first_frame: Option<Instant>,
+    pub(super) last_frame: Option<Instant>,
+    pub(super) poses_published: u64,
+    pub(super) status_published: u64,
+    pub(super) publish_errors: u64,
+    pub(super) publisher_error: Option<String>,
+}
+
+fn pose_status(r: &FrameResult) -> PoseStatus {
+    match r.state {
+        TrackerState::Initializing => PoseStatus::Initializing,
+        TrackerState::Tracking if r.pose.is_some() => PoseStatus::Tracking,
+        TrackerState::Tracking | TrackerState::Lost => PoseStatus::Lost,
+    }
+}
+
+/// The process thread: edges, tracker, publishers.
+struct Processor<'a, 'o, 'm> {
+    shared: &'a Shared<'o>,
+    pool: &'a Pool,
+    ready: Receiver<usize>,
+    records: Sender<FrameRecord>,
+    detector: EdgeDetector,
+    tracker: Tracker<'m>,
+    poses: Option<PosePublisher>,
+    status: Option<StatusPublisher>,
+    clocks: Vec<StageClock>,
+    budgets: omnitrack_config::BudgetConfig,
+    max_frames: Option<u64>,
+    processed: u64,
+    last_ts: u64,
+    last_pose: Pose,
+    last_state: PoseStatus,
+    first_frame: Option<Instant>,
+    last_frame: Option<Instant>,
+    poses_published: u64,
+    status_published: u64,
+    publish_errors: u64,
+    /// Delivered images per sensor at the last status, and when it was.
+    status_delivered: Vec<u64>,
+    status_rates: Vec<f32>,
+    status_at: Instant,
+    status_overruns: [u64; PipelineStage::COUNT],
+    /// What the last search made of its volume, and the widened diameter (m), for the status.
+    search: SearchState,
+    search_widened_to_m: f32,
+}
+
+impl Processor<'_, '_, '_> {
+    fn run(mut self) -> ProcessOutcome {
+        let interval = Duration::from_secs_f64(self.budgets.status_interval_ms / 1e3);
+        let mut next_status = Instant::now() + interval;
+        self.publish_status();
+        let reason = loop {
+            if self.shared.stop.load(Ordering::Relaxed) {
+                break RunEnd::Stopped;
+            }
+            if self.shared.halt.load(Ordering::Relaxed) {
+                // A sink or source failure; the caller reports it.
+                break RunEnd::Stopped;
+            }
+            if self.max_frames.is_some_and(|m| self.processed >= m) {
+                break RunEnd::MaxFrames;
+            }
+            let wait = next_status.saturating_duration_since(Instant::now()).min(TICK);
+            match self.ready.recv_timeout(wait) {
+                Ok(h) => self.frame(h),
+                Err(RecvTimeoutError::Timeout) => {}
+                Err(RecvTimeoutError::Disconnected) => break RunEnd::EndOfStream,
+            }
+            let now = Instant::now();
+            if now >= next_status {
+                self.publish_status();
+                next_status += interval;
+                if next_status <= now {
+                    next_status = now + interval;
+                }
+            }
+        };
+        self.shared.halt.store(true, Ordering::Relaxed);
+        // A frame still waiting for the tracker is dropped like any replaced one.
+        while let Ok(h) = self.ready.try_recv() {
+            {
+                let slot = self.pool.slot(h);
+                for (img, c) in slot.frame.sensors().iter().zip(self.shared.sensors.iter()) {
+                    if img.valid {
+                        SensorCounters::add(&c.overwritten, 1);
+                    }
+                }
+            }
+            self.shared.frames_dropped.fetch_add(1, Ordering::Relaxed);
+            self.pool.release(h);
+        }
+        self.publish_status();
+        ProcessOutcome {
+            reason,
+            clocks: std::mem::take(&mut self.clocks),
+            tracker: *self.tracker.stats(),
+            frames_processed: self.processed,
+            first_frame: self.first_frame,
+            last_frame: self.last_frame,
+            poses_published: self.poses_published,
+            status_published: self.status_published,
+            publish_errors: self.publish_errors,
+            publisher_error: None,
+        }
+    }
+
+    fn frame(&mut self, h: usize) {
+        let (record, arrived) = {
+            let slot = self.pool.slot(h);
+            let frame = &slot.frame;
+            let timestamp_ns = frame.timestamp_ns().unwrap_or(self.last_ts + 1);
+            let started = Instant::now();
+            let edges = self.detector.detect(frame);
+            let edge_time = started.elapsed();
+            let edge_count = edges.len();
+            let result = self.tracker.process(edges, timestamp_ns);
+            let frame_time = started.elapsed();
+            for (img, c) in frame.sensors().iter().zip(self.shared.sensors.iter()) {
+                if img.valid {
+                    SensorCounters::add(&c.delivered, 1);
+                }
+            }
+            let record = FrameRecord {
+                sequence: slot.seq,
+                timestamp_ns,
+                valid_sensors: frame.valid_count(),
+                edges: edge_count,
+                edge_time,
+                track_time: frame_time - edge_time,
+                frame_time,
+                result,
+            };
+            (record, slot.arrived)
+        };
+        self.pool.release(h);
+        self.last_ts = record.timestamp_ns;
+        self.processed += 1;
+        let r = &record.result;
+        match (&r.event, r.pose.is_some()) {
+            (Some(TrackerEvent::Searched(rep)), _) => {
+                (self.search, self.search_widened_to_m) = match rep.widened_to_m {
+                    _ if rep.cells_in_volume == 0 => (SearchState::NoCells, 0.0),
+                    Some(d) => (SearchState::Widened, d as f32),
+                    None => (SearchState::AsGiven, 0.0),
+                }
+            }
+            (_, true) => (self.search, self.search_widened_to_m) = (SearchState::None, 0.0),
+            _ => {}
+        }
+        if let Some(p) = &r.pose {
+            self.last_pose = *p;
+        }
+        self.last_state = pose_status(r);
+        let publish_time = self.publish_pose(&record);
+        let done = Instant::now();
+        self.first_frame.get_or_insert(done);
+        self.last_frame = Some(done);
+        let c = &mut self.clocks;
+        c[PipelineStage::Edges.index()].record(record.edge_time);
+        c[PipelineStage::Match.index()].record(r.match_time);
+        c[PipelineStage::Solve.index()].record(r.solve_time);
+        c[PipelineStage::Track.index()].record(record.track_time);
+        if let Some(t) = publish_time {
+            c[PipelineStage::Publish.index()].record(t);
+        }
+        c[PipelineStage::Latency.index()].record(done - arrived);
+        // The sink drains until this channel closes: a full buffer only makes the tracker wait.
+        let _ = self.records.send(record);
+    }
+
+    /// Publishes the frame's pose sample; returns the time it took.
+    fn publish_pose(&mut self, record: &FrameRecord) -> Option<Duration> {
+        let publisher = self.poses.as_ref()?;
+        let r = &record.result;
+        let started = Instant::now();
+        let sent = publishing(|| {
+            publisher.publish_pose(
+                record.timestamp_ns,
+                record.sequence,
+                self.last_state,
+                &self.last_pose,
+                &r.covariance,
+                r.inliers,
+                r.xi_rad2,
+            )
+        });
+        let took = started.elapsed();
+        match sent {
+            Ok(_) => self.poses_published += 1,
+            Err(e) => self.publish_error(&e),
+        }
+        Some(took)
+    }
+
+    fn publish_error(&mut self, e: &omnitrack_io::publish::PublishError) {
+        self.publish_errors += 1;
+        if self.publish_errors <= WARN_LIMIT {
+            tracing::warn!(errors = self.publish_errors, "{e}");
+        }
+    }
+
+    /// Builds and sends a status sample (and logs new budget overruns at `debug`).
+    fn publish_status(&mut self) {
+        let now = Instant::now();
+        let dt = now.duration_since(self.status_at).as_secs_f64();
+        // Rates over at least half an interval: a status right after another (the last one, at
+        // stop) repeats the previous rates.
+        let fresh = dt >= self.budgets.status_interval_ms / 2e3;
+        if fresh {
+            self.status_at = now;
+        }
+        let mut s = StatusSample {
+            timestamp_ns: self.last_ts
+                + self
+                    .last_frame
+                    .map_or(0, |t| now.saturating_duration_since(t).as_nanos() as u64),
+            sequence: self.status_published,
+            tracker_state: self.last_state as u8,
+            sensor_count: self.shared.sensors.len().min(STATUS_MAX_SENSORS) as u8,
+            search: self.search as u8,
+            search_widened_to_m: self.search_widened_to_m,
+            ..StatusSample::default()
+        };
+        for (k, c) in self.shared.sensors.iter().enumerate() {
+            let snap = c.snapshot();
+            if fresh {
+                let before = std::mem::replace(&mut self.status_delivered[k], snap.delivered);
+                self.status_rates[k] = ((snap.delivered - before) as f64 / dt) as f32;
+            }
+            if k < STATUS_MAX_SENSORS {
+                s.frame_rate_hz[k] = self.status_rates[k];
+                s.frames_dropped[k] = snap.lost();
+            }
+        }
+        let capture = lock(&self.shared.capture);
+        for stage in PipelineStage::ALL {
+            let clock = match stage {
+                PipelineStage::Capture => &*capture,
+                _ => &self.clocks[stage.index()],
+            };
+            if let Some(slot) = stage.status_stage().map(|st| st.index()).filter(|&i| i < STATUS_STAGES) {
+                let us = |d: Duration| u32::try_from(d.as_micros()).unwrap_or(u32::MAX);
+                s.stage_p50_us[slot] = us(clock.histogram.quantile(0.5));
+                s.stage_p99_us[slot] = us(clock.histogram.quantile(0.99));
+            }
+            let seen = &mut self.status_overruns[stage.index()];
+            if clock.overruns > *seen {
+                tracing::debug!(
+                    stage = stage.name(),
+                    overruns = clock.overruns,
+                    new = clock.overruns - *seen,
+                    budget = ?clock.budget,
+                    p99 = ?clock.histogram.quantile(0.99),
+                    "stage over its budget"
+                );
+                *seen = clock.overruns;
+            }
+        }
+        drop(capture);
+        let Some(publisher) = self.status.as_ref() else {
+            return;
+        };
+        match publishing(|| publisher.publish(&s)) {
+            Ok(_) => self.status_published += 1,
+            Err(e) => self.publish_error(&e),
+        }
+    }
+}
+
+/// The process thread's body. The publishers, the edge detector and the tracker are made here,
+/// on this thread: the detector allocates nothing per frame only on the thread that built it.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn run_process(
+    shared: &Shared,
+    pool: &Pool,
+    ready_rx: Receiver<usize>,
+    records_tx: Sender<FrameRecord>,
+    rig: &Rig,
+    model: &Model,
+    table: &VisibilityTable,
+    cfg: &TrackerConfig,
+    opts: &PipelineOptions,
+) -> ProcessOutcome {
+    shared.thread_started(PipelineThread::Process);
+    let mut publisher_error = None;
+    let poses = create_publisher::<PoseSample>(opts.pose_service.as_deref(), &mut publisher_error);
+    let status = create_publisher::<StatusSample>(opts.status_service.as_deref(), &mut publisher_error);
+    let clocks = PipelineStage::ALL
+        .iter()
+        .map(|s| StageClock::new(s.budget(&cfg.budgets)))
+        .collect();
+    let processor = Processor {
+        shared,
+        pool,
+        ready: ready_rx,
+        records: records_tx,
+        detector: EdgeDetector::new(rig, &cfg.edges),
+        tracker: Tracker::new(rig, model, table, cfg, opts.run.hint, opts.run.seed),
+        poses,
+        status,
+        clocks,
+        budgets: cfg.budgets.clone(),
+        max_frames: opts.run.max_frames,
+        processed: 0,
+        last_ts: 0,
+        last_pose: Pose::identity(),
+        last_state: PoseStatus::Initializing,
+        first_frame: None,
+        last_frame: None,
+        poses_published: 0,
+        status_published: 0,
+        publish_errors: 0,
+        status_delivered: vec![0; rig.sensors.len()],
+        status_rates: vec![0.0; rig.sensors.len()],
+        status_at: Instant::now(),
+        status_overruns: [0; PipelineStage::COUNT],
+        search: SearchState::None,
+        search_widened_to_m: 0.0,
+    };
+    let mut outcome = processor.run();
+    outcome.publisher_error = publisher_error;
+    outcome
+}

@@ -1,0 +1,70 @@
+//! State shared by all pipeline threads: the stop flag and the pipeline's own halt, per-sensor
+//! and frame counters (atomics), the capture clock, the first source error and the thread hook.
+//!
+//! In: the [`PipelineOptions`] and the budgets. Out: what every thread reads and counts into;
+//! [`run_pipeline`](super::run_pipeline) turns it into the summary at the end.
+
+use super::stats::SensorCounters;
+use super::{PipelineOptions, PipelineStage, PipelineThread, StageClock};
+use omnitrack_config::BudgetConfig;
+use omnitrack_io::capture::SourceError;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Mutex, MutexGuard};
+use std::time::Duration;
+
+/// State shared by all pipeline threads: flags and counters (atomics), the capture clock.
+pub(super) struct Shared<'o> {
+    pub(super) stop: &'o AtomicBool,
+    /// Set by the pipeline itself: processing ended, the sink or a sensor failed.
+    pub(super) halt: AtomicBool,
+    pub(super) sensors: Box<[SensorCounters]>,
+    pub(super) frames_captured: AtomicU64,
+    pub(super) frames_dropped: AtomicU64,
+    pub(super) capture: Mutex<StageClock>,
+    pub(super) source_error: Mutex<Option<SourceError>>,
+    pub(super) lossless: bool,
+    pub(super) hook: Option<fn(PipelineThread)>,
+}
+
+impl<'o> Shared<'o> {
+    pub(super) fn new(opts: &'o PipelineOptions, sensors: usize, budgets: &BudgetConfig) -> Shared<'o> {
+        Shared {
+            stop: &opts.stop,
+            halt: AtomicBool::new(false),
+            sensors: (0..sensors).map(|_| SensorCounters::default()).collect(),
+            frames_captured: AtomicU64::new(0),
+            frames_dropped: AtomicU64::new(0),
+            capture: Mutex::new(StageClock::new(PipelineStage::Capture.budget(budgets))),
+            source_error: Mutex::new(None),
+            lossless: opts.lossless,
+            hook: opts.on_thread_start,
+        }
+    }
+}
+
+impl Shared<'_> {
+    pub(super) fn stopping(&self) -> bool {
+        self.halt.load(Ordering::Relaxed) || self.stop.load(Ordering::Relaxed)
+    }
+
+    pub(super) fn thread_started(&self, t: PipelineThread) {
+        if let Some(hook) = self.hook {
+            hook(t);
+        }
+    }
+
+    pub(super) fn record_capture(&self, d: Duration) {
+        lock(&self.capture).record(d);
+    }
+
+    pub(super) fn fail(&self, e: SourceError) {
+        // Returned by `run_pipeline` (the caller says it); logged here only at `debug`.
+        tracing::debug!("source failed: {e}");
+        lock(&self.source_error).get_or_insert(e);
+        self.halt.store(true, Ordering::Relaxed);
+    }
+}
+
+pub(super) fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|e| e.into_inner())
+}

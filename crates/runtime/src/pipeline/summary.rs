@@ -1,0 +1,128 @@
+//! What a run did: why it ended ([`RunEnd`]) and its [`PipelineSummary`] (frames, drops,
+//! per-sensor and per-stage counts, publishing), one line of it as its `Display`.
+//!
+//! In: the counters the threads shared, the process thread's outcome and the whole-rig source's
+//! own counters. Out: the summary [`run_pipeline`](super::run_pipeline) returns.
+
+use super::process::ProcessOutcome;
+use super::shared::{lock, Shared};
+use super::stats::SensorCounters;
+use super::{PipelineStage, SensorSummary, StageSummary};
+use omnitrack_io::capture::SourceStats;
+use omnitrack_tracker::TrackerStats;
+use std::fmt;
+use std::sync::atomic::Ordering;
+use std::time::Duration;
+
+/// Why the pipeline stopped (when it did not fail). Not the solver's `StopReason`, which says why
+/// consensus sampling stopped.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RunEnd {
+    /// The source ended.
+    EndOfStream,
+    /// `max_frames` were processed.
+    MaxFrames,
+    /// The stop flag was set (by the caller or a signal).
+    Stopped,
+}
+
+/// What a run did.
+#[derive(Debug, Clone)]
+pub struct PipelineSummary {
+    pub reason: RunEnd,
+    /// Start-up done → last frame processed.
+    pub elapsed: Duration,
+    /// Frames handed into the pool by capture (or assembly).
+    pub frames_captured: u64,
+    pub frames_processed: u64,
+    /// Whole frames replaced by a newer one before the tracker took them (latest frame wins).
+    pub frames_dropped: u64,
+    /// Indexed by sensor id.
+    pub sensors: Vec<SensorSummary>,
+    /// Indexed by [`PipelineStage::index`].
+    pub stages: [StageSummary; PipelineStage::COUNT],
+    pub tracker: TrackerStats,
+    /// The whole-rig source's own counters (per-sensor sources: `None`).
+    pub source: Option<SourceStats>,
+    pub poses_published: u64,
+    pub status_published: u64,
+    pub publish_errors: u64,
+    /// Why a service could not be opened (the run went on without it).
+    pub publisher_error: Option<String>,
+}
+
+impl PipelineSummary {
+    pub fn stage(&self, stage: PipelineStage) -> &StageSummary {
+        &self.stages[stage.index()]
+    }
+
+    /// Frames processed per second of the run.
+    pub fn frame_rate_hz(&self) -> f64 {
+        if self.elapsed.is_zero() {
+            return 0.0;
+        }
+        self.frames_processed as f64 / self.elapsed.as_secs_f64()
+    }
+}
+
+impl fmt::Display for PipelineSummary {
+    /// One line: frames, rate, drops, latency, overruns.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let lat = self.stage(PipelineStage::Latency);
+        write!(
+            f,
+            "{} frames processed of {} captured ({:.1} frames/s), {} dropped; latency p50 {:.1} ms, p99 {:.1} ms; overruns:",
+            self.frames_processed,
+            self.frames_captured,
+            self.frame_rate_hz(),
+            self.frames_dropped,
+            lat.p50.as_secs_f64() * 1e3,
+            lat.p99.as_secs_f64() * 1e3
+        )?;
+        for s in PipelineStage::ALL {
+            let st = self.stage(s);
+            if st.budget.is_some() {
+                write!(f, " {} {}", s.name(), st.overruns)?;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The summary of a run that did not fail.
+pub(super) fn summarize(
+    shared: &Shared,
+    outcome: ProcessOutcome,
+    source_stats: Option<SourceStats>,
+) -> PipelineSummary {
+    let capture = lock(&shared.capture).summary();
+    let mut stages = [StageSummary::default(); PipelineStage::COUNT];
+    for s in PipelineStage::ALL {
+        stages[s.index()] = match s {
+            PipelineStage::Capture => capture,
+            _ => outcome.clocks[s.index()].summary(),
+        };
+    }
+    let elapsed = match (outcome.first_frame, outcome.last_frame) {
+        // From the first frame's pose: start-up (edge tables, publishers) is not the rate.
+        (Some(a), Some(b)) if outcome.frames_processed > 1 => {
+            (b - a).mul_f64(outcome.frames_processed as f64 / (outcome.frames_processed - 1) as f64)
+        }
+        _ => Duration::ZERO,
+    };
+    PipelineSummary {
+        reason: outcome.reason,
+        elapsed,
+        frames_captured: shared.frames_captured.load(Ordering::Relaxed),
+        frames_processed: outcome.frames_processed,
+        frames_dropped: shared.frames_dropped.load(Ordering::Relaxed),
+        sensors: shared.sensors.iter().map(SensorCounters::snapshot).collect(),
+        stages,
+        tracker: outcome.tracker,
+        source: source_stats,
+        poses_published: outcome.poses_published,
+        status_published: outcome.status_published,
+        publish_errors: outcome.publish_errors,
+        publisher_error: outcome.publisher_error,
+    }
+}
