@@ -26,7 +26,7 @@ mod bench {
     use omnitrack::desk::recording::{cached_scenario, RecordingOptions};
     use omnitrack::desk::scenario::{Scenario, ScenarioName};
     use omnitrack::publish::{PoseStatus, PoseSubscriber};
-    use omnitrack::runtime::pipeline::{run_pipeline, PipelineOptions, PipelineStage, PipelineSummary};
+    use omnitrack::runtime::pipeline::{run_pipeline, PipelineOptions, PipelineSummary, Stage};
     use omnitrack::runtime::{load_or_build_table, FrameRecord, RunOptions};
     use omnitrack::tracker::SearchVolume;
     use omnitrack::visibility::VisibilityTable;
@@ -275,9 +275,9 @@ mod bench {
         for r in &runs {
             let s = &r.summary;
             let ms = |d: Duration| d.as_secs_f64() * 1e3;
-            let e = s.stage(PipelineStage::Edges);
-            let t = s.stage(PipelineStage::Track);
-            let p = s.stage(PipelineStage::Publish);
+            let e = s.stage(Stage::Edges);
+            let t = s.stage(Stage::Track);
+            let p = s.stage(Stage::Publish);
             println!(
                 "| {} | {} | {} | {} | {} | {:.1} | {:.0} | {:.1} / {:.1} / {:.1} | {:.1} / {:.1} | {:.1} / {:.1} | {:.0} / {:.0} | {} / {} / {} |",
                 r.name,
@@ -298,7 +298,7 @@ mod bench {
                 p.p99.as_secs_f64() * 1e6,
                 e.overruns,
                 t.overruns,
-                s.stage(PipelineStage::Latency).overruns,
+                s.stage(Stage::Frame).overruns,
             );
             if r.received as u64 != s.poses_published {
                 println!(

@@ -23,8 +23,7 @@ use omnitrack::config::TrackerConfig;
 use omnitrack::publish::{PoseStatus, PoseSubscriber, SearchState, StatusSample, StatusSubscriber};
 use omnitrack::rig::Sensor;
 use omnitrack::runtime::pipeline::{
-    inside_publish, live_sensors, run_pipeline, FrameSink, PipelineOptions, PipelineStage, PipelineThread, RunEnd,
-    TumSink,
+    inside_publish, live_sensors, run_pipeline, FrameSink, PipelineOptions, PipelineThread, RunEnd, Stage, TumSink,
 };
 use omnitrack::runtime::{FrameRecord, RunError, RunOptions, SinkError};
 use omnitrack::tracker::SearchVolume;

@@ -145,7 +145,7 @@ fn per_sensor_capture_assembles_frames_by_timestamp_and_survives_a_dead_sensor()
     assert!(dead.faults >= FRAMES - FROM - 2, "{dead:?}");
     // Its failed reads stood for it in their frames: hardly any frame waited for it in vain.
     assert!(dead.sync_missed <= 2, "{dead:?}");
-    assert!(summary.stage(PipelineStage::Capture).count >= 6 * FRAMES);
+    assert!(summary.stage(Stage::Capture).count >= 6 * FRAMES);
     // Timestamps of a frame are within the tolerance of each other.
     assert!(records.iter().all(|r| r.sequence == 0 || r.timestamp_ns > 0));
 }

@@ -35,7 +35,7 @@
 //! ([`SensorSummary::lost`]); its `frame_rate_hz` is the rate of delivered images over the last
 //! status interval (0 for a dead sensor); its stage p50/p99 are over the whole run so far.
 //!
-//! Budgets (tracker.toml `[budgets]`): each [`PipelineStage`] with a budget counts its overruns
+//! Budgets (tracker.toml `[budgets]`): each [`Stage`] with a budget counts its overruns
 //! (summary, and `debug` logs on the status schedule). Latency is measured from the hand-over
 //! into the pool (the frame complete in memory; for per-sensor capture its first image) to the
 //! pose sample sent.
@@ -76,11 +76,12 @@ mod summary;
 
 pub use live::{live_sensors, open_pipeline_source, LiveSensor, SensorCapture};
 pub use logging::init_logging;
+pub use omnitrack_io::publish::Stage;
 pub use options::{PipelineOptions, PipelineSource, PipelineThread};
 pub use publishing::inside_publish;
 pub use signals::{stop_on_signals, SignalGuard};
 pub use sink::{FrameSink, TrajectoryFileError, TumSink};
-pub use stats::{Histogram, PipelineStage, SensorSummary, StageClock, StageSummary};
+pub use stats::{stage_budget, Histogram, SensorSummary, StageClock, StageSummary};
 pub use summary::{PipelineSummary, RunEnd};
 
 use super::{FrameRecord, RunError};

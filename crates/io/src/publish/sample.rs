@@ -201,7 +201,8 @@ pub const STATUS_MAX_SENSORS: usize = 16;
 /// Number of stage-timing slots in a [`StatusSample`] (see [`Stage`]).
 pub const STATUS_STAGES: usize = 8;
 
-/// The named pipeline stages whose timings a [`StatusSample`] carries, by slot index.
+/// The pipeline's timed stages, by their slot in a [`StatusSample`]: one type for the status
+/// message, the pipeline's clocks and budgets, and its summary.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 #[repr(u8)]
 pub enum Stage {
@@ -215,19 +216,29 @@ pub enum Stage {
     Solve = 3,
     /// Loan, write and send of the pose sample.
     Publish = 4,
-    /// Whole frame: capture time to pose sent.
+    /// Whole frame: from its hand-over into the frame pool (capture complete; for per-sensor
+    /// capture, its first image) to the pose sent — the latency.
     Frame = 5,
+    /// The tracker's whole step (matching and solving are parts of it).
+    Track = 6,
 }
 
+// Every stage has its slot in the status message.
+const _: () = assert!(Stage::COUNT <= STATUS_STAGES);
+
 impl Stage {
+    /// How many stages there are (slots beyond these in a [`StatusSample`] stay 0).
+    pub const COUNT: usize = 7;
+
     /// All named stages, in slot order.
-    pub const ALL: [Stage; 6] = [
+    pub const ALL: [Stage; Stage::COUNT] = [
         Stage::Capture,
         Stage::Edges,
         Stage::Match,
         Stage::Solve,
         Stage::Publish,
         Stage::Frame,
+        Stage::Track,
     ];
 
     /// Slot index in [`StatusSample::stage_p50_us`] / [`StatusSample::stage_p99_us`].
@@ -235,7 +246,7 @@ impl Stage {
         self as usize
     }
 
-    /// Lower-case name: `capture`, `edges`, `match`, `solve`, `publish`, `frame`.
+    /// Lower-case name: `capture`, `edges`, `match`, `solve`, `publish`, `frame`, `track`.
     pub fn name(self) -> &'static str {
         match self {
             Stage::Capture => "capture",
@@ -244,6 +255,7 @@ impl Stage {
             Stage::Solve => "solve",
             Stage::Publish => "publish",
             Stage::Frame => "frame",
+            Stage::Track => "track",
         }
     }
 }

@@ -10,7 +10,7 @@ use super::pool::Pool;
 use super::publishing::{create_publisher, publishing};
 use super::shared::{lock, Shared};
 use super::stats::SensorCounters;
-use super::{PipelineOptions, PipelineStage, PipelineThread, RunEnd, StageClock, TICK};
+use super::{stage_budget, PipelineOptions, PipelineThread, RunEnd, Stage, StageClock, TICK};
 use crate::FrameRecord;
 use crossbeam::channel::{Receiver, RecvTimeoutError, Sender};
 use omnitrack_config::TrackerConfig;
@@ -20,7 +20,6 @@ use omnitrack_core::rig::Rig;
 use omnitrack_edges::EdgeDetector;
 use omnitrack_io::publish::{
     PosePublisher, PoseSample, PoseStatus, SearchState, StatusPublisher, StatusSample, STATUS_MAX_SENSORS,
-    STATUS_STAGES,
 };
 use omnitrack_tracker::visibility::VisibilityTable;
 use omnitrack_tracker::{FrameResult, Tracker, TrackerEvent, TrackerState, TrackerStats};
@@ -78,7 +77,7 @@ struct Processor<'a, 'o, 'm> {
     status_delivered: Vec<u64>,
     status_rates: Vec<f32>,
     status_at: Instant,
-    status_overruns: [u64; PipelineStage::COUNT],
+    status_overruns: [u64; Stage::COUNT],
     /// What the last search made of its volume, and the widened diameter (m), for the status.
     search: SearchState,
     search_widened_to_m: f32,
@@ -196,14 +195,14 @@ impl Processor<'_, '_, '_> {
         self.first_frame.get_or_insert(done);
         self.last_frame = Some(done);
         let c = &mut self.clocks;
-        c[PipelineStage::Edges.index()].record(record.edge_time);
-        c[PipelineStage::Match.index()].record(r.match_time);
-        c[PipelineStage::Solve.index()].record(r.solve_time);
-        c[PipelineStage::Track.index()].record(record.track_time);
+        c[Stage::Edges.index()].record(record.edge_time);
+        c[Stage::Match.index()].record(r.match_time);
+        c[Stage::Solve.index()].record(r.solve_time);
+        c[Stage::Track.index()].record(record.track_time);
         if let Some(t) = publish_time {
-            c[PipelineStage::Publish.index()].record(t);
+            c[Stage::Publish.index()].record(t);
         }
-        c[PipelineStage::Latency.index()].record(done - arrived);
+        c[Stage::Frame.index()].record(done - arrived);
         // The sink drains until this channel closes: a full buffer only makes the tracker wait.
         let _ = self.records.send(record);
     }
@@ -273,16 +272,14 @@ impl Processor<'_, '_, '_> {
             }
         }
         let capture = lock(&self.shared.capture);
-        for stage in PipelineStage::ALL {
+        for stage in Stage::ALL {
             let clock = match stage {
-                PipelineStage::Capture => &*capture,
+                Stage::Capture => &*capture,
                 _ => &self.clocks[stage.index()],
             };
-            if let Some(slot) = stage.status_stage().map(|st| st.index()).filter(|&i| i < STATUS_STAGES) {
-                let us = |d: Duration| u32::try_from(d.as_micros()).unwrap_or(u32::MAX);
-                s.stage_p50_us[slot] = us(clock.histogram.quantile(0.5));
-                s.stage_p99_us[slot] = us(clock.histogram.quantile(0.99));
-            }
+            let us = |d: Duration| u32::try_from(d.as_micros()).unwrap_or(u32::MAX);
+            s.stage_p50_us[stage.index()] = us(clock.histogram.quantile(0.5));
+            s.stage_p99_us[stage.index()] = us(clock.histogram.quantile(0.99));
             let seen = &mut self.status_overruns[stage.index()];
             if clock.overruns > *seen {
                 tracing::debug!(
@@ -325,9 +322,9 @@ pub(super) fn run_process(
     let mut publisher_error = None;
     let poses = create_publisher::<PoseSample>(opts.pose_service.as_deref(), &mut publisher_error);
     let status = create_publisher::<StatusSample>(opts.status_service.as_deref(), &mut publisher_error);
-    let clocks = PipelineStage::ALL
+    let clocks = Stage::ALL
         .iter()
-        .map(|s| StageClock::new(s.budget(&cfg.budgets)))
+        .map(|s| StageClock::new(stage_budget(*s, &cfg.budgets)))
         .collect();
     let processor = Processor {
         shared,
@@ -353,7 +350,7 @@ pub(super) fn run_process(
         status_delivered: vec![0; rig.sensors.len()],
         status_rates: vec![0.0; rig.sensors.len()],
         status_at: Instant::now(),
-        status_overruns: [0; PipelineStage::COUNT],
+        status_overruns: [0; Stage::COUNT],
         search: SearchState::None,
         search_widened_to_m: 0.0,
     };

@@ -5,7 +5,7 @@
 //! [`run_pipeline`](super::run_pipeline) turns it into the summary at the end.
 
 use super::stats::SensorCounters;
-use super::{PipelineOptions, PipelineStage, PipelineThread, StageClock};
+use super::{stage_budget, PipelineOptions, PipelineThread, Stage, StageClock};
 use omnitrack_config::BudgetConfig;
 use omnitrack_io::capture::SourceError;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -34,7 +34,7 @@ impl<'o> Shared<'o> {
             sensors: (0..sensors).map(|_| SensorCounters::default()).collect(),
             frames_captured: AtomicU64::new(0),
             frames_dropped: AtomicU64::new(0),
-            capture: Mutex::new(StageClock::new(PipelineStage::Capture.budget(budgets))),
+            capture: Mutex::new(StageClock::new(stage_budget(Stage::Capture, budgets))),
             source_error: Mutex::new(None),
             lossless: opts.lossless,
             hook: opts.on_thread_start,

@@ -114,81 +114,19 @@ impl Histogram {
     }
 }
 
-/// The timed stages of the pipeline.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum PipelineStage {
-    /// One grab: a whole-rig `next_frame` (replay: the PNG decodes and the pacing wait), or one
-    /// sensor's read. Budget `capture_ms`.
-    Capture,
-    /// Edge + hue extraction of the whole frame. Budget `edges_ms`.
-    Edges,
-    /// The tracker's correspondence matching (part of `Track`; no budget of its own).
-    Match,
-    /// The tracker's pose solve (part of `Track`; no budget of its own).
-    Solve,
-    /// `Tracker::process` as a whole. Budget `track_ms`.
-    Track,
-    /// Loan, write and send of the pose sample. Budget `publish_ms`.
-    Publish,
-    /// Hand-over of the frame into the pool (capture complete) → pose sent. Budget `frame_ms`.
-    Latency,
-}
-
-impl PipelineStage {
-    /// How many timed stages there are.
-    pub const COUNT: usize = 7;
-
-    pub const ALL: [PipelineStage; PipelineStage::COUNT] = [
-        PipelineStage::Capture,
-        PipelineStage::Edges,
-        PipelineStage::Match,
-        PipelineStage::Solve,
-        PipelineStage::Track,
-        PipelineStage::Publish,
-        PipelineStage::Latency,
-    ];
-
-    pub fn index(self) -> usize {
-        self as usize
-    }
-
-    pub fn name(self) -> &'static str {
-        match self {
-            PipelineStage::Capture => "capture",
-            PipelineStage::Edges => "edges",
-            PipelineStage::Match => "match",
-            PipelineStage::Solve => "solve",
-            PipelineStage::Track => "track",
-            PipelineStage::Publish => "publish",
-            PipelineStage::Latency => "latency",
-        }
-    }
-
-    /// The stage's budget in tracker.toml `[budgets]`, if it has one.
-    pub fn budget(self, b: &BudgetConfig) -> Option<Duration> {
-        let ms = match self {
-            PipelineStage::Capture => b.capture_ms,
-            PipelineStage::Edges => b.edges_ms,
-            PipelineStage::Track => b.track_ms,
-            PipelineStage::Publish => b.publish_ms,
-            PipelineStage::Latency => b.frame_ms,
-            PipelineStage::Match | PipelineStage::Solve => return None,
-        };
-        Some(Duration::from_secs_f64(ms / 1e3))
-    }
-
-    /// The slot of the status sample that carries this stage.
-    pub fn status_stage(self) -> Option<Stage> {
-        match self {
-            PipelineStage::Capture => Some(Stage::Capture),
-            PipelineStage::Edges => Some(Stage::Edges),
-            PipelineStage::Match => Some(Stage::Match),
-            PipelineStage::Solve => Some(Stage::Solve),
-            PipelineStage::Publish => Some(Stage::Publish),
-            PipelineStage::Latency => Some(Stage::Frame),
-            PipelineStage::Track => None,
-        }
-    }
+/// A stage's budget in tracker.toml `[budgets]`, if it has one: `capture_ms`, `edges_ms`,
+/// `track_ms`, `publish_ms` and, for the whole frame (hand-over into the pool → pose sent),
+/// `frame_ms`. Matching and solving are parts of `track` with no budget of their own.
+pub fn stage_budget(stage: Stage, b: &BudgetConfig) -> Option<Duration> {
+    let ms = match stage {
+        Stage::Capture => b.capture_ms,
+        Stage::Edges => b.edges_ms,
+        Stage::Track => b.track_ms,
+        Stage::Publish => b.publish_ms,
+        Stage::Frame => b.frame_ms,
+        Stage::Match | Stage::Solve => return None,
+    };
+    Some(Duration::from_secs_f64(ms / 1e3))
 }
 
 /// One stage's timings against its budget.

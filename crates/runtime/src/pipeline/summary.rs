@@ -7,7 +7,7 @@
 use super::process::ProcessOutcome;
 use super::shared::{lock, Shared};
 use super::stats::SensorCounters;
-use super::{PipelineStage, SensorSummary, StageSummary};
+use super::{SensorSummary, Stage, StageSummary};
 use omnitrack_io::capture::SourceStats;
 use omnitrack_tracker::TrackerStats;
 use std::fmt;
@@ -39,8 +39,8 @@ pub struct PipelineSummary {
     pub frames_dropped: u64,
     /// Indexed by sensor id.
     pub sensors: Vec<SensorSummary>,
-    /// Indexed by [`PipelineStage::index`].
-    pub stages: [StageSummary; PipelineStage::COUNT],
+    /// Indexed by [`Stage::index`].
+    pub stages: [StageSummary; Stage::COUNT],
     pub tracker: TrackerStats,
     /// The whole-rig source's own counters (per-sensor sources: `None`).
     pub source: Option<SourceStats>,
@@ -52,7 +52,7 @@ pub struct PipelineSummary {
 }
 
 impl PipelineSummary {
-    pub fn stage(&self, stage: PipelineStage) -> &StageSummary {
+    pub fn stage(&self, stage: Stage) -> &StageSummary {
         &self.stages[stage.index()]
     }
 
@@ -68,7 +68,7 @@ impl PipelineSummary {
 impl fmt::Display for PipelineSummary {
     /// One line: frames, rate, drops, latency, overruns.
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        let lat = self.stage(PipelineStage::Latency);
+        let lat = self.stage(Stage::Frame);
         write!(
             f,
             "{} frames processed of {} captured ({:.1} frames/s), {} dropped; latency p50 {:.1} ms, p99 {:.1} ms; overruns:",
@@ -79,7 +79,7 @@ impl fmt::Display for PipelineSummary {
             lat.p50.as_secs_f64() * 1e3,
             lat.p99.as_secs_f64() * 1e3
         )?;
-        for s in PipelineStage::ALL {
+        for s in Stage::ALL {
             let st = self.stage(s);
             if st.budget.is_some() {
                 write!(f, " {} {}", s.name(), st.overruns)?;
@@ -96,10 +96,10 @@ pub(super) fn summarize(
     source_stats: Option<SourceStats>,
 ) -> PipelineSummary {
     let capture = lock(&shared.capture).summary();
-    let mut stages = [StageSummary::default(); PipelineStage::COUNT];
-    for s in PipelineStage::ALL {
+    let mut stages = [StageSummary::default(); Stage::COUNT];
+    for s in Stage::ALL {
         stages[s.index()] = match s {
-            PipelineStage::Capture => capture,
+            Stage::Capture => capture,
             _ => outcome.clocks[s.index()].summary(),
         };
     }
