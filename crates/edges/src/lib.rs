@@ -510,6 +510,28 @@ pub fn edges_csv(edges: &[Edge], rig: &Rig) -> String {
     s
 }
 
+/// Why `omnitrack edges` cannot read its image.
+#[derive(Debug, thiserror::Error)]
+pub enum EdgesCsvError {
+    #[error("--sensor {sensor}: rig {rig:?} has sensors 0..{last}")]
+    NoSuchSensor { sensor: usize, rig: String, last: usize },
+    #[error("{}: cannot read image: {source}", .path.display())]
+    Unreadable {
+        path: std::path::PathBuf,
+        source: image::ImageError,
+    },
+    #[error("{}: image is {width}x{height}, sensor {sensor} of rig {rig:?} is {sensor_width}x{sensor_height}", .path.display())]
+    WrongSize {
+        path: std::path::PathBuf,
+        width: u32,
+        height: u32,
+        sensor: usize,
+        rig: String,
+        sensor_width: u32,
+        sensor_height: u32,
+    },
+}
+
 /// `omnitrack edges --rig R --sensor K IMAGE`: loads the image, checks it against the rig's
 /// sensor and returns the CSV; errors are one line naming the file.
 pub fn edges_csv_for_image(
@@ -517,27 +539,30 @@ pub fn edges_csv_for_image(
     config: &EdgeConfig,
     sensor: usize,
     path: &std::path::Path,
-) -> Result<String, String> {
-    let shown = path.display();
+) -> Result<String, EdgesCsvError> {
     let Some(s) = rig.sensors.get(sensor) else {
-        return Err(format!(
-            "--sensor {sensor}: rig {:?} has sensors 0..{}",
-            rig.name,
-            rig.sensors.len().saturating_sub(1)
-        ));
+        return Err(EdgesCsvError::NoSuchSensor {
+            sensor,
+            rig: rig.name.clone(),
+            last: rig.sensors.len().saturating_sub(1),
+        });
     };
     let img = image::open(path)
-        .map_err(|e| format!("{shown}: cannot read image: {e}"))?
+        .map_err(|source| EdgesCsvError::Unreadable {
+            path: path.to_path_buf(),
+            source,
+        })?
         .to_rgb8();
     if img.width() != s.width || img.height() != s.height {
-        return Err(format!(
-            "{shown}: image is {}x{}, sensor {sensor} of rig {:?} is {}x{}",
-            img.width(),
-            img.height(),
-            rig.name,
-            s.width,
-            s.height
-        ));
+        return Err(EdgesCsvError::WrongSize {
+            path: path.to_path_buf(),
+            width: img.width(),
+            height: img.height(),
+            sensor,
+            rig: rig.name.clone(),
+            sensor_width: s.width,
+            sensor_height: s.height,
+        });
     }
     let mut si = SensorImage::new(sensor, s.width, s.height);
     si.pixels_mut().copy_from_slice(img.as_raw());
@@ -548,4 +573,45 @@ pub fn edges_csv_for_image(
     };
     let mut det = EdgeDetector::with_params(rig, config, params);
     Ok(edges_csv(det.detect_sensor(&si), rig))
+}
+
+#[cfg(test)]
+mod csv_errors {
+    use super::*;
+
+    /// Each way `omnitrack edges` can be handed the wrong image is one line naming it.
+    #[test]
+    fn a_wrong_sensor_file_or_size_is_named() {
+        let rig = Rig::from_toml_str(
+            "name = \"one\"\n[[sensors]]\nid = 0\nresolution = [8, 6]\nmodel = \"pinhole\"\n\
+             intrinsics = [8.0, 8.0, 3.5, 2.5]\nrotation_wxyz = [1.0, 0.0, 0.0, 0.0]\n\
+             translation_m = [0.0, 0.0, 0.0]\n",
+            "one.toml",
+        )
+        .unwrap();
+        let config = EdgeConfig::default();
+        let dir = tempfile::tempdir().unwrap();
+        let small = dir.path().join("small.png");
+        image::RgbImage::new(4, 3).save(&small).unwrap();
+        let right = dir.path().join("right.png");
+        image::RgbImage::new(8, 6).save(&right).unwrap();
+
+        let e = edges_csv_for_image(&rig, &config, 1, &right).unwrap_err();
+        assert_eq!(e.to_string(), "--sensor 1: rig \"one\" has sensors 0..0");
+        let missing = dir.path().join("missing.png");
+        let e = edges_csv_for_image(&rig, &config, 0, &missing).unwrap_err();
+        assert!(
+            e.to_string()
+                .starts_with(&format!("{}: cannot read image: ", missing.display())),
+            "{e}"
+        );
+        let e = edges_csv_for_image(&rig, &config, 0, &small).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            format!("{}: image is 4x3, sensor 0 of rig \"one\" is 8x6", small.display())
+        );
+        // A blank image of the right size has no edges: the header alone.
+        let csv = edges_csv_for_image(&rig, &config, 0, &right).unwrap();
+        assert_eq!(csv.lines().count(), 1, "{csv}");
+    }
 }
