@@ -384,7 +384,7 @@ pub struct Initialiser<'m> {
     /// their quarter-turn twins about the vertical are voted too.
     vote: TranslationVote,
     /// The frame's longest edges, for the vote.
-    vote_edges: Vec<Edge>,
+    vote_edges: heapless::Vec<Edge, VOTE_EDGES>,
     /// Rotation hypotheses from vanishing directions (module `vanishing`).
     vanishing: VanishingDirections,
     /// The floors: the rig stands in a band above the one beneath it.
@@ -460,7 +460,7 @@ impl<'m> Initialiser<'m> {
             alphas: Vec::with_capacity(max_set),
             candidates: Vec::with_capacity(POLISHED + VOTED_ROTATIONS * PEAKS + MAX_ROTATIONS * GRID_KEEP),
             vote: TranslationVote::new(model.segments.len()),
-            vote_edges: Vec::with_capacity(VOTE_EDGES),
+            vote_edges: heapless::Vec::new(),
             vanishing: VanishingDirections::new(model, max_edges),
             floors,
             grid_best: std::array::from_fn(|_| GridBest::new()),

@@ -18,7 +18,7 @@ pub const BUCKETS: usize = SUB + (MAX_EXP - SUB_BITS + 1) as usize * SUB;
 /// and the mean exact. Allocates once, in [`Histogram::new`].
 #[derive(Clone)]
 pub struct Histogram {
-    counts: Box<[u64]>,
+    counts: Box<[u64; BUCKETS]>,
     total: u64,
     sum_ns: u128,
     max_ns: u64,
@@ -66,7 +66,7 @@ fn bucket_upper(i: usize) -> u64 {
 impl Histogram {
     pub fn new() -> Histogram {
         Histogram {
-            counts: vec![0; BUCKETS].into_boxed_slice(),
+            counts: Box::new([0; BUCKETS]),
             total: 0,
             sum_ns: 0,
             max_ns: 0,

@@ -42,7 +42,8 @@ impl Initialiser<'_> {
         self.edge_order.sort_unstable_by(|a, b| b.0.total_cmp(&a.0));
         self.vote_edges.clear();
         for &(_, i) in self.edge_order.iter().take(VOTE_EDGES) {
-            self.vote_edges.push(edges[i as usize]);
+            // Never full: at most VOTE_EDGES are taken.
+            let _ = self.vote_edges.push(edges[i as usize]);
         }
         let m = self.top.len();
         let mm = self.opts.edges_considered;
