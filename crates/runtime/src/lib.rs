@@ -76,6 +76,10 @@ pub enum RunError {
 
 /// Runs the tracker over `source` until it ends (or `max_frames`), handing every frame to
 /// `sink`. A sink error stops the run (after the frames already handed over).
+///
+/// This loop runs the tracker on the caller's thread, so its sink sees the tracker too (its
+/// correspondences and states, for pictures and evaluations). The device pipeline's
+/// [`pipeline::FrameSink`] gets the records alone: there the tracker runs on a thread of its own.
 pub fn track(
     source: &mut dyn FrameSource,
     model: &Model,
