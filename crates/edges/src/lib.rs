@@ -57,7 +57,7 @@ pub struct Edge {
     /// Sensor id.
     pub sensor: u8,
     /// Plane through the sensor's centre containing the edge, rig frame; `ends` are the unit
-    /// rays of the two end points (in the plane); the normal is oriented as ends[0] × ends[1].
+    /// rays of the two end points (in the plane); the normal is oriented as `ends[0] × ends[1]`.
     pub plane: EdgePlane,
     /// Pixel positions of the two ends on the image as it is (on the curved fisheye edge).
     pub px: [Point2<f64>; 2],

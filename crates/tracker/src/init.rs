@@ -17,7 +17,7 @@
 //!    match is the normalised product of overlaps: per pair, the overlap of the observation's
 //!    interval (±`dihedral_tolerance`) with the expected range divided by their union, so a
 //!    narrow, informative range counts more than one that a near segment sweeps over the cell.
-//!    A[r][i], A[s][j], A[t][k] += α (Figure 4 line 7).
+//!    `A[r][i]`, `A[s][j]`, `A[t][k]` += α (Figure 4 line 7).
 //! 4. The k best edges of each segment (k = 3) by A; random samples of three segments, each with
 //!    one of its k best edges; the pose of each sample; the sample's pose scored.
 //!

@@ -13,7 +13,7 @@
 //!   repeated structure (doorways along a corridor): a single frame may prefer the wrong one. On
 //!   each of those frames a candidate must pass the search's acceptance test again, or it is
 //!   dropped; with none left, the next frame searches afresh.
-//! - **Tracking**: [`maintenance`] per Figure 7.
+//! - **Tracking**: `maintenance` per Figure 7.
 //!
 //! A frame is "bad" when the solve fails, leaves fewer than `min_inliers` accepted inliers, or
 //! jumps more than `max_jump_m` / `max_jump_deg` from the motion prior; `lost_after_frames`

@@ -14,7 +14,7 @@ const MAX_EXP: u32 = 40;
 /// Buckets of a [`Histogram`]: 32 exact ones (0–31 ns), then 32 per power of two up to 2^41 ns.
 pub const BUCKETS: usize = SUB + (MAX_EXP - SUB_BITS + 1) as usize * SUB;
 
-/// Durations (nanoseconds) in [`BUCKETS`] log-linear buckets: quantiles within ~3 %, the maximum
+/// Durations (nanoseconds) in `BUCKETS` log-linear buckets: quantiles within ~3 %, the maximum
 /// and the mean exact. Allocates once, in [`Histogram::new`].
 #[derive(Clone)]
 pub struct Histogram {

@@ -5,7 +5,7 @@
 //!
 //! - [`three_lines`]: every rotation that puts three lines into their planes (Kumar–Hanson
 //!   eq. 8 for three lines: a degree-8 polynomial), Med_R_and_T's subsets.
-//! - [`wahba`]: the rotation of three normal pairs (Wahba's SVD) and the upright yaw alone,
+//! - [`wahba`](mod@wahba): the rotation of three normal pairs (Wahba's SVD) and the upright yaw alone,
 //!   the initialiser's samples (Koch–Teller §4.1).
 //! - [`translation`]: the translation of lines under a known rotation (Kumar–Hanson eq. 9).
 

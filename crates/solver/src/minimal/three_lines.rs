@@ -20,7 +20,7 @@ use omnitrack_core::geometry::Correspondence;
 /// circle ⊥ n₁, so R = Rot(n₁, θ) A₀ Rot(d₁, φ) with A₀ any rotation taking d₁ onto that circle.
 /// For fixed θ the other two constraints are linear in (cos φ, sin φ); asking that these be a
 /// unit vector gives one trigonometric polynomial of degree 4 in θ, i.e. a polynomial of degree
-/// 8 in t = tan(θ/2), whose roots [`polynomial_roots`] finds. A complex pair
+/// 8 in t = tan(θ/2), whose roots `polynomial_roots` finds. A complex pair
 /// with a small imaginary part is what noise makes of two nearby real roots, so its real part
 /// is kept too (the least-squares rotation there); every rotation is then polished by Newton's
 /// method on the three equations.

@@ -5,7 +5,7 @@
 //!
 //! In: one correspondence (edge plane ↔ model segment) or [`PointObservation`] and the unknowns
 //! `T_rig_world = (Q, s)`. Out: residuals, Jacobian rows over `(Δs, δω)` and weights; a normal
-//! matrix and gradient; a [`Refined`] pose.
+//! matrix and gradient; a `Refined` pose.
 //!
 //! The unknown is `T_rig_world = (Q, s)`. A segment end point P seen by a sensor centred at c has
 //! the residual `n · (Q P + s − c)` (KH eq. 9 with the sensor offset). Every refinement

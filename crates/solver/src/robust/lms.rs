@@ -21,7 +21,7 @@
 //!
 //! Scratch (per-line errors, the candidates' line sets) is allocated per call, never per subset:
 //! the subset loop itself allocates nothing. This solver is for `omnitrack pose` and whole-frame
-//! solves; the tracker's per-frame path uses the fixed-capacity [`super::ConsensusSampler`].
+//! solves; the tracker's per-frame path uses the fixed-capacity [`crate::ConsensusSampler`].
 
 use crate::minimal::three_lines::three_line_rotations;
 use crate::refine::horn::tetrahedral;

@@ -17,7 +17,7 @@
 //! **How.** The candidates are the union of the sets of the nodes serving T and the 26 positions
 //! a node spacing away around it (in x, y and z), so every segment a nearby node sees is tried.
 //! Each is sampled at [`SAMPLES`] points spread along it; a point is in sight when the ray from T
-//! to it meets no face of the model before it (the last [`END_SLACK_M`] excepted: the point lies
+//! to it meets no face of the model before it (the last `END_SLACK_M` excepted: the point lies
 //! on its own faces' borders). The fraction in sight is the share of sampled points in sight;
 //! segments with none are dropped.
 //!

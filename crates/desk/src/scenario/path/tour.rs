@@ -125,7 +125,7 @@ pub fn tour(space: &Space, min_length_m: f64, rng: &mut Rng) -> Vec<P2> {
 /// Turns sharper than this are widened before rounding.
 const SHARP_TURN: f64 = 120.0 * std::f64::consts::PI / 180.0;
 
-/// Replaces every corner turning more than [`SHARP_TURN`] (a U-turn, which no fillet can round) by
+/// Replaces every corner turning more than `SHARP_TURN` (a U-turn, which no fillet can round) by
 /// two corners either side of it, a bulb up to 0.9 m wide reaching a little beyond it, where the
 /// free space allows; the legs to and between the new corners are clear like the tour's legs.
 pub fn ease_sharp_turns(space: &Space, poly: &[P2]) -> Vec<P2> {

@@ -18,8 +18,8 @@ pub struct Dense {
 }
 
 /// Rounds every corner of the polyline with a circular arc: radius up to
-/// [`MAX_TURN_RADIUS_M`], its tangent length at most half of either adjoining leg, halved until
-/// the arc keeps [`ARC_SLACK_M`] beyond the inflated walls (down to a sharp corner, which is on
+/// `MAX_TURN_RADIUS_M`, its tangent length at most half of either adjoining leg, halved until
+/// the arc keeps `ARC_SLACK_M` beyond the inflated walls (down to a sharp corner, which is on
 /// the clear polyline).
 pub fn smooth(space: &Space, poly: &[P2]) -> Dense {
     const STEP: f64 = 0.05;
