@@ -238,18 +238,11 @@ mod bench {
     /// halved and the principal point moved with the pixel centres (pixel u's centre is at
     /// u + 0.5 in pixel-edge coordinates, so c ↦ (c + 0.5) / 2 − 0.5).
     fn binned_rig(rig: &Rig) -> Rig {
-        use omnitrack::geometry::lens::{Kb4, Lens, Pinhole};
         let mut r = rig.clone();
-        let c = |c: f64| (c + 0.5) / 2.0 - 0.5;
         for s in &mut r.sensors {
             s.width /= 2;
             s.height /= 2;
-            s.lens = match s.lens {
-                Lens::Kb4(k) => Lens::Kb4(Kb4::new(k.fx / 2.0, k.fy / 2.0, c(k.cx), c(k.cy), k.k).expect("halved kb4")),
-                Lens::Pinhole(p) => {
-                    Lens::Pinhole(Pinhole::new(p.fx / 2.0, p.fy / 2.0, c(p.cx), c(p.cy)).expect("halved pinhole"))
-                }
-            };
+            s.lens = s.lens.resampled(0.5);
         }
         r
     }

@@ -30,11 +30,11 @@ pub fn run(Args { rig, model, config }: Args) -> CommandResult {
         for s in &rig.sensors {
             let c = s.centre();
             eprintln!(
-                "  sensor {}: {}×{}, {} lens seeing {:.1}° off-axis at the corners, centre ({:.3}, {:.3}, {:.3}) m",
+                "  sensor {}: {}×{}, {} lens seeing up to {:.1}° off its axis, centre ({:.3}, {:.3}, {:.3}) m",
                 s.id,
                 s.width,
                 s.height,
-                lens_name(&s.lens),
+                s.lens.model_name(),
                 s.max_off_axis().to_degrees(),
                 c.x,
                 c.y,
@@ -63,11 +63,4 @@ pub fn run(Args { rig, model, config }: Args) -> CommandResult {
         eprintln!("{}: tracker config valid", path.display());
     }
     Ok(())
-}
-
-fn lens_name(lens: &omnitrack::geometry::Lens) -> &'static str {
-    match lens {
-        omnitrack::geometry::Lens::Pinhole(_) => "pinhole",
-        omnitrack::geometry::Lens::Kb4(_) => "kb4",
-    }
 }

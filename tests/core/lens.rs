@@ -1,7 +1,7 @@
 //! Lens geometry: round trips at random pixels and rays, Jacobians against finite differences.
 
 use nalgebra::{Point2, Vector3};
-use omnitrack::geometry::{Kb4, Lens, Pinhole};
+use omnitrack::geometry::{Equirectangular, Kb4, Lens, Pinhole, Radtan};
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 
@@ -38,7 +38,85 @@ fn cases() -> Vec<Case> {
             width: 512.0,
             height: 384.0,
         },
+        Case {
+            // EuRoC's cam0 as Kalibr calibrated it, with a k3 added.
+            name: "radtan (EuRoC cam0)",
+            lens: Lens::Radtan(radtan_euroc()),
+            width: 752.0,
+            height: 480.0,
+        },
+        Case {
+            name: "equirectangular 1024×512",
+            lens: Lens::Equirectangular(Equirectangular::for_panorama(1024, 512)),
+            width: 1024.0,
+            height: 512.0,
+        },
     ]
+}
+
+fn radtan_euroc() -> Radtan {
+    Radtan::new(
+        458.654,
+        457.296,
+        367.215,
+        248.375,
+        &[-0.28340811, 0.07395907, 0.00019359, 1.76187114e-05, 0.0012],
+    )
+    .unwrap()
+}
+
+/// Pixels of `cv2.projectPoints` (OpenCV 5.0, identity pose) for the lens of [`radtan_euroc`].
+#[test]
+fn radtan_projects_as_opencv_does() {
+    let lens = Lens::Radtan(radtan_euroc());
+    let opencv = [
+        ([0.3, -0.2, 1.0], [499.905931297956, 160.188503567068]),
+        ([-1.2, 0.7, 2.5], [164.750090691070, 366.158630851779]),
+        ([0.01, 0.02, 0.9], [372.310314991826, 258.535501883420]),
+        ([2.0, 1.5, 1.7], [769.508670286854, 549.380293017169]),
+        ([-0.5, -0.45, 0.6], [75.718565846670, -13.092864250613]),
+    ];
+    for (p, px) in opencv {
+        let got = lens.project(&Vector3::from(p)).unwrap();
+        assert!((got - Point2::from(px)).norm() < 1e-9, "{p:?}: {got} vs {px:?}");
+    }
+}
+
+#[test]
+fn equirectangular_sees_the_whole_sphere_with_its_seam_behind() {
+    let lens = Lens::Equirectangular(Equirectangular::for_panorama(1024, 512));
+    // Straight ahead is the centre; straight behind is the seam at both side borders.
+    let ahead = lens.project(&Vector3::new(0.0, 0.0, 2.0)).unwrap();
+    assert!((ahead - Point2::new(511.5, 255.5)).norm() < 1e-12);
+    let left = lens.project(&Vector3::new(-1e-9, 0.0, -1.0)).unwrap();
+    let right = lens.project(&Vector3::new(1e-9, 0.0, -1.0)).unwrap();
+    assert!(
+        (left.x + 0.5).abs() < 1e-6 && (right.x - 1023.5).abs() < 1e-6,
+        "{left} {right}"
+    );
+    // Up (−y, the camera frame's y points down) is the top row.
+    let up = lens.project(&Vector3::new(0.0, -1.0, 0.0)).unwrap();
+    assert!((up.y + 0.5).abs() < 1e-12);
+    assert_eq!(lens.max_theta(), std::f64::consts::PI);
+    assert!(
+        lens.unproject(&Point2::new(511.5, 600.0)).is_none(),
+        "below the bottom pole"
+    );
+}
+
+#[test]
+fn a_folding_radtan_polynomial_is_refused_and_its_fold_is_not_imaged() {
+    // 1 + 3k1r² = 0 at r = 1/√3 (30°) for k1 = −1: refused (folds before 20° would be), …
+    assert!(Radtan::new(400.0, 400.0, 320.0, 240.0, &[-3.0, 0.0, 0.0, 0.0]).is_err());
+    assert!(
+        Radtan::new(400.0, 400.0, 320.0, 240.0, &[0.1, 0.0, 0.0]).is_err(),
+        "three numbers"
+    );
+    // … and a lens folding at 30° images nothing beyond it.
+    let lens = Lens::Radtan(Radtan::new(400.0, 400.0, 320.0, 240.0, &[-1.0, 0.0, 0.0, 0.0]).unwrap());
+    assert!((lens.max_theta() - (1.0f64 / 3.0).sqrt().atan()).abs() < 1e-9);
+    assert!(lens.project(&Vector3::new(0.5, 0.0, 1.0)).is_some());
+    assert!(lens.project(&Vector3::new(0.7, 0.0, 1.0)).is_none());
 }
 
 #[test]

@@ -10,6 +10,14 @@
 //! Newton iteration on the monotonic part of θ ↦ θd, which is found once when the lens is built,
 //! so that unproject is exact (to ~1e-15 rad) everywhere the model is invertible and says `None`
 //! where it is not, instead of returning a wrong ray.
+//!
+//! `Radtan` is OpenCV's default camera model (`cv::projectPoints`: radial k1, k2, k3 and
+//! tangential p1, p2; Kalibr's `pinhole-radtan`). Its domain is likewise limited to the radius
+//! where the radial polynomial still rises (found when the lens is built), and its inverse is
+//! Newton's method on the 2×2 distortion map, checked by re-projection.
+//!
+//! `Equirectangular` sees the whole sphere (a consumer 360° camera's panorama):
+//! u = cx + fx·atan2(x, z), v = cy + fy·asin(y/ρ).
 
 use nalgebra::{Matrix2x3, Point2, Unit, Vector2, Vector3};
 
@@ -36,12 +44,42 @@ pub struct Kb4 {
     theta_d_max: f64,
 }
 
+/// OpenCV's default lens (pinhole with radial and tangential distortion), on normalised
+/// coordinates x' = x/z, y' = y/z, r² = x'² + y'²:
+/// x'' = x'(1 + k1r² + k2r⁴ + k3r⁶) + 2p1x'y' + p2(r² + 2x'²),
+/// y'' = y'(1 + k1r² + k2r⁴ + k3r⁶) + p1(r² + 2y'²) + 2p2x'y', u = fx·x'' + cx, v = fy·y'' + cy.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Radtan {
+    pub fx: f64,
+    pub fy: f64,
+    pub cx: f64,
+    pub cy: f64,
+    /// k1, k2, p1, p2, k3 (OpenCV's order; k3 = 0 when four are given).
+    pub d: [f64; 5],
+    /// Largest normalised radius r up to which r·(1 + k1r² + k2r⁴ + k3r⁶) rises (capped at
+    /// [`RADTAN_MAX_RADIUS`]): beyond it the polynomial folds the image back on itself.
+    r_max: f64,
+}
+
+/// A panorama of the whole sphere: u = cx + fx·atan2(x, z) (longitude, 0 along the optical
+/// axis), v = cy + fy·asin(y/ρ) (latitude, down positive like y). A W×H panorama has
+/// fx = W/2π, fy = H/π, cx = (W−1)/2, cy = (H−1)/2.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Equirectangular {
+    pub fx: f64,
+    pub fy: f64,
+    pub cx: f64,
+    pub cy: f64,
+}
+
 /// The lens of one sensor. One type for every lens so that the rest of the code never matches on
 /// the model.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Lens {
     Pinhole(Pinhole),
     Kb4(Kb4),
+    Radtan(Radtan),
+    Equirectangular(Equirectangular),
 }
 
 /// Why a lens could not be built from its parameters.
@@ -52,12 +90,12 @@ pub enum LensError {
     #[error("principal point must be finite (cx = {cx}, cy = {cy})")]
     BadCentre { cx: f64, cy: f64 },
     #[error("distortion coefficients must be finite ({k:?})")]
-    BadDistortion { k: [f64; 4] },
+    BadDistortion { k: Vec<f64> },
     #[error(
         "distortion {k:?} folds the image back on itself at θ = {theta_deg:.1}° (dθd/dθ ≤ 0): \
          the lens would see less than {theta_deg:.1}° off-axis"
     )]
-    Folds { k: [f64; 4], theta_deg: f64 },
+    Folds { k: Vec<f64>, theta_deg: f64 },
 }
 
 fn check_intrinsics(fx: f64, fy: f64, cx: f64, cy: f64) -> Result<(), LensError> {
@@ -85,12 +123,12 @@ impl Kb4 {
     pub fn new(fx: f64, fy: f64, cx: f64, cy: f64, k: [f64; 4]) -> Result<Self, LensError> {
         check_intrinsics(fx, fy, cx, cy)?;
         if k.iter().any(|c| !c.is_finite()) {
-            return Err(LensError::BadDistortion { k });
+            return Err(LensError::BadDistortion { k: k.to_vec() });
         }
         let theta_max = monotonic_limit(&k);
         if theta_max < KB4_MIN_DOMAIN {
             return Err(LensError::Folds {
-                k,
+                k: k.to_vec(),
                 theta_deg: theta_max.to_degrees(),
             });
         }
@@ -141,6 +179,140 @@ impl Kb4 {
     }
 }
 
+/// Largest normalised radius a radtan lens is taken to image (r = tan θ: 84°). OpenCV's model is
+/// a pinhole's and meant for lenses well under 180°; its polynomial says nothing reliable so far
+/// out, and the radius would otherwise be unbounded for a lens without distortion.
+pub const RADTAN_MAX_RADIUS: f64 = 10.0;
+
+/// Smallest normalised radius a radtan lens must cover before its polynomial may turn (tan 20°),
+/// as for KB4: a fold this early means the coefficients are wrong.
+const RADTAN_MIN_RADIUS: f64 = 0.364;
+
+impl Radtan {
+    /// From OpenCV's coefficients k1, k2, p1, p2 and, if given, k3.
+    pub fn new(fx: f64, fy: f64, cx: f64, cy: f64, d: &[f64]) -> Result<Self, LensError> {
+        check_intrinsics(fx, fy, cx, cy)?;
+        if !(d.len() == 4 || d.len() == 5) || d.iter().any(|c| !c.is_finite()) {
+            return Err(LensError::BadDistortion { k: d.to_vec() });
+        }
+        let mut c = [0.0; 5];
+        c[..d.len()].copy_from_slice(d);
+        let r_max = radtan_monotonic_limit(&c);
+        if r_max < RADTAN_MIN_RADIUS {
+            return Err(LensError::Folds {
+                k: d.to_vec(),
+                theta_deg: r_max.atan().to_degrees(),
+            });
+        }
+        Ok(Self {
+            fx,
+            fy,
+            cx,
+            cy,
+            d: c,
+            r_max,
+        })
+    }
+
+    /// The largest off-axis angle (rad) the model is taken to represent.
+    pub fn max_theta(&self) -> f64 {
+        self.r_max.atan()
+    }
+
+    /// (x'', y'') of normalised (x', y'), with d(x'', y'')/d(x', y') (rows x'', y'').
+    #[inline]
+    fn distort(&self, m: Vector2<f64>) -> (Vector2<f64>, nalgebra::Matrix2<f64>) {
+        let [k1, k2, p1, p2, k3] = self.d;
+        let (x, y) = (m.x, m.y);
+        let r2 = x * x + y * y;
+        let radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3));
+        // d(radial)/dx = x·dr, d(radial)/dy = y·dr.
+        let dr = 2.0 * k1 + r2 * (4.0 * k2 + 6.0 * k3 * r2);
+        let out = Vector2::new(
+            x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x),
+            y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y,
+        );
+        let cross = dr * x * y + 2.0 * p1 * x + 2.0 * p2 * y;
+        let jac = nalgebra::Matrix2::new(
+            radial + dr * x * x + 2.0 * p1 * y + 6.0 * p2 * x,
+            cross,
+            cross,
+            radial + dr * y * y + 6.0 * p1 * y + 2.0 * p2 * x,
+        );
+        (out, jac)
+    }
+
+    /// Normalised (x', y') with `distort` = `target`, by Newton's method from the target itself,
+    /// inside the model's radius; `None` if it does not converge there.
+    fn undistort(&self, target: Vector2<f64>) -> Option<Vector2<f64>> {
+        let mut m = target;
+        for _ in 0..50 {
+            let (f, j) = self.distort(m);
+            let err = f - target;
+            if err.norm() <= 1e-14 * (1.0 + target.norm()) {
+                break;
+            }
+            let step = j.lu().solve(&err)?;
+            let mut next = m - step;
+            // Keep the iterate inside the domain, where the map is one-to-one.
+            let r = next.norm();
+            if r > self.r_max {
+                next *= 0.5 * (m.norm() + self.r_max) / r;
+            }
+            m = next;
+        }
+        let (f, _) = self.distort(m);
+        (m.norm() <= self.r_max && (f - target).norm() <= 1e-9 * (1.0 + target.norm())).then_some(m)
+    }
+}
+
+/// First r in (0, RADTAN_MAX_RADIUS] where d/dr [r(1 + k1r² + k2r⁴ + k3r⁶)] = 1 + 3k1r² + 5k2r⁴
+/// + 7k3r⁶ reaches zero, or RADTAN_MAX_RADIUS: a scan, then bisection.
+fn radtan_monotonic_limit(d: &[f64; 5]) -> f64 {
+    let [k1, k2, _, _, k3] = *d;
+    let slope = |r: f64| {
+        let r2 = r * r;
+        1.0 + r2 * (3.0 * k1 + r2 * (5.0 * k2 + r2 * 7.0 * k3))
+    };
+    let n = 4000;
+    let step = RADTAN_MAX_RADIUS / n as f64;
+    let mut prev = 0.0;
+    for i in 1..=n {
+        let r = i as f64 * step;
+        if slope(r) <= 0.0 {
+            let (mut lo, mut hi) = (prev, r);
+            for _ in 0..200 {
+                let mid = 0.5 * (lo + hi);
+                if slope(mid) > 0.0 {
+                    lo = mid;
+                } else {
+                    hi = mid;
+                }
+            }
+            return lo;
+        }
+        prev = r;
+    }
+    RADTAN_MAX_RADIUS
+}
+
+impl Equirectangular {
+    pub fn new(fx: f64, fy: f64, cx: f64, cy: f64) -> Result<Self, LensError> {
+        check_intrinsics(fx, fy, cx, cy)?;
+        Ok(Self { fx, fy, cx, cy })
+    }
+
+    /// The lens of a whole W×H panorama: fx = W/2π, fy = H/π, centred.
+    pub fn for_panorama(width: u32, height: u32) -> Self {
+        Self {
+            fx: width as f64 / std::f64::consts::TAU,
+            fy: height as f64 / std::f64::consts::PI,
+            cx: (width as f64 - 1.0) / 2.0,
+            cy: (height as f64 - 1.0) / 2.0,
+        }
+    }
+}
+
 /// θd(θ) = θ(1 + k1θ² + k2θ⁴ + k3θ⁶ + k4θ⁸).
 #[inline]
 fn distort(k: &[f64; 4], theta: f64) -> f64 {
@@ -182,31 +354,84 @@ fn monotonic_limit(k: &[f64; 4]) -> f64 {
 }
 
 impl Lens {
+    /// The model's name in a rig file: `pinhole`, `kb4`, `radtan` or `equirectangular`.
+    pub fn model_name(&self) -> &'static str {
+        match self {
+            Lens::Pinhole(_) => "pinhole",
+            Lens::Kb4(_) => "kb4",
+            Lens::Radtan(_) => "radtan",
+            Lens::Equirectangular(_) => "equirectangular",
+        }
+    }
+
+    /// The same lens for an image resampled by `scale` (0.5: 2×2 binning): focal lengths scale,
+    /// and the principal point moves with pixel centres, c' = (c + ½)·scale − ½.
+    pub fn resampled(&self, scale: f64) -> Lens {
+        let c = |c: f64| (c + 0.5) * scale - 0.5;
+        match *self {
+            Lens::Pinhole(l) => Lens::Pinhole(Pinhole {
+                fx: l.fx * scale,
+                fy: l.fy * scale,
+                cx: c(l.cx),
+                cy: c(l.cy),
+            }),
+            Lens::Kb4(l) => Lens::Kb4(Kb4 {
+                fx: l.fx * scale,
+                fy: l.fy * scale,
+                cx: c(l.cx),
+                cy: c(l.cy),
+                ..l
+            }),
+            Lens::Radtan(l) => Lens::Radtan(Radtan {
+                fx: l.fx * scale,
+                fy: l.fy * scale,
+                cx: c(l.cx),
+                cy: c(l.cy),
+                ..l
+            }),
+            Lens::Equirectangular(l) => Lens::Equirectangular(Equirectangular {
+                fx: l.fx * scale,
+                fy: l.fy * scale,
+                cx: c(l.cx),
+                cy: c(l.cy),
+            }),
+        }
+    }
+
     pub fn fx(&self) -> f64 {
         match self {
             Lens::Pinhole(l) => l.fx,
             Lens::Kb4(l) => l.fx,
+            Lens::Radtan(l) => l.fx,
+            Lens::Equirectangular(l) => l.fx,
         }
     }
     pub fn fy(&self) -> f64 {
         match self {
             Lens::Pinhole(l) => l.fy,
             Lens::Kb4(l) => l.fy,
+            Lens::Radtan(l) => l.fy,
+            Lens::Equirectangular(l) => l.fy,
         }
     }
     pub fn principal_point(&self) -> Point2<f64> {
         match self {
             Lens::Pinhole(l) => Point2::new(l.cx, l.cy),
             Lens::Kb4(l) => Point2::new(l.cx, l.cy),
+            Lens::Radtan(l) => Point2::new(l.cx, l.cy),
+            Lens::Equirectangular(l) => Point2::new(l.cx, l.cy),
         }
     }
 
     /// Largest angle (rad) between the optical axis and a ray the lens can image, ignoring the
-    /// sensor's borders: π/2 for a pinhole, the model's monotonic domain for KB4.
+    /// sensor's borders: π/2 for a pinhole, the model's monotonic domain for KB4 and radtan, π
+    /// for a panorama.
     pub fn max_theta(&self) -> f64 {
         match self {
             Lens::Pinhole(_) => std::f64::consts::FRAC_PI_2,
             Lens::Kb4(l) => l.theta_max,
+            Lens::Radtan(l) => l.max_theta(),
+            Lens::Equirectangular(_) => std::f64::consts::PI,
         }
     }
 
@@ -224,6 +449,19 @@ impl Lens {
             Lens::Kb4(l) => {
                 let s = kb4_scale(l, p)?;
                 Some(Point2::new(l.fx * s * p.x + l.cx, l.fy * s * p.y + l.cy))
+            }
+            Lens::Radtan(l) => {
+                let m = radtan_normalised(l, p)?;
+                let (d, _) = l.distort(m);
+                Some(Point2::new(l.fx * d.x + l.cx, l.fy * d.y + l.cy))
+            }
+            Lens::Equirectangular(l) => {
+                let rho = p.norm();
+                if !(rho.is_finite() && rho > 0.0) {
+                    return None;
+                }
+                let lat = (p.y / rho).clamp(-1.0, 1.0).asin();
+                Some(Point2::new(l.cx + l.fx * p.x.atan2(p.z), l.cy + l.fy * lat))
             }
         }
     }
@@ -250,6 +488,25 @@ impl Lens {
                 let (sin, cos) = theta.sin_cos();
                 let dir = m / theta_d * sin;
                 Some(Unit::new_unchecked(Vector3::new(dir.x, dir.y, cos)))
+            }
+            Lens::Radtan(l) => {
+                let target = Vector2::new((px.x - l.cx) / l.fx, (px.y - l.cy) / l.fy);
+                if !target.iter().all(|c| c.is_finite()) {
+                    return None;
+                }
+                let m = l.undistort(target)?;
+                Some(Unit::new_normalize(Vector3::new(m.x, m.y, 1.0)))
+            }
+            Lens::Equirectangular(l) => {
+                let lon = (px.x - l.cx) / l.fx;
+                let lat = (px.y - l.cy) / l.fy;
+                use std::f64::consts::{FRAC_PI_2, PI};
+                if !(lon.abs() <= PI && lat.abs() <= FRAC_PI_2) {
+                    return None;
+                }
+                let (sl, cl) = lat.sin_cos();
+                let (so, co) = lon.sin_cos();
+                Some(Unit::new_normalize(Vector3::new(cl * so, sl, cl * co)))
             }
         }
     }
@@ -297,8 +554,46 @@ impl Lens {
                     l.fy * p.y * ds_dz,
                 ))
             }
+            Lens::Radtan(l) => {
+                // pixel ← (x'', y'') ← (x', y') = (x/z, y/z).
+                let m = radtan_normalised(l, p)?;
+                let (_, jd) = l.distort(m);
+                let iz = 1.0 / p.z;
+                let jm = Matrix2x3::new(iz, 0.0, -m.x * iz, 0.0, iz, -m.y * iz);
+                let f = nalgebra::Matrix2::new(l.fx, 0.0, 0.0, l.fy);
+                Some(f * jd * jm)
+            }
+            Lens::Equirectangular(l) => {
+                // d atan2(x, z) = (z dx − x dz) / h², d asin(y/ρ) = (h² dy − y (x dx + z dz)) / (ρ² h)
+                // with h² = x² + z²: singular at the poles, where longitude is undefined.
+                let h2 = p.x * p.x + p.z * p.z;
+                let rho2 = h2 + p.y * p.y;
+                let h = h2.sqrt();
+                if !(h > 1e-12 * rho2.sqrt() && rho2.is_finite()) {
+                    return None;
+                }
+                let a = 1.0 / (rho2 * h);
+                Some(Matrix2x3::new(
+                    l.fx * p.z / h2,
+                    0.0,
+                    -l.fx * p.x / h2,
+                    -l.fy * p.y * p.x * a,
+                    l.fy * h2 * a,
+                    -l.fy * p.y * p.z * a,
+                ))
+            }
         }
     }
+}
+
+/// (x/z, y/z) of a point a radtan lens images: in front, within the model's radius.
+#[inline]
+fn radtan_normalised(l: &Radtan, p: &Vector3<f64>) -> Option<Vector2<f64>> {
+    if !(p.z > 0.0 && p.z.is_finite()) {
+        return None;
+    }
+    let m = Vector2::new(p.x / p.z, p.y / p.z);
+    (m.norm() <= l.r_max).then_some(m)
 }
 
 /// s = θd/r, the factor taking (x, y) to normalised distorted coordinates, with its on-axis limit.

@@ -7,7 +7,7 @@
 pub mod lens;
 pub mod observation;
 
-pub use lens::{Kb4, Lens, LensError, Pinhole};
+pub use lens::{Equirectangular, Kb4, Lens, LensError, Pinhole, Radtan};
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 pub use observation::{xi, Correspondence, EdgePlane};
 

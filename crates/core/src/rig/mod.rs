@@ -10,7 +10,7 @@ pub mod view;
 
 pub use view::ViewMap;
 
-use crate::geometry::{pose_from_parts, rotation_to_wxyz, Kb4, Lens, Pinhole, Pose};
+use crate::geometry::{pose_from_parts, rotation_to_wxyz, Equirectangular, Kb4, Lens, Pinhole, Pose, Radtan};
 use nalgebra::{Point2, Point3, Unit, Vector3};
 use std::fmt::Write as _;
 use std::path::Path;
@@ -65,6 +65,9 @@ pub struct RigError {
     pub message: String,
 }
 
+/// The lens models a rig file may name.
+const LENS_MODELS: &str = "\"kb4\", \"pinhole\", \"radtan\" or \"equirectangular\"";
+
 const SENSOR_KEYS: [&str; 9] = [
     "id",
     "resolution",
@@ -89,16 +92,28 @@ impl Sensor {
         px.x >= -0.5 && px.y >= -0.5 && px.x <= self.width as f64 - 0.5 && px.y <= self.height as f64 - 0.5
     }
 
-    /// Largest angle (rad) between the optical axis and the ray through any pixel of the image
-    /// (for both lens models the extreme is at a corner: θd grows with distance from the
-    /// principal point in normalised coordinates).
+    /// Largest angle (rad) between the optical axis and the ray through any pixel of the image:
+    /// at a corner for the lenses centred on their axis (θd grows with distance from the
+    /// principal point in normalised coordinates), at the middle of a side border for a panorama
+    /// (whose corners are its poles, 90° off the axis, and whose side borders are straight
+    /// behind).
     pub fn max_off_axis(&self) -> f64 {
         let (w, h) = (self.width as f64 - 0.5, self.height as f64 - 0.5);
-        [(-0.5, -0.5), (w, -0.5), (-0.5, h), (w, h)]
-            .iter()
-            .filter_map(|&(u, v)| self.lens.unproject(&Point2::new(u, v)))
-            .map(|r| r.z.clamp(-1.0, 1.0).acos())
-            .fold(0.0, f64::max)
+        let (mu, mv) = (0.5 * (w - 0.5), 0.5 * (h - 0.5));
+        [
+            (-0.5, -0.5),
+            (w, -0.5),
+            (-0.5, h),
+            (w, h),
+            (-0.5, mv),
+            (w, mv),
+            (mu, -0.5),
+            (mu, h),
+        ]
+        .iter()
+        .filter_map(|&(u, v)| self.lens.unproject(&Point2::new(u, v)))
+        .map(|r| r.z.clamp(-1.0, 1.0).acos())
+        .fold(0.0, f64::max)
     }
 
     /// Unit ray through a pixel, in the rig frame (starting at [`Sensor::centre`]).
@@ -196,11 +211,15 @@ impl Rig {
         for s in &self.sensors {
             let _ = writeln!(out, "\n[[sensors]]\nid = {}", s.id);
             let _ = writeln!(out, "resolution = [{}, {}]", s.width, s.height);
-            let (model, intr, dist) = match s.lens {
-                Lens::Pinhole(l) => ("pinhole", [l.fx, l.fy, l.cx, l.cy], None),
-                Lens::Kb4(l) => ("kb4", [l.fx, l.fy, l.cx, l.cy], Some(l.k)),
+            let dist = match s.lens {
+                Lens::Pinhole(_) | Lens::Equirectangular(_) => None,
+                Lens::Kb4(l) => Some(l.k.to_vec()),
+                // Four coefficients when k3 is 0, as OpenCV and Kalibr write them.
+                Lens::Radtan(l) => Some(l.d[..if l.d[4] == 0.0 { 4 } else { 5 }].to_vec()),
             };
-            let _ = writeln!(out, "model = \"{model}\"");
+            let c = s.lens.principal_point();
+            let intr = [s.lens.fx(), s.lens.fy(), c.x, c.y];
+            let _ = writeln!(out, "model = \"{}\"", s.lens.model_name());
             let _ = writeln!(out, "intrinsics = {}", float_list(&intr));
             if let Some(k) = dist {
                 let _ = writeln!(out, "distortion = {}", float_list(&k));
@@ -288,8 +307,8 @@ fn parse_sensor(entry: &Value, index: usize, count: usize) -> Result<Sensor, Pla
     }
     let model = match t.get("model") {
         Some(Value::String(s)) => s.as_str(),
-        Some(_) => return Err(fail("model", "must be the string \"kb4\" or \"pinhole\"".into())),
-        None => return Err(fail("model", "missing (\"kb4\" or \"pinhole\")".into())),
+        Some(_) => return Err(fail("model", format!("must be a string: {LENS_MODELS}"))),
+        None => return Err(fail("model", format!("missing ({LENS_MODELS})"))),
     };
     let i = numbers("intrinsics", 4)?;
     let lens = match model {
@@ -297,16 +316,34 @@ fn parse_sensor(entry: &Value, index: usize, count: usize) -> Result<Sensor, Pla
             let k = numbers("distortion", 4)?;
             Kb4::new(i[0], i[1], i[2], i[3], [k[0], k[1], k[2], k[3]]).map(Lens::Kb4)
         }
-        "pinhole" => {
+        "radtan" => {
+            let n = match t.get("distortion") {
+                Some(Value::Array(a)) if a.len() == 4 || a.len() == 5 => a.len(),
+                Some(Value::Array(a)) => {
+                    return Err(fail(
+                        "distortion",
+                        format!("must have 4 or 5 numbers (k1, k2, p1, p2[, k3]), found {}", a.len()),
+                    ))
+                }
+                _ => 4,
+            };
+            let d = numbers("distortion", n)?;
+            Radtan::new(i[0], i[1], i[2], i[3], &d).map(Lens::Radtan)
+        }
+        "pinhole" | "equirectangular" => {
             if t.contains_key("distortion") {
-                return Err(fail("distortion", "not allowed for model \"pinhole\"".into()));
+                return Err(fail("distortion", format!("not allowed for model \"{model}\"")));
             }
-            Pinhole::new(i[0], i[1], i[2], i[3]).map(Lens::Pinhole)
+            if model == "pinhole" {
+                Pinhole::new(i[0], i[1], i[2], i[3]).map(Lens::Pinhole)
+            } else {
+                Equirectangular::new(i[0], i[1], i[2], i[3]).map(Lens::Equirectangular)
+            }
         }
         other => {
             return Err(fail(
                 "model",
-                format!("unknown lens model \"{other}\" (expected \"kb4\" or \"pinhole\")"),
+                format!("unknown lens model \"{other}\" (expected {LENS_MODELS})"),
             ))
         }
     };

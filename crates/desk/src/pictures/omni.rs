@@ -63,7 +63,7 @@ pub fn frame_images(frame: &FrameSet) -> Vec<RgbImage> {
 fn pixels_per_radian(lens: &Lens) -> f64 {
     let f = lens.fx().max(lens.fy());
     match lens {
-        Lens::Pinhole(_) => 3.0 * f,
+        Lens::Pinhole(_) | Lens::Radtan(_) => 3.0 * f,
         _ => 1.5 * f,
     }
 }
