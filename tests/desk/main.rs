@@ -4,6 +4,7 @@ mod convert;
 mod demo;
 mod eval;
 mod floorplan;
+mod kalibr;
 mod pictures;
 mod random_buildings;
 mod recording_replay;

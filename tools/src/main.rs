@@ -89,6 +89,11 @@ enum Command {
         #[command(subcommand)]
         command: ModelCommand,
     },
+    /// Rig files from other tools' calibrations.
+    Rig {
+        #[command(subcommand)]
+        command: RigCommand,
+    },
     /// Compare an estimated trajectory with the ground truth: ATE and RPE (as evo_ape/evo_rpe).
     Eval {
         /// Ground truth, TUM format (T_world_rig).
@@ -107,6 +112,26 @@ enum Command {
         /// Print every statistic as JSON (metres and degrees) instead of the table.
         #[arg(long)]
         json: bool,
+    },
+}
+
+#[derive(Subcommand)]
+enum RigCommand {
+    /// A rig file from a Kalibr camera chain (camchain.yaml): `pinhole` cameras with
+    /// `equidistant` (→ kb4), `radtan` (→ radtan) or no distortion; other models are refused.
+    /// The rig frame is the named camera's frame turned to x forward, y left, z up.
+    FromKalibr {
+        /// Kalibr's camera chain (the camchain.yaml of kalibr_calibrate_cameras).
+        camchain: PathBuf,
+        /// Where to write the rig.
+        #[arg(long, value_name = "RIG.toml")]
+        out: PathBuf,
+        /// The camera whose frame, turned, is the rig's.
+        #[arg(long, value_name = "camN", default_value = "cam0")]
+        rig_frame: String,
+        /// The rig's name (default: the output file's stem).
+        #[arg(long)]
+        name: Option<String>,
     },
 }
 
@@ -213,6 +238,33 @@ fn main() -> ExitCode {
 
 fn run(command: Command) -> Result<(), String> {
     match command {
+        Command::Rig {
+            command:
+                RigCommand::FromKalibr {
+                    camchain,
+                    out,
+                    rig_frame,
+                    name,
+                },
+        } => {
+            let file = camchain.display().to_string();
+            let yaml = std::fs::read_to_string(&camchain).map_err(|e| format!("{file}: cannot read: {e}"))?;
+            let name = name.unwrap_or_else(|| {
+                out.file_stem()
+                    .map(|s| s.to_string_lossy().into_owned())
+                    .unwrap_or_else(|| "rig".into())
+            });
+            let rig =
+                omnitrack::desk::kalibr::rig_from_kalibr(&yaml, &file, &name, &rig_frame).map_err(|e| e.to_string())?;
+            let header = format!(
+                "# Converted by `omnitrack-desk rig from-kalibr` from {file}; rig frame: {rig_frame} turned to\n\
+                 # x forward, y left, z up, origin at its optical centre.\n"
+            );
+            std::fs::write(&out, header + &rig.to_toml_string())
+                .map_err(|e| format!("{}: cannot write: {e}", out.display()))?;
+            eprintln!("{}: rig '{}', {} sensors", out.display(), rig.name, rig.sensors.len());
+            Ok(())
+        }
         Command::Model {
             command: ModelCommand::FromIfc { file, out, storey },
         } => from_ifc(&file, &out, storey.as_deref()),

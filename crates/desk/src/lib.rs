@@ -5,6 +5,7 @@
 pub mod demo;
 pub mod eval;
 pub mod floorplan;
+pub mod kalibr;
 pub mod observations;
 pub mod pictures;
 pub mod recording;
