@@ -27,6 +27,9 @@ enum Command {
     /// Tracks: frames from the source, poses on the iceoryx2 pose service and, if asked, a TUM
     /// trajectory. Without --init the whole model is searched.
     Run(commands::run::Args),
+    /// Records what a source delivers (v4l, usb or a replay) in the recording layout `run`
+    /// replays: PNG per sensor image, frames.csv with the capture timestamps.
+    Record(commands::record::Args),
     /// Validates a rig, and optionally a model and a tracker config, and summarises them.
     Check(commands::check::Args),
     /// Solves one pose T_world_rig from line correspondences and prints it as JSON.
@@ -75,6 +78,7 @@ fn run(command: Command) -> CommandResult {
                 .into(),
         ),
         Command::Run(args) => commands::run::run(args),
+        Command::Record(args) => commands::record::run(args),
         Command::Check(args) => commands::check::run(args),
         Command::Pose(args) => commands::pose::run(args),
         Command::Edges(args) => commands::edges::run(args),

@@ -5,6 +5,7 @@
 pub mod check;
 pub mod edges;
 pub mod pose;
+pub mod record;
 pub mod run;
 pub mod segments;
 pub mod visibility;

@@ -4,5 +4,6 @@
 mod common;
 
 mod cli_pose;
+mod cli_record;
 mod cli_run;
 mod cli_visibility;

@@ -10,10 +10,12 @@
 //! buffers and the tracker's tables are sized once (the sink decides what it keeps).
 //!
 //! [`pipeline`] is the threaded device runtime (capture threads, frame pool, tracker, publishers);
-//! [`cli`] the command-line parsing both binaries share.
+//! [`record`] writes a source's frames as a recording; [`cli`] the command-line parsing both
+//! binaries share.
 
 pub mod cli;
 pub mod pipeline;
+pub mod record;
 
 use omnitrack_config::TrackerConfig;
 use omnitrack_core::model::Model;

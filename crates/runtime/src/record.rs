@@ -1,0 +1,226 @@
+//! `omnitrack record`: what a source delivers, written in the recording layout that `run`
+//! replays (docs/interfaces.md, "Recording"), for replay, tuning and bug reports.
+//!
+//! In: a [`FrameSource`] (live cameras or a replay), an output directory that does not exist or
+//! is empty, [`RecordOptions`]. Out: `DIR/rig.toml` (the source's rig), `DIR/sensorK/NNNNNN.png`
+//! (8-bit RGB, lossless), `DIR/frames.csv` (`frame,sensor,timestamp_ns,path`, one row per valid
+//! image: a sensor's dropped image has no row, as the format allows), and a [`RecordSummary`].
+//!
+//! Capture never waits for the disk: the caller's thread pulls frames into a preallocated pool
+//! and hands them to a writer thread through a bounded queue; when the queue is full the frame
+//! is dropped and counted (latest frames are what a bug report needs), unless
+//! [`RecordOptions::lossless`] asks capture to wait (a replay re-recorded as fast as it goes).
+//! The writer flushes `frames.csv` after every frame, so a crash loses at most the frame being
+//! written, and a write error (a full disk) stops the recording with one line after the frames
+//! already on disk.
+
+use crossbeam::channel::{bounded, Receiver, Sender, TrySendError};
+use image::codecs::png::{CompressionType, FilterType, PngEncoder};
+use image::{ExtendedColorType, ImageEncoder};
+use omnitrack_io::capture::{FrameSet, FrameSource, SourceError};
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+/// The header of `frames.csv`.
+pub const FRAMES_HEADER: &str = "frame,sensor,timestamp_ns,path";
+
+/// How to record.
+#[derive(Debug, Clone)]
+pub struct RecordOptions {
+    /// Stop after this many frames taken from the source (written or dropped).
+    pub max_frames: Option<u64>,
+    /// Frames waiting for the writer before capture drops (default 8: a quarter second at 30 Hz).
+    pub queue: usize,
+    /// Wait for the writer instead of dropping (replays; live cameras would stall).
+    pub lossless: bool,
+    /// Set from anywhere (a signal handler) to stop after the frame in hand.
+    pub stop: Arc<AtomicBool>,
+}
+
+impl Default for RecordOptions {
+    fn default() -> Self {
+        RecordOptions {
+            max_frames: None,
+            queue: 8,
+            lossless: false,
+            stop: Arc::new(AtomicBool::new(false)),
+        }
+    }
+}
+
+/// What a recording holds.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct RecordSummary {
+    /// Frames the source delivered.
+    pub frames_captured: u64,
+    /// Frames on disk (each with its valid images).
+    pub frames_written: u64,
+    /// Frames dropped because the writer was behind.
+    pub frames_dropped: u64,
+    /// Images written, and sensor images the source delivered as invalid (no row, no file).
+    pub images_written: u64,
+    pub images_invalid: u64,
+}
+
+impl std::fmt::Display for RecordSummary {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} frames captured, {} written ({} images), {} dropped (writer behind), {} sensor images invalid",
+            self.frames_captured, self.frames_written, self.images_written, self.frames_dropped, self.images_invalid
+        )
+    }
+}
+
+/// Why a recording stopped early or could not start.
+#[derive(Debug, thiserror::Error)]
+pub enum RecordError {
+    #[error("{}: the output directory exists and is not empty (a recording never overwrites)", .0.display())]
+    NotEmpty(PathBuf),
+    #[error("{}: {source}", .path.display())]
+    Write { path: PathBuf, source: std::io::Error },
+    #[error("{}: cannot encode PNG: {message}", .path.display())]
+    Encode { path: PathBuf, message: String },
+    #[error("{0}")]
+    Source(#[from] SourceError),
+}
+
+/// Records `source` into `out` (module doc). On an error the frames already written stay a
+/// valid recording.
+pub fn record(source: &mut dyn FrameSource, out: &Path, opts: &RecordOptions) -> Result<RecordSummary, RecordError> {
+    let write_error = |path: &Path| {
+        let path = path.to_path_buf();
+        move |source| RecordError::Write { path, source }
+    };
+    if let Ok(mut entries) = std::fs::read_dir(out) {
+        if entries.next().is_some() {
+            return Err(RecordError::NotEmpty(out.to_path_buf()));
+        }
+    }
+    let rig = source.rig().clone();
+    std::fs::create_dir_all(out).map_err(write_error(out))?;
+    for s in &rig.sensors {
+        let dir = out.join(format!("sensor{}", s.id));
+        std::fs::create_dir_all(&dir).map_err(write_error(&dir))?;
+    }
+    let rig_path = out.join("rig.toml");
+    std::fs::write(&rig_path, rig.to_toml_string()).map_err(write_error(&rig_path))?;
+    let csv_path = out.join("frames.csv");
+    let mut csv = BufWriter::new(File::create(&csv_path).map_err(write_error(&csv_path))?);
+    writeln!(csv, "{FRAMES_HEADER}")
+        .and_then(|_| csv.flush())
+        .map_err(write_error(&csv_path))?;
+
+    let queue = opts.queue.max(1);
+    let (full_tx, full_rx) = bounded::<FrameSet>(queue);
+    let (free_tx, free_rx) = bounded::<FrameSet>(queue + 1);
+    for _ in 0..queue + 1 {
+        let _ = free_tx.send(FrameSet::for_rig(&rig));
+    }
+    let mut summary = RecordSummary::default();
+    let written = std::thread::scope(|scope| {
+        let writer = scope.spawn(move || write_frames(full_rx, free_tx, out, csv, csv_path));
+        let captured = capture(source, opts, &full_tx, &free_rx, &rig, &mut summary);
+        drop(full_tx);
+        let written = writer.join().unwrap_or_else(|_| {
+            Err(RecordError::Encode {
+                path: out.to_path_buf(),
+                message: "the writer thread panicked".into(),
+            })
+        });
+        captured.and(written)
+    });
+    let (frames, images) = written?;
+    summary.frames_written = frames;
+    summary.images_written = images;
+    Ok(summary)
+}
+
+/// The caller's side: frames from the source into the pool and on to the writer.
+fn capture(
+    source: &mut dyn FrameSource,
+    opts: &RecordOptions,
+    full: &Sender<FrameSet>,
+    free: &Receiver<FrameSet>,
+    rig: &omnitrack_core::rig::Rig,
+    summary: &mut RecordSummary,
+) -> Result<(), RecordError> {
+    // The frame in hand when every pool frame waits for the writer: capture goes on into it.
+    let mut spare = FrameSet::for_rig(rig);
+    while opts.max_frames.is_none_or(|m| summary.frames_captured < m) && !opts.stop.load(Ordering::Relaxed) {
+        let mut frame = if opts.lossless {
+            match free.recv() {
+                Ok(f) => f,
+                // The writer stopped (its error is reported by the caller).
+                Err(_) => return Ok(()),
+            }
+        } else {
+            free.try_recv()
+                .unwrap_or_else(|_| std::mem::replace(&mut spare, FrameSet::for_rig(rig)))
+        };
+        if !source.next_frame(&mut frame)? {
+            break;
+        }
+        summary.frames_captured += 1;
+        summary.images_invalid += frame.sensors().iter().filter(|s| !s.valid).count() as u64;
+        match full.try_send(frame) {
+            Ok(()) => {}
+            Err(TrySendError::Full(frame)) if opts.lossless => {
+                if full.send(frame).is_err() {
+                    return Ok(());
+                }
+            }
+            Err(TrySendError::Full(frame)) => {
+                summary.frames_dropped += 1;
+                spare = frame;
+            }
+            Err(TrySendError::Disconnected(_)) => return Ok(()),
+        }
+    }
+    Ok(())
+}
+
+/// The writer thread: PNGs and rows, `frames.csv` flushed per frame. Returns frames and images
+/// written.
+fn write_frames(
+    full: Receiver<FrameSet>,
+    free: Sender<FrameSet>,
+    out: &Path,
+    mut csv: BufWriter<File>,
+    csv_path: PathBuf,
+) -> Result<(u64, u64), RecordError> {
+    let (mut frames, mut images) = (0u64, 0u64);
+    let mut bytes = Vec::new();
+    for frame in full {
+        for s in frame.sensors().iter().filter(|s| s.valid) {
+            let relative = format!("sensor{}/{:06}.png", s.sensor(), frame.sequence);
+            let path = out.join(&relative);
+            bytes.clear();
+            PngEncoder::new_with_quality(&mut bytes, CompressionType::Fast, FilterType::Adaptive)
+                .write_image(s.pixels(), s.width(), s.height(), ExtendedColorType::Rgb8)
+                .map_err(|e| RecordError::Encode {
+                    path: path.clone(),
+                    message: e.to_string(),
+                })?;
+            std::fs::write(&path, &bytes).map_err(|source| RecordError::Write { path, source })?;
+            writeln!(csv, "{},{},{},{relative}", frame.sequence, s.sensor(), s.timestamp_ns).map_err(|source| {
+                RecordError::Write {
+                    path: csv_path.clone(),
+                    source,
+                }
+            })?;
+            images += 1;
+        }
+        csv.flush().map_err(|source| RecordError::Write {
+            path: csv_path.clone(),
+            source,
+        })?;
+        frames += 1;
+        // The capture side may have gone; the frame is then simply dropped.
+        let _ = free.send(frame);
+    }
+    Ok((frames, images))
+}
