@@ -41,12 +41,23 @@ enum Command {
         #[command(subcommand)]
         command: commands::visibility::Command,
     },
-    /// Subscribes to the pose service and prints one line per sample.
+    /// Subscribes to the pose service (or the status service) and prints one line per sample.
     Listen {
         /// Stop after N samples (default: until Ctrl-C).
         #[arg(long)]
         count: Option<u64>,
+        /// The status service instead: tracker state, search, per-sensor rates and drops, stage
+        /// timings.
+        #[arg(long)]
+        status: bool,
     },
+    /// Prints a shell completion script for omnitrack (bash, zsh, fish, elvish or powershell).
+    Completions {
+        /// The shell.
+        shell: clap_complete::Shell,
+    },
+    /// Prints omnitrack's manual page (roff; `omnitrack manpage | man -l -`).
+    Manpage,
     /// Prints the model segments of an OBJ as CSV: x1,y1,z1,x2,y2,z2,faces (OBJ face numbers,
     /// space-separated; empty for a free `l` segment).
     Segments(commands::segments::Args),
@@ -56,6 +67,8 @@ fn main() -> ExitCode {
     let cli: Cli = omnitrack::runtime::cli::parse_or_exit("omnitrack", "omnitrack demo");
     match run(cli.command) {
         Ok(()) => ExitCode::SUCCESS,
+        // The reader went away (`… | head`): nothing is left to say, and no one to say it to.
+        Err(e) if commands::is_broken_pipe(&*e) => ExitCode::SUCCESS,
         Err(message) => {
             eprintln!("omnitrack: {message}");
             ExitCode::from(2)
@@ -68,7 +81,7 @@ fn run(command: Command) -> CommandResult {
         #[cfg(feature = "desk")]
         Command::Demo => {
             let report = omnitrack::desk::demo::run_demo(&omnitrack::desk::demo::DemoOptions::default())?;
-            println!("{report}");
+            commands::print_line(&report.to_string())?;
             Ok(())
         }
         #[cfg(not(feature = "desk"))]
@@ -83,11 +96,29 @@ fn run(command: Command) -> CommandResult {
         Command::Pose(args) => commands::pose::run(args),
         Command::Edges(args) => commands::edges::run(args),
         Command::Visibility { command } => commands::visibility::run(command),
-        Command::Listen { count } => Ok(omnitrack::publish::listen(
+        Command::Listen { count, status: false } => Ok(omnitrack::publish::listen(
             omnitrack::publish::POSE_SERVICE,
             count,
             &mut std::io::stdout().lock(),
         )?),
+        Command::Listen { count, status: true } => Ok(omnitrack::publish::listen_status(
+            omnitrack::publish::STATUS_SERVICE,
+            count,
+            &mut std::io::stdout().lock(),
+        )?),
         Command::Segments(args) => commands::segments::run(args),
+        Command::Completions { shell } => {
+            let mut cli = <Cli as clap::CommandFactory>::command();
+            // Into memory first: clap_complete panics on a failed write.
+            let mut script = Vec::new();
+            clap_complete::generate(shell, &mut cli, "omnitrack", &mut script);
+            std::io::Write::write_all(&mut std::io::stdout().lock(), &script).map_err(commands::stdout_error)?;
+            Ok(())
+        }
+        Command::Manpage => {
+            let cli = <Cli as clap::CommandFactory>::command();
+            clap_mangen::Man::new(cli).render(&mut std::io::stdout().lock())?;
+            Ok(())
+        }
     }
 }

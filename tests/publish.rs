@@ -7,8 +7,8 @@ use std::time::Duration;
 
 use nalgebra::{Isometry3, Matrix6, Translation3, UnitQuaternion, Vector3};
 use omnitrack::publish::{
-    format_pose_line, listen, PosePublisher, PoseSample, PoseStatus, PoseSubscriber, Stage, StatusPublisher,
-    StatusSample, StatusSubscriber, STATUS_MAX_SENSORS,
+    format_pose_line, format_status_line, listen, listen_status, PosePublisher, PoseSample, PoseStatus, PoseSubscriber,
+    Stage, StatusPublisher, StatusSample, StatusSubscriber, STATUS_MAX_SENSORS,
 };
 
 mod common;
@@ -312,4 +312,59 @@ fn listen_prints_one_documented_line_per_sample() {
     .unwrap();
     let one = String::from_utf8(one).unwrap();
     assert!(one.contains(" status=unknown(9) "), "{one}");
+}
+
+#[test]
+fn listen_status_prints_one_documented_line_per_status_sample() {
+    use omnitrack::publish::SearchState;
+    let name = unique("listen-status");
+    let publisher = StatusPublisher::create(&name).unwrap();
+    let name2 = name.clone();
+    let listener = std::thread::spawn(move || {
+        let mut out = Vec::new();
+        listen_status(&name2, Some(2), &mut out).map(|_| String::from_utf8(out).unwrap())
+    });
+    let mut s = StatusSample {
+        timestamp_ns: 42,
+        tracker_state: u8::from(PoseStatus::Tracking),
+        sensor_count: 2,
+        search: u8::from(SearchState::Widened),
+        search_widened_to_m: 4.3,
+        ..StatusSample::default()
+    };
+    s.frame_rate_hz[..2].copy_from_slice(&[30.0, 29.5]);
+    s.frames_dropped[..2].copy_from_slice(&[0, 3]);
+    for st in Stage::ALL {
+        s.stage_p50_us[st.index()] = 10 * (st.index() as u32 + 1);
+        s.stage_p99_us[st.index()] = 100 * (st.index() as u32 + 1);
+    }
+    let deadline = std::time::Instant::now() + WAIT;
+    while !listener.is_finished() && std::time::Instant::now() < deadline {
+        publisher.publish(&s).unwrap();
+        s.sequence += 1;
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    assert!(listener.is_finished(), "listen --status did not stop after 2 samples");
+    let text = listener.join().unwrap().unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    assert_eq!(lines.len(), 2, "{text}");
+    let first = lines[0].split_once(' ').unwrap().1;
+    assert_eq!(
+        first,
+        "t=42ns state=tracking search=widened:4.3 sensors=2 fps=[30.0,29.5] dropped=[0,3] \
+         p50_us=[capture=10,edges=20,match=30,solve=40,publish=50,frame=60,track=70] \
+         p99_us=[capture=100,edges=200,match=300,solve=400,publish=500,frame=600,track=700]"
+    );
+    let mut one = Vec::new();
+    format_status_line(
+        &StatusSample {
+            sensor_count: 200,
+            search: 9,
+            ..StatusSample::default()
+        },
+        &mut one,
+    )
+    .unwrap();
+    let one = String::from_utf8(one).unwrap();
+    assert!(one.contains(" search=unknown(9) sensors=16 "), "{one}");
 }

@@ -38,7 +38,6 @@ pub fn run(
     };
     let csv = omnitrack::edges::edges_csv_for_image(&rig, &edges, sensor, &image)?;
     let mut out = std::io::stdout().lock();
-    out.write_all(csv.as_bytes())
-        .map_err(|e| format!("cannot write to standard output: {e}"))?;
+    out.write_all(csv.as_bytes()).map_err(super::stdout_error)?;
     Ok(())
 }

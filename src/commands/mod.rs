@@ -12,3 +12,30 @@ pub mod visibility;
 
 /// A command's outcome: its output is written; an error is reported by `main` in one line.
 pub type CommandResult = Result<(), Box<dyn std::error::Error>>;
+
+/// Writes `text` and a newline to standard output. Unlike `println!`, a closed pipe
+/// (`omnitrack pose … | head -c1`) comes back as an error, which `main` ends quietly on.
+pub fn print_line(text: &str) -> std::io::Result<()> {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    writeln!(out, "{text}").and_then(|_| out.flush())
+}
+
+/// A failed write to standard output, said so, its kind kept (a closed pipe stays one).
+pub fn stdout_error(e: std::io::Error) -> std::io::Error {
+    std::io::Error::new(e.kind(), format!("cannot write to standard output: {e}"))
+}
+
+/// Whether `e`, or an error it was caused by, is a write to a closed pipe.
+pub fn is_broken_pipe(e: &(dyn std::error::Error + 'static)) -> bool {
+    let mut cause = Some(e);
+    while let Some(c) = cause {
+        if c.downcast_ref::<std::io::Error>()
+            .is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe)
+        {
+            return true;
+        }
+        cause = c.source();
+    }
+    false
+}

@@ -54,7 +54,7 @@ pub fn run(
     let correspondences = omnitrack::lines::parse_lines(&text, &name, &rig)?;
     let solution = solver::solve(method, &correspondences, guess.as_ref(), &options, 0)
         .map_err(|e| format!("{name}: no pose: {e}"))?;
-    println!("{}", pose_json(&solution));
+    super::print_line(&pose_json(&solution))?;
     Ok(())
 }
 

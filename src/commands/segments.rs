@@ -39,6 +39,6 @@ pub fn run(Args { model }: Args) -> CommandResult {
         }
         out.flush()
     };
-    write(&mut out).map_err(|e| format!("cannot write to standard output: {e}"))?;
+    write(&mut out).map_err(super::stdout_error)?;
     Ok(())
 }

@@ -48,7 +48,7 @@ pub fn run(command: Command) -> CommandResult {
         Command::Query { visibility, at } => {
             let at = omnitrack::visibility::parse_point(&at)?;
             let json = omnitrack::visibility::run_query(&visibility, &at)?;
-            println!("{json}");
+            super::print_line(&json)?;
             Ok(())
         }
     }

@@ -140,3 +140,28 @@ fn a_hint_with_no_valid_node_is_widened_and_a_run_without_a_pose_says_why() {
     let last = last_line(&stderr);
     assert!(last.starts_with("omnitrack: no pose: "), "{stderr}");
 }
+
+/// A reader that goes away (`omnitrack … | head -c1`) ends the command quietly: no panic, no
+/// error line, exit 0.
+#[test]
+fn a_closed_standard_output_ends_quietly() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = dir.path().join("room.obj");
+    std::fs::write(&model, "v 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2 3\n").unwrap();
+    for args in [
+        vec!["manpage"],
+        vec!["completions", "bash"],
+        vec!["segments", "--model", model.to_str().unwrap()],
+    ] {
+        let (reader, writer) = std::io::pipe().unwrap();
+        drop(reader);
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_omnitrack"))
+            .args(&args)
+            .stdout(writer)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.success(), "{args:?}: {:?} {stderr}", out.status);
+        assert!(stderr.is_empty(), "{args:?}: {stderr}");
+    }
+}

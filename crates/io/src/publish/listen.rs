@@ -1,4 +1,5 @@
-//! `omnitrack listen [--count N]`: subscribes to the pose service and prints one line per sample.
+//! `omnitrack listen [--count N] [--status]`: subscribes to the pose service (or, with
+//! `--status`, the status service) and prints one line per sample.
 //!
 //! Line format (one sample per line, space-separated `key=value`, fixed key order):
 //!
@@ -12,11 +13,22 @@
 //! - `sd_m` / `sd_deg`: square roots of the covariance diagonal (translation in metres,
 //!   rotation converted to degrees);
 //! - `inliers`: accepted correspondences; `xi`: ξ in rad² (scientific notation).
+//!
+//! Status lines (`--status`), same rules:
+//!
+//! ```text
+//! seq=7 t=1700000000123456789ns state=tracking search=none sensors=6 fps=[30.0,30.0,30.0,30.0,30.0,29.9] dropped=[0,0,0,0,0,2] p50_us=[capture=812,edges=3950,match=420,solve=610,publish=48,frame=8400,track=1700] p99_us=[…]
+//! ```
+//!
+//! - `state`: the tracker's [`PoseStatus`]; `search`: the last search's [`SearchState`]
+//!   (`none`, `as_given`, `widened` followed by `:D` metres, `no_cells`);
+//! - `sensors`, then per sensor the delivered images per second and the images lost since start;
+//! - `p50_us` / `p99_us`: per [`Stage`], in microseconds (0 = not measured yet).
 
 use std::io::Write;
 use std::time::Duration;
 
-use super::{PoseSample, PoseStatus, PoseSubscriber, PublishError};
+use super::{PoseSample, PoseStatus, PoseSubscriber, PublishError, SearchState, Stage, StatusSample, StatusSubscriber};
 
 /// Writes one sample as one line in the format above (without the newline).
 pub fn format_pose_line(s: &PoseSample, out: &mut dyn Write) -> std::io::Result<()> {
@@ -50,6 +62,43 @@ pub fn format_pose_line(s: &PoseSample, out: &mut dyn Write) -> std::io::Result<
     )
 }
 
+/// Writes one status sample as one line in the format above (without the newline).
+pub fn format_status_line(s: &StatusSample, out: &mut dyn Write) -> std::io::Result<()> {
+    write!(out, "seq={} t={}ns state=", s.sequence, s.timestamp_ns)?;
+    match PoseStatus::try_from(s.tracker_state) {
+        Ok(st) => write!(out, "{}", st.as_str())?,
+        Err(b) => write!(out, "unknown({b})")?,
+    }
+    write!(out, " search=")?;
+    match SearchState::try_from(s.search) {
+        Ok(SearchState::Widened) => write!(out, "widened:{:.1}", s.search_widened_to_m)?,
+        Ok(st) => write!(out, "{}", st.as_str())?,
+        Err(b) => write!(out, "unknown({b})")?,
+    }
+    let n = usize::from(s.sensor_count).min(s.frame_rate_hz.len());
+    write!(out, " sensors={n} fps=[")?;
+    for (i, f) in s.frame_rate_hz[..n].iter().enumerate() {
+        write!(out, "{}{f:.1}", if i > 0 { "," } else { "" })?;
+    }
+    write!(out, "] dropped=[")?;
+    for (i, d) in s.frames_dropped[..n].iter().enumerate() {
+        write!(out, "{}{d}", if i > 0 { "," } else { "" })?;
+    }
+    for (key, values) in [("p50_us", &s.stage_p50_us), ("p99_us", &s.stage_p99_us)] {
+        write!(out, "] {key}=[")?;
+        for (i, stage) in Stage::ALL.iter().enumerate() {
+            write!(
+                out,
+                "{}{}={}",
+                if i > 0 { "," } else { "" },
+                stage.name(),
+                values[stage.index()]
+            )?;
+        }
+    }
+    write!(out, "]")
+}
+
 /// Why `omnitrack listen` stopped.
 #[derive(Debug, thiserror::Error)]
 pub enum ListenError {
@@ -67,12 +116,27 @@ pub enum ListenError {
 /// so an idle listener sleeps.
 pub fn listen(service: &str, count: Option<u64>, out: &mut dyn Write) -> Result<(), ListenError> {
     let subscriber = PoseSubscriber::create(service)?;
+    print_samples(|t| subscriber.wait(t), format_pose_line, count, out)
+}
+
+/// [`listen`] for the status service: one line per [`StatusSample`] (format in the module doc).
+pub fn listen_status(service: &str, count: Option<u64>, out: &mut dyn Write) -> Result<(), ListenError> {
+    let subscriber = StatusSubscriber::create(service)?;
+    print_samples(|t| subscriber.wait(t), format_status_line, count, out)
+}
+
+fn print_samples<T>(
+    mut wait: impl FnMut(Duration) -> Result<Option<T>, PublishError>,
+    format: fn(&T, &mut dyn Write) -> std::io::Result<()>,
+    count: Option<u64>,
+    out: &mut dyn Write,
+) -> Result<(), ListenError> {
     let mut printed = 0u64;
     while count.is_none_or(|n| printed < n) {
-        let Some(sample) = subscriber.wait(Duration::from_secs(1))? else {
+        let Some(sample) = wait(Duration::from_secs(1))? else {
             continue;
         };
-        format_pose_line(&sample, out)
+        format(&sample, out)
             .and_then(|_| writeln!(out))
             .and_then(|_| out.flush())
             .map_err(ListenError::Output)?;

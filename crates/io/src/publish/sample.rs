@@ -175,6 +175,18 @@ pub enum SearchState {
     NoCells = 3,
 }
 
+impl SearchState {
+    /// The word used by `omnitrack listen --status`: `none`, `as_given`, `widened`, `no_cells`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            SearchState::None => "none",
+            SearchState::AsGiven => "as_given",
+            SearchState::Widened => "widened",
+            SearchState::NoCells => "no_cells",
+        }
+    }
+}
+
 impl From<SearchState> for u8 {
     fn from(s: SearchState) -> u8 {
         s as u8
