@@ -18,6 +18,8 @@
 //! Every error is one line on stderr and exit code 2, so scripts can tell a bad input from a
 //! crash.
 
+mod look;
+
 use clap::{Parser, Subcommand};
 use omnitrack::desk::eval::{evaluate_files, ErrorSeries, EvalOptions, Evaluation, Stats};
 use omnitrack::desk::floorplan;
@@ -88,6 +90,41 @@ enum Command {
     Model {
         #[command(subcommand)]
         command: ModelCommand,
+    },
+    /// One frame of a recording with the model re-projected over its sensor images at the
+    /// trajectory's pose (PNG): a wrong calibration, convention or model shows at a glance.
+    Overlay {
+        /// The recording (rig.toml, frames.csv, sensorK/*.png), e.g. made by `omnitrack record`.
+        #[arg(long, value_name = "DIR")]
+        recording: PathBuf,
+        /// The building model.
+        #[arg(long, value_name = "MODEL.obj")]
+        model: PathBuf,
+        /// The poses (TUM, e.g. `omnitrack run --trajectory`).
+        #[arg(long, value_name = "T.tum")]
+        trajectory: PathBuf,
+        /// The frame (its number in frames.csv; default: the first with a pose).
+        #[arg(long)]
+        frame: Option<u64>,
+        /// Where to write the picture.
+        #[arg(long, value_name = "OUT.png")]
+        out: PathBuf,
+    },
+    /// Pictures of a run: the trajectory over the floor plan (coloured by its error when the
+    /// ground truth is given) and the error over time.
+    Plot {
+        /// The building model (its plan is drawn from its segments).
+        #[arg(long, value_name = "MODEL.obj")]
+        model: PathBuf,
+        /// The estimate (TUM).
+        #[arg(long, value_name = "T.tum")]
+        trajectory: PathBuf,
+        /// The ground truth (TUM), if there is one.
+        #[arg(long, value_name = "GT.tum")]
+        truth: Option<PathBuf>,
+        /// The directory to write plan.png (and errors.png) into.
+        #[arg(long, value_name = "DIR")]
+        out: PathBuf,
     },
     /// Rig files from other tools' calibrations.
     Rig {
@@ -238,6 +275,25 @@ fn main() -> ExitCode {
 
 fn run(command: Command) -> Result<(), String> {
     match command {
+        Command::Overlay {
+            recording,
+            model,
+            trajectory,
+            frame,
+            out,
+        } => {
+            eprintln!("{}", look::overlay(&recording, &model, &trajectory, frame, &out)?);
+            Ok(())
+        }
+        Command::Plot {
+            model,
+            trajectory,
+            truth,
+            out,
+        } => {
+            eprintln!("{}", look::plot(&model, &trajectory, truth.as_deref(), &out)?);
+            Ok(())
+        }
         Command::Rig {
             command:
                 RigCommand::FromKalibr {
