@@ -1,10 +1,10 @@
 //! Integration tests of omnitrack-desk and the visibility build: plans, renders, scenarios, evaluation, pictures, the demo: one test binary for several files, so that they link once.
 
+mod calibration;
 mod convert;
 mod demo;
 mod eval;
 mod floorplan;
-mod kalibr;
 mod pictures;
 mod random_buildings;
 mod recording_replay;

@@ -170,6 +170,63 @@ enum RigCommand {
         #[arg(long)]
         name: Option<String>,
     },
+    /// A one-sensor rig from an OpenCV calibration file (cv::FileStorage YAML: K or
+    /// camera_matrix, D or distortion_coefficients, image_width and image_height). The rig
+    /// frame is the camera's turned to x forward, y left, z up.
+    FromOpencv {
+        /// The calibration file.
+        file: PathBuf,
+        /// Where to write the rig.
+        #[arg(long, value_name = "RIG.toml")]
+        out: PathBuf,
+        /// Which OpenCV model the coefficients are (four numbers fit both).
+        #[arg(long, value_enum, default_value = "fisheye")]
+        model: OpenCvLens,
+        /// The image size, when the file does not give it.
+        #[arg(long, value_name = "W,H", value_parser = parse_size)]
+        resolution: Option<(u32, u32)>,
+        /// The rig's name (default: the output file's stem).
+        #[arg(long)]
+        name: Option<String>,
+    },
+}
+
+/// `W,H`, two whole pixel counts.
+fn parse_size(text: &str) -> Result<(u32, u32), String> {
+    let parts: Vec<&str> = text.split(',').map(str::trim).collect();
+    match parts[..] {
+        [w, h] => match (w.parse::<u32>(), h.parse::<u32>()) {
+            (Ok(w), Ok(h)) if w > 0 && h > 0 => Ok((w, h)),
+            _ => Err(format!("{text:?}: expected W,H (two positive whole numbers)")),
+        },
+        _ => Err(format!("{text:?}: expected W,H")),
+    }
+}
+
+/// Writes the rig file `out`, with a header saying where it came from.
+fn write_rig(out: &std::path::Path, rig: &Rig, header: &str) -> Result<(), String> {
+    std::fs::write(out, format!("{header}{}", rig.to_toml_string()))
+        .map_err(|e| format!("{}: cannot write: {e}", out.display()))?;
+    eprintln!("{}: rig '{}', {} sensors", out.display(), rig.name, rig.sensors.len());
+    Ok(())
+}
+
+/// The rig's name: given, or the output file's stem.
+fn rig_name(name: Option<String>, out: &std::path::Path) -> String {
+    name.unwrap_or_else(|| {
+        out.file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "rig".into())
+    })
+}
+
+/// `--model` of `rig from-opencv`.
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum OpenCvLens {
+    /// cv::fisheye (4 coefficients): kb4.
+    Fisheye,
+    /// The default model, k1, k2, p1, p2[, k3]: radtan.
+    Default,
 }
 
 #[derive(Subcommand)]
@@ -305,21 +362,38 @@ fn run(command: Command) -> Result<(), String> {
         } => {
             let file = camchain.display().to_string();
             let yaml = std::fs::read_to_string(&camchain).map_err(|e| format!("{file}: cannot read: {e}"))?;
-            let name = name.unwrap_or_else(|| {
-                out.file_stem()
-                    .map(|s| s.to_string_lossy().into_owned())
-                    .unwrap_or_else(|| "rig".into())
-            });
-            let rig =
-                omnitrack::desk::kalibr::rig_from_kalibr(&yaml, &file, &name, &rig_frame).map_err(|e| e.to_string())?;
+            let rig = omnitrack::desk::kalibr::rig_from_kalibr(&yaml, &file, &rig_name(name, &out), &rig_frame)
+                .map_err(|e| e.to_string())?;
             let header = format!(
                 "# Converted by `omnitrack-desk rig from-kalibr` from {file}; rig frame: {rig_frame} turned to\n\
                  # x forward, y left, z up, origin at its optical centre.\n"
             );
-            std::fs::write(&out, header + &rig.to_toml_string())
-                .map_err(|e| format!("{}: cannot write: {e}", out.display()))?;
-            eprintln!("{}: rig '{}', {} sensors", out.display(), rig.name, rig.sensors.len());
-            Ok(())
+            write_rig(&out, &rig, &header)
+        }
+        Command::Rig {
+            command:
+                RigCommand::FromOpencv {
+                    file,
+                    out,
+                    model,
+                    resolution,
+                    name,
+                },
+        } => {
+            use omnitrack::desk::opencv_calib::{rig_from_opencv, OpenCvModel};
+            let shown = file.display().to_string();
+            let yaml = std::fs::read_to_string(&file).map_err(|e| format!("{shown}: cannot read: {e}"))?;
+            let model = match model {
+                OpenCvLens::Fisheye => OpenCvModel::Fisheye,
+                OpenCvLens::Default => OpenCvModel::Default,
+            };
+            let rig =
+                rig_from_opencv(&yaml, &shown, &rig_name(name, &out), model, resolution).map_err(|e| e.to_string())?;
+            let header = format!(
+                "# Converted by `omnitrack-desk rig from-opencv` from {shown}; rig frame: the camera's turned to\n\
+                 # x forward, y left, z up, origin at its optical centre.\n"
+            );
+            write_rig(&out, &rig, &header)
         }
         Command::Model {
             command: ModelCommand::FromIfc { file, out, storey },

@@ -7,6 +7,7 @@ pub mod eval;
 pub mod floorplan;
 pub mod kalibr;
 pub mod observations;
+pub mod opencv_calib;
 pub mod pictures;
 pub mod recording;
 pub mod render;

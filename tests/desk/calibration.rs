@@ -1,4 +1,4 @@
-//! Calibration in: Kalibr camera chains to rig files. The shipped rig written out as Kalibr would
+//! Calibration in: Kalibr camera chains and OpenCV calibration files to rig files. The shipped rig written out as Kalibr would
 //! write it converts back to itself (up to the rig frame, which becomes the reference camera's);
 //! a stereo radtan chain gives radtan lenses and its baseline; what cannot be converted says
 //! which camera and which key, in one line.
@@ -176,5 +176,100 @@ fn what_cannot_be_converted_is_named_in_one_line() {
         assert!(line.starts_with("camchain.yaml: "), "{line}");
         assert!(line.contains(expected), "{line:?} should say {expected:?}");
         assert!(!line.contains('\n'), "{line:?}");
+    }
+}
+
+/// What OpenCV 5.0's `cv::FileStorage` wrote for `cv::fisheye` K and D (the shipped rig's first
+/// sensor), with the `%YAML:1.0` header OpenCV 3 wrote instead of `%YAML 1.2`.
+const OPENCV_FISHEYE: &str = "%YAML:1.0
+---
+K: !!opencv-matrix
+   rows: 3
+   cols: 3
+   dt: d
+   data: [ 285., 0., 191.5, 0., 285., 255.5, 0., 0., 1. ]
+D: !!opencv-matrix
+   rows: 4
+   cols: 1
+   dt: d
+   data: [ -0.014999999999999999, 0.002, -0.00029999999999999997, 0. ]
+image_width: 384
+image_height: 512
+";
+
+#[test]
+fn an_opencv_fisheye_calibration_is_the_shipped_rigs_first_sensor() {
+    use omnitrack::desk::opencv_calib::{rig_from_opencv, OpenCvModel};
+    let rig = rig_from_opencv(OPENCV_FISHEYE, "cam.yaml", "one", OpenCvModel::Fisheye, None).unwrap();
+    let shipped = shipped();
+    assert_eq!(rig.sensors.len(), 1);
+    let (a, b) = (&rig.sensors[0], &shipped.sensors[0]);
+    assert_eq!(a.lens, b.lens);
+    assert_eq!((a.width, a.height), (b.width, b.height));
+    // Sensor 0 of the shipped rig looks forward as the turned camera frame does.
+    assert!(a.t_rig_sensor.rotation.angle_to(&b.t_rig_sensor.rotation) < 1e-12);
+
+    // The default model from OpenCV's calibration sample's key names, five coefficients.
+    let default = "%YAML 1.2
+---
+camera_matrix: !!opencv-matrix
+   rows: 3
+   cols: 3
+   dt: d
+   data: [ 458.654, 0., 367.21499999999997, 0., 457.29599999999999,
+       248.375, 0., 0., 1. ]
+distortion_coefficients: !!opencv-matrix
+   rows: 1
+   cols: 5
+   dt: d
+   data: [ -0.28340810999999999, 0.073959070000000002,
+       0.00019358999999999999, 1.7618711400000001e-05,
+       0.0011999999999999999 ]
+";
+    let rig = rig_from_opencv(default, "cam.yaml", "one", OpenCvModel::Default, Some((752, 480))).unwrap();
+    assert!(matches!(rig.sensors[0].lens, Lens::Radtan(r) if r.d[4] == 0.0012));
+    assert_eq!((rig.sensors[0].width, rig.sensors[0].height), (752, 480));
+}
+
+#[test]
+fn what_an_opencv_file_lacks_is_named_in_one_line() {
+    use omnitrack::desk::opencv_calib::{rig_from_opencv, OpenCvModel};
+    let cases = [
+        (
+            OPENCV_FISHEYE.replace("K: ", "Kx: "),
+            OpenCvModel::Fisheye,
+            "key 'K' or 'camera_matrix': missing",
+        ),
+        (
+            OPENCV_FISHEYE.replace("rows: 4", "rows: 5"),
+            OpenCvModel::Fisheye,
+            "key 'D': rows × cols = 5 but data has 4 numbers",
+        ),
+        (
+            OPENCV_FISHEYE.replace("image_width: 384\n", ""),
+            OpenCvModel::Fisheye,
+            "no image size",
+        ),
+        (
+            OPENCV_FISHEYE.replace("0., 285., 255.5", "2., 285., 255.5"),
+            OpenCvModel::Fisheye,
+            "no skew",
+        ),
+        (
+            OPENCV_FISHEYE.replace("rows: 4", "rows: 8").replace(
+                "0.002, -0.00029999999999999997, 0. ]",
+                "0.002, -0.0003, 0., 0., 0., 0., 0. ]",
+            ),
+            OpenCvModel::Default,
+            "8 coefficients",
+        ),
+    ];
+    for (yaml, model, expected) in cases {
+        let line = rig_from_opencv(&yaml, "cam.yaml", "one", model, None)
+            .unwrap_err()
+            .to_string();
+        assert!(line.starts_with("cam.yaml"), "{line}");
+        assert!(line.contains(expected), "{line:?} should say {expected:?}");
+        assert!(!line.contains('\n'));
     }
 }
