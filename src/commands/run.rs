@@ -5,7 +5,7 @@
 use super::CommandResult;
 use omnitrack::config::TrackerConfig;
 use omnitrack::{Model, Rig};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// `run`'s arguments (docs/interfaces.md).
 #[derive(clap::Args)]
@@ -130,6 +130,10 @@ pub fn run(a: Args) -> CommandResult {
         }
     }
 
+    if let Some(out) = &a.trajectory {
+        let inputs = [Some(&a.model), a.rig.as_ref(), a.visibility.as_ref(), a.config.as_ref()];
+        refuse_to_overwrite(out, inputs.into_iter().flatten())?;
+    }
     init_logging();
     let cfg = match &a.config {
         Some(p) => TrackerConfig::load(p)?,
@@ -207,4 +211,22 @@ fn no_pose_reason(frames: u64, searches: u64, empty: u64, widened: u64) -> Strin
     } else {
         format!("{searches} searches found no pose that explains the frames clearly enough to commit (a wrong pose is refused: a model that differs from the building, or a hint far from the rig?)")
     }
+}
+
+/// An output that is one of the inputs (`--trajectory model.obj`) would destroy it: refused.
+/// Only a file that exists can be an input, so a new output path passes.
+fn refuse_to_overwrite<'a>(out: &Path, inputs: impl Iterator<Item = &'a PathBuf>) -> Result<(), String> {
+    let Ok(target) = std::fs::canonicalize(out) else {
+        return Ok(());
+    };
+    for input in inputs {
+        if std::fs::canonicalize(input).is_ok_and(|i| i == target) {
+            return Err(format!(
+                "--trajectory {}: that is the input {}; refusing to overwrite it",
+                out.display(),
+                input.display()
+            ));
+        }
+    }
+    Ok(())
 }

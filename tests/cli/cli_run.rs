@@ -25,6 +25,10 @@ fn bad_arguments_and_inputs_are_one_line_errors() {
             "radius must be positive",
         ),
         (vec!["--source", &replay, "--init", "a,b,c"], "numbers"),
+        (
+            vec!["--source", &replay, "--trajectory", model],
+            "refusing to overwrite",
+        ),
     ] {
         let mut full = vec!["run", "--model", model, "--no-publish"];
         full.extend(args.iter().copied());

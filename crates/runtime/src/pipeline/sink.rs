@@ -41,13 +41,30 @@ pub struct TrajectoryFileError {
     pub source: std::io::Error,
 }
 
+/// How often the trajectory is forced to the disk (`fsync`): what a power cut can lose.
+const SYNC_INTERVAL: std::time::Duration = std::time::Duration::from_secs(1);
+
 /// A [`FrameSink`] writing the tracked poses as a TUM trajectory (the format of
-/// [`omnitrack_core::trajectory`]), buffered, flushed at [`FrameSink::finish`]. Allocation-free per frame.
+/// [`omnitrack_core::trajectory`]).
+///
+/// Every pose goes to the file as it comes (one `write` of its line), so a crash of the process
+/// (SIGKILL, the OOM killer) loses at most the pose in hand; the file is synced to the disk every
+/// [`SYNC_INTERVAL`], so a power cut loses at most that much. It runs on the caller's thread,
+/// never on the frame path. A pose older than the last one written (a source whose clock went
+/// back) is left out and counted: a TUM file is in time order. When the file cannot be written
+/// (a full disk), one line says so and the trajectory stops there, while tracking and
+/// publishing go on: the poses are the product, the file a record of them. Allocation-free per
+/// frame.
 #[derive(Debug)]
 pub struct TumSink {
     path: PathBuf,
     out: std::io::BufWriter<std::fs::File>,
     poses: u64,
+    out_of_order: u64,
+    last_ns: Option<u64>,
+    synced: std::time::Instant,
+    /// Set when a write failed: nothing more is written.
+    failed: bool,
 }
 
 impl TumSink {
@@ -59,12 +76,18 @@ impl TumSink {
             source,
         };
         let f = std::fs::File::create(path).map_err(|e| failed("create", e))?;
-        let mut out = std::io::BufWriter::with_capacity(64 << 10, f);
-        writeln!(out, "# timestamp_s tx ty tz qx qy qz qw (T_world_rig)").map_err(|e| failed("write", e))?;
+        let mut out = std::io::BufWriter::with_capacity(4 << 10, f);
+        writeln!(out, "# timestamp_s tx ty tz qx qy qz qw (T_world_rig)")
+            .and_then(|()| out.flush())
+            .map_err(|e| failed("write", e))?;
         Ok(TumSink {
             path: path.to_path_buf(),
             out,
             poses: 0,
+            out_of_order: 0,
+            last_ns: None,
+            synced: std::time::Instant::now(),
+            failed: false,
         })
     }
 
@@ -73,12 +96,27 @@ impl TumSink {
         self.poses
     }
 
-    fn write_failed(&self, source: std::io::Error) -> SinkError {
-        Box::new(TrajectoryFileError {
+    /// Poses left out because they were older than the last one written.
+    pub fn out_of_order(&self) -> u64 {
+        self.out_of_order
+    }
+
+    /// Whether writing failed (the trajectory ends at the last pose written).
+    pub fn failed(&self) -> bool {
+        self.failed
+    }
+
+    fn stop_writing(&mut self, source: std::io::Error) {
+        self.failed = true;
+        let e = TrajectoryFileError {
             path: self.path.clone(),
             action: "write",
             source,
-        })
+        };
+        eprintln!(
+            "omnitrack: {e}; the trajectory stops at its {} poses, tracking and publishing go on",
+            self.poses
+        );
     }
 }
 
@@ -87,21 +125,54 @@ impl FrameSink for TumSink {
         let Some(pose) = &r.result.pose else {
             return Ok(());
         };
+        if self.failed {
+            return Ok(());
+        }
+        if self.last_ns.is_some_and(|t| r.timestamp_ns <= t) {
+            self.out_of_order += 1;
+            return Ok(());
+        }
         let stamped = omnitrack_core::trajectory::Stamped {
             timestamp_ns: r.timestamp_ns,
             pose: *pose,
         };
-        if let Err(e) =
-            omnitrack_core::trajectory::write_tum_line(&mut self.out, &stamped).and_then(|()| writeln!(self.out))
-        {
-            return Err(self.write_failed(e));
+        let written = omnitrack_core::trajectory::write_tum_line(&mut self.out, &stamped)
+            .and_then(|()| writeln!(self.out))
+            .and_then(|()| self.out.flush());
+        if let Err(e) = written {
+            self.stop_writing(e);
+            return Ok(());
         }
         self.poses += 1;
+        self.last_ns = Some(r.timestamp_ns);
+        if self.synced.elapsed() >= SYNC_INTERVAL {
+            self.synced = std::time::Instant::now();
+            if let Err(e) = self.out.get_ref().sync_data() {
+                self.stop_writing(e);
+            }
+        }
         Ok(())
     }
 
     fn finish(&mut self) -> Result<(), SinkError> {
-        self.out.flush().map_err(|e| self.write_failed(e))
+        if self.failed {
+            return Ok(());
+        }
+        if self.out_of_order > 0 {
+            eprintln!(
+                "omnitrack: {}: {} poses older than the one before them were left out (the source's clock went back)",
+                self.path.display(),
+                self.out_of_order
+            );
+        }
+        let flushed = self.out.flush().and_then(|()| self.out.get_ref().sync_data());
+        flushed.map_err(|source| -> SinkError {
+            Box::new(TrajectoryFileError {
+                path: self.path.clone(),
+                action: "write",
+                source,
+            })
+        })
     }
 }
 
@@ -125,4 +196,80 @@ pub(super) fn drain(sink: &mut dyn FrameSink, records: &Receiver<FrameRecord>, s
         sink_error.get_or_insert(e);
     }
     sink_error
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Matrix6;
+    use omnitrack_core::geometry::Pose;
+    use omnitrack_tracker::{FrameResult, TrackerState};
+    use std::time::Duration;
+
+    fn tracked(timestamp_ns: u64) -> FrameRecord {
+        FrameRecord {
+            sequence: timestamp_ns,
+            timestamp_ns,
+            valid_sensors: 1,
+            edges: 0,
+            edge_time: Duration::ZERO,
+            track_time: Duration::ZERO,
+            frame_time: Duration::ZERO,
+            result: FrameResult {
+                state: TrackerState::Tracking,
+                pose: Some(Pose::translation(timestamp_ns as f64, 0.0, 1.5)),
+                covariance: Matrix6::identity(),
+                inliers: 10,
+                states: [0; 3],
+                xi_rad2: 0.0,
+                explained: 1.0,
+                samples: 1,
+                match_time: Duration::ZERO,
+                solve_time: Duration::ZERO,
+                event: None,
+            },
+        }
+    }
+
+    /// Each pose is in the file when `frame` returns (a crash right after loses nothing), and a
+    /// pose older than the last is left out and counted.
+    #[test]
+    fn every_pose_is_on_disk_at_once_and_in_time_order() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("t.tum");
+        let mut sink = TumSink::create(&path).unwrap();
+        for (k, t) in [10u64, 20, 15, 30].into_iter().enumerate() {
+            sink.frame(&tracked(t)).unwrap();
+            let lines = std::fs::read_to_string(&path).unwrap().lines().count();
+            // Header, then the poses so far (the third was older than the second).
+            assert_eq!(lines, 1 + [1, 2, 2, 3][k], "after the pose at {t} ns");
+        }
+        assert_eq!((sink.poses(), sink.out_of_order()), (3, 1));
+        sink.finish().unwrap();
+    }
+
+    /// A file that cannot be written (a full disk: /dev/full) stops the trajectory, not the
+    /// run: `frame` keeps answering Ok.
+    #[test]
+    fn a_full_disk_stops_the_trajectory_and_not_the_run() {
+        let file = std::fs::OpenOptions::new().write(true).open("/dev/full").unwrap();
+        let mut sink = TumSink {
+            path: "/dev/full".into(),
+            out: std::io::BufWriter::new(file),
+            poses: 0,
+            out_of_order: 0,
+            last_ns: None,
+            synced: std::time::Instant::now(),
+            failed: false,
+        };
+        for t in [10, 20, 30] {
+            assert!(sink.frame(&tracked(t)).is_ok());
+        }
+        assert!(sink.failed());
+        assert_eq!(sink.poses(), 0);
+        assert!(sink.finish().is_ok());
+        // Creating one there fails at once, with the path and the reason in one line.
+        let e = TumSink::create(Path::new("/dev/full")).unwrap_err().to_string();
+        assert!(e.starts_with("/dev/full: cannot write: "), "{e}");
+    }
 }
