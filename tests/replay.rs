@@ -607,3 +607,42 @@ fn steady_state_allocations_per_frame_are_constant_and_only_the_decoders() {
         "a few decoder allocations per image: {counts:?}"
     );
 }
+
+/// A recording reads only regular files inside its folder: paths with `..` or absolute ones are
+/// bad rows; a link out of the folder, a FIFO (which would block the read forever) and a device
+/// (which never ends) are skipped images, counted and warned about, and the run goes on.
+#[test]
+fn a_recording_reads_nothing_outside_its_folder() {
+    let outside = tempfile::tempdir().unwrap();
+    let secret = outside.path().join("secret.png");
+    let dir = recording(&SMALL, 3);
+    std::fs::copy(dir.path().join("sensor0/000000.png"), &secret).unwrap();
+    append_index(
+        dir.path(),
+        &format!(
+            "\n7,0,700,../{}\n7,1,700,{}\n",
+            secret.file_name().unwrap().to_str().unwrap(),
+            secret.display()
+        ),
+    );
+    // Frame 1: sensor 0 a link out of the folder, sensor 1 a FIFO; frame 2: sensor 0 /dev/zero.
+    let s0 = dir.path().join("sensor0");
+    std::fs::remove_file(s0.join("000001.png")).unwrap();
+    std::os::unix::fs::symlink(&secret, s0.join("000001.png")).unwrap();
+    let s1 = dir.path().join("sensor1/000001.png");
+    std::fs::remove_file(&s1).unwrap();
+    let made = std::process::Command::new("mkfifo").arg(&s1).status().unwrap();
+    assert!(made.success());
+    std::fs::remove_file(s0.join("000002.png")).unwrap();
+    std::os::unix::fs::symlink("/dev/zero", s0.join("000002.png")).unwrap();
+
+    let (mut source, mut frame) = open(&dir);
+    assert_eq!(source.stats().bad_rows.outside, 2, "the absolute and the .. rows");
+    let mut valid = Vec::new();
+    while source.next_frame(&mut frame).unwrap() {
+        valid.push((frame.sensor(0).valid, frame.sensor(1).valid));
+    }
+    assert_eq!(valid, vec![(true, true), (false, false), (false, true)]);
+    assert_eq!(source.stats().sensors[0].missing, 2);
+    assert_eq!(source.stats().sensors[1].missing, 1);
+}

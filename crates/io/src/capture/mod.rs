@@ -293,11 +293,14 @@ pub struct BadRowStats {
     pub duplicate: u64,
     /// An empty path field.
     pub empty_path: u64,
+    /// A path that leaves the recording (absolute, or with `..`): a recording reads only what
+    /// is inside its folder.
+    pub outside: u64,
 }
 
 impl BadRowStats {
     pub fn total(&self) -> u64 {
-        self.field_count + self.not_a_number + self.unknown_sensor + self.duplicate + self.empty_path
+        self.field_count + self.not_a_number + self.unknown_sensor + self.duplicate + self.empty_path + self.outside
     }
 }
 

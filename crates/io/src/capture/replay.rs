@@ -86,6 +86,8 @@ struct FrameEntry {
 #[derive(Debug)]
 pub struct ReplaySource {
     dir: PathBuf,
+    /// `dir` resolved: every image read must lie under it.
+    root: PathBuf,
     rig: Rig,
     pacing: Pacing,
     rows: Vec<Row>,
@@ -147,7 +149,13 @@ impl ReplaySource {
         let file_buf = Vec::with_capacity(max_pixels * 3 + (64 << 10));
         let rgba_buf = vec![0u8; max_pixels * 4].into_boxed_slice();
 
+        // Images are read only from inside this folder (symbolic links are followed only to it).
+        let root = std::fs::canonicalize(dir).map_err(|e| SourceError::Io {
+            path: dir.to_path_buf(),
+            message: format!("cannot resolve the recording directory: {e}"),
+        })?;
         Ok(ReplaySource {
+            root,
             dir: dir.to_path_buf(),
             rig,
             pacing,
@@ -245,7 +253,7 @@ impl FrameSource for ReplaySource {
         }
         for row in &self.rows[rows] {
             let img = out.sensor_mut(row.sensor);
-            match load_png(&row.path, &mut self.file_buf, &mut self.rgba_buf, img) {
+            match load_png(&row.path, &self.root, &mut self.file_buf, &mut self.rgba_buf, img) {
                 Ok(()) => {
                     img.set_valid(row.timestamp_ns);
                     self.stats.sensors[row.sensor].delivered += 1;
@@ -285,8 +293,17 @@ impl FrameSource for ReplaySource {
 #[derive(Debug)]
 enum Problem {
     Io(io::Error),
+    /// A symbolic link to a file outside the recording.
+    Outside,
+    /// A FIFO, a device or a directory.
+    NotAFile,
+    /// Larger than any PNG of the sensor's size can be (bytes).
+    TooLarge(u64),
     Decode(ImageError),
-    Size { found: (u32, u32), expected: (u32, u32) },
+    Size {
+        found: (u32, u32),
+        expected: (u32, u32),
+    },
     Format(ColorType),
 }
 
@@ -295,6 +312,9 @@ impl fmt::Display for Problem {
         match self {
             Problem::Io(e) if e.kind() == io::ErrorKind::NotFound => f.write_str("file not found"),
             Problem::Io(e) => write!(f, "cannot read: {e}"),
+            Problem::Outside => f.write_str("a link to a file outside the recording, not followed"),
+            Problem::NotAFile => f.write_str("not a regular file"),
+            Problem::TooLarge(n) => write!(f, "{n} bytes, more than a PNG of the sensor's size can be"),
             Problem::Decode(e) => write!(f, "not a valid PNG: {e}"),
             Problem::Size { found, expected } => {
                 write!(
@@ -315,14 +335,35 @@ impl fmt::Display for Problem {
 /// sized at open. Leaves `img`'s flags alone (the caller sets them).
 fn load_png(
     path: &Path,
+    root: &Path,
     file_buf: &mut Vec<u8>,
     rgba: &mut [u8],
     img: &mut SensorImage,
 ) -> Result<(), (ImageFault, Problem)> {
     file_buf.clear();
+    let missing = |e| (ImageFault::Missing, Problem::Io(e));
+    // Only a regular file inside the recording: a link out of it, a FIFO (which would block the
+    // read) or a device (/dev/zero, which never ends) is refused before it is opened.
+    if std::fs::symlink_metadata(path)
+        .map_err(missing)?
+        .file_type()
+        .is_symlink()
+        && !std::fs::canonicalize(path).map_err(missing)?.starts_with(root)
+    {
+        return Err((ImageFault::Missing, Problem::Outside));
+    }
+    let meta = std::fs::metadata(path).map_err(missing)?;
+    if !meta.is_file() {
+        return Err((ImageFault::Missing, Problem::NotAFile));
+    }
+    // A PNG is never much larger than its raw pixels: past this it is not the sensor's image.
+    let most = 4 * u64::from(img.width()) * u64::from(img.height()) + (1 << 20);
+    if meta.len() > most {
+        return Err((ImageFault::Corrupt, Problem::TooLarge(meta.len())));
+    }
     File::open(path)
-        .and_then(|mut f| f.read_to_end(file_buf))
-        .map_err(|e| (ImageFault::Missing, Problem::Io(e)))?;
+        .and_then(|f| f.take(most).read_to_end(file_buf))
+        .map_err(missing)?;
 
     let corrupt = |e: ImageError| (ImageFault::Corrupt, Problem::Decode(e));
     let mut limits = Limits::default();
@@ -445,6 +486,19 @@ fn parse_index(
         if fields[3].is_empty() {
             stats.bad_rows.empty_path += 1;
             bad(stats, warnings, format_args!("empty path"));
+            continue;
+        }
+        let relative = Path::new(fields[3]);
+        if relative
+            .components()
+            .any(|c| !matches!(c, std::path::Component::Normal(_) | std::path::Component::CurDir))
+        {
+            stats.bad_rows.outside += 1;
+            bad(
+                stats,
+                warnings,
+                format_args!("path {:?} leaves the recording (absolute or with ..)", fields[3]),
+            );
             continue;
         }
         if !seen.insert((frame, sensor)) {
