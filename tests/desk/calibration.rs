@@ -1,7 +1,10 @@
-//! Calibration in: Kalibr camera chains and OpenCV calibration files to rig files. The shipped rig written out as Kalibr would
-//! write it converts back to itself (up to the rig frame, which becomes the reference camera's);
-//! a stereo radtan chain gives radtan lenses and its baseline; what cannot be converted says
-//! which camera and which key, in one line.
+//! Calibration in: Kalibr camera chains and OpenCV calibration files to rig files. The shipped
+//! rig written out as Kalibr would write it converts back to itself (up to the rig frame, which
+//! becomes the reference camera's); a stereo radtan chain gives radtan lenses and its baseline;
+//! an OpenCV fisheye file gives the shipped rig's first sensor; what cannot be converted says
+//! which file, camera and key, in one line.
+
+#![cfg(feature = "desk")]
 
 use nalgebra::{Matrix4, Vector3};
 use omnitrack::desk::kalibr::{rig_from_kalibr, KalibrError};
