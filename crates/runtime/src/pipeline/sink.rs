@@ -49,7 +49,7 @@ const SYNC_INTERVAL: std::time::Duration = std::time::Duration::from_secs(1);
 ///
 /// Every pose goes to the file as it comes (one `write` of its line), so a crash of the process
 /// (SIGKILL, the OOM killer) loses at most the pose in hand; the file is synced to the disk every
-/// [`SYNC_INTERVAL`], so a power cut loses at most that much. It runs on the caller's thread,
+/// `SYNC_INTERVAL` (a second), so a power cut loses at most that much. It runs on the caller's thread,
 /// never on the frame path. A pose older than the last one written (a source whose clock went
 /// back) is left out and counted: a TUM file is in time order. When the file cannot be written
 /// (a full disk), one line says so and the trajectory stops there, while tracking and
