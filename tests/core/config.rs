@@ -83,6 +83,23 @@ fn bad_values_name_the_key() {
             "key 'motion.max_tilt_deg': must be in (0, 180]",
         ),
         ("[typo]\n", "unknown field `typo`"),
+        // Capacities and budgets far past any use are refused before they ask for gigabytes.
+        (
+            "[edges]\nmax_edges_per_sensor = 1000000000\n",
+            "key 'edges.max_edges_per_sensor': must be at most 16384",
+        ),
+        (
+            "[edges]\nhue_strip_width_px = 100000\n",
+            "key 'edges.hue_strip_width_px': must be at most 64",
+        ),
+        (
+            "[initialisation]\ntime_budget_ms = 1e9\n",
+            "key 'initialisation.time_budget_ms': must be at most 600000",
+        ),
+        (
+            "[visibility]\ncube_map_resolution = 100000\n",
+            "key 'visibility.cube_map_resolution': must be at most 4096",
+        ),
     ];
     for (text, expected) in cases {
         let e = TrackerConfig::from_toml_str(text, "tracker.toml")

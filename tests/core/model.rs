@@ -306,3 +306,16 @@ fn lines_a_tenth_of_a_micron_apart_are_one_line_across_rounding_boundaries() {
         assert_eq!(on_seam, 2, "y = {y}: {:#?}", m.segments);
     }
 }
+
+/// Coordinates past ±1e9 m are refused with the line; 1e155 used to overflow the stack (the face
+/// geometry's squares became infinite and a triangle was split for ever). A georeferenced model
+/// (UTM northings of millions of metres) loads.
+#[test]
+fn coordinates_beyond_any_building_are_refused_and_georeferenced_ones_load() {
+    let far = "v 0 0 0\nv 1e155 0 0\nv 0 1e155 0\nf 1 2 3\n";
+    let e = Model::from_obj_str(far, "far.obj").unwrap_err().to_string();
+    assert!(e.starts_with("far.obj:2: vertex coordinate '1e155' is beyond"), "{e}");
+    let utm = "v 500000 5400000 300\nv 500010 5400000 300\nv 500010 5400010 300\nv 500000 5400010 300\nf 1 2 3 4\n";
+    let m = Model::from_obj_str(utm, "utm.obj").unwrap();
+    assert_eq!((m.faces.len(), m.segments.len()), (1, 4));
+}

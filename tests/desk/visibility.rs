@@ -762,3 +762,27 @@ fn an_open_model_without_a_ceiling_keeps_its_room() {
     let scene = Occluders::new(&model);
     assert!(!scene.is_free(&Point3::new(3.0, 5.0, 1.5), 0.2));
 }
+
+/// A grid too large to build (a 100 km model at 1 m, or a room at 0.1 mm) is refused in one
+/// line before any of it is allocated, saying what to change.
+#[test]
+fn a_grid_too_large_to_build_is_refused_before_it_is_allocated() {
+    use omnitrack::config::VisibilityConfig;
+    use omnitrack::visibility::build::run_build;
+    let dir = tempfile::tempdir().unwrap();
+    for (size, spacing) in [(1e5, None), (10.0, Some(1e-4))] {
+        let obj = dir.path().join("m.obj");
+        std::fs::write(
+            &obj,
+            format!("v 0 0 0\nv {size} 0 0\nv {size} {size} 0\nv 0 {size} 0\nf 1 2 3 4\n"),
+        )
+        .unwrap();
+        let out = dir.path().join("m.vis");
+        let e = run_build(&obj, &out, spacing, &VisibilityConfig::default())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("grid cells, more than 30000000"), "{e}");
+        assert!(e.contains("use a wider spacing"), "{e}");
+        assert!(!out.exists());
+    }
+}

@@ -381,6 +381,15 @@ impl TrackerConfig {
                 Err(format!("key '{key}': must be at least {min}, found {v}"))
             }
         }
+        // Upper bounds: every capacity and budget here sizes memory or time, so a value far past
+        // any use (a typo, `1e9`) is refused before it asks for gigabytes or minutes per frame.
+        fn at_most(key: &str, v: f64, max: f64, why: &str) -> Result<(), String> {
+            if v <= max {
+                Ok(())
+            } else {
+                Err(format!("key '{key}': must be at most {max} ({why}), found {v}"))
+            }
+        }
         let (e, i, m, v, s) = (
             &self.edges,
             &self.initialisation,
@@ -390,6 +399,48 @@ impl TrackerConfig {
         );
         at_least("edges.hue_strip_width_px", e.hue_strip_width_px, 1)?;
         at_least("edges.max_edges_per_sensor", e.max_edges_per_sensor, 3)?;
+        at_most(
+            "edges.hue_strip_width_px",
+            f64::from(e.hue_strip_width_px),
+            64.0,
+            "a wider strip samples other surfaces than the edge's, at its cost per pixel",
+        )?;
+        at_most(
+            "edges.max_edges_per_sensor",
+            f64::from(e.max_edges_per_sensor),
+            16384.0,
+            "buffers and matching grow with it; a sensor image holds far fewer lines",
+        )?;
+        const MINUTE_MS: f64 = 60_000.0;
+        for (key, ms) in [
+            ("initialisation.time_budget_ms", i.time_budget_ms),
+            (
+                "initialisation.whole_model_time_budget_ms",
+                i.whole_model_time_budget_ms,
+            ),
+            ("maintenance.time_budget_ms", m.time_budget_ms),
+            ("maintenance.relocalise_time_budget_ms", m.relocalise_time_budget_ms),
+        ] {
+            at_most(key, ms, 10.0 * MINUTE_MS, "a search that long is a hang")?;
+        }
+        at_most(
+            "initialisation.max_samples",
+            f64::from(i.max_samples),
+            1e7,
+            "sample tables are sized by it",
+        )?;
+        at_most(
+            "maintenance.max_samples",
+            f64::from(m.max_samples),
+            1e7,
+            "sample tables are sized by it",
+        )?;
+        at_most(
+            "visibility.cube_map_resolution",
+            f64::from(v.cube_map_resolution),
+            4096.0,
+            "six faces of that many pixels squared per build worker",
+        )?;
         positive("edges.min_edge_length_deg", e.min_edge_length_deg)?;
         for (key, x) in [
             ("edges.min_hue_saturation", e.min_hue_saturation),

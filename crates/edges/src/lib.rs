@@ -547,23 +547,30 @@ pub fn edges_csv_for_image(
             last: rig.sensors.len().saturating_sub(1),
         });
     };
-    let img = image::open(path)
-        .map_err(|source| EdgesCsvError::Unreadable {
-            path: path.to_path_buf(),
-            source,
-        })?
-        .to_rgb8();
-    if img.width() != s.width || img.height() != s.height {
+    let unreadable = |source| EdgesCsvError::Unreadable {
+        path: path.to_path_buf(),
+        source,
+    };
+    let reader = || {
+        image::ImageReader::open(path)
+            .map_err(|e| unreadable(image::ImageError::IoError(e)))?
+            .with_guessed_format()
+            .map_err(|e| unreadable(image::ImageError::IoError(e)))
+    };
+    // The size from the header, before decoding: a huge image is refused, not decoded.
+    let (width, height) = reader()?.into_dimensions().map_err(unreadable)?;
+    if width != s.width || height != s.height {
         return Err(EdgesCsvError::WrongSize {
             path: path.to_path_buf(),
-            width: img.width(),
-            height: img.height(),
+            width,
+            height,
             sensor,
             rig: rig.name.clone(),
             sensor_width: s.width,
             sensor_height: s.height,
         });
     }
+    let img = reader()?.decode().map_err(unreadable)?.to_rgb8();
     let mut si = SensorImage::new(sensor, s.width, s.height);
     si.pixels_mut().copy_from_slice(img.as_raw());
     si.set_valid(0);

@@ -172,8 +172,12 @@ fn build_and_cache(
     cache: &Path,
     cfg: &TrackerConfig,
 ) -> Result<(VisibilityTable, String), VisibilityError> {
-    use omnitrack_tracker::visibility::build::{build_table, BuildOptions};
+    use omnitrack_tracker::visibility::build::{build_table, check_grid, BuildOptions};
     let mut opts = BuildOptions::from_config(&cfg.visibility);
+    check_grid(model, &opts).map_err(|message| VisibilityError::Invalid {
+        file: cache.display().to_string(),
+        message,
+    })?;
     opts.progress = true;
     let recorded = std::fs::canonicalize(model_path).unwrap_or_else(|_| model_path.to_path_buf());
     let started = Instant::now();

@@ -5,6 +5,10 @@ use super::{Face, ModelError, ModelStats};
 use nalgebra::Point3;
 use std::collections::HashMap;
 
+/// Largest coordinate a model may have (m): a UTM northing with a zone prefix is under 1e8, and
+/// past about 1e150 the squares in the face geometry overflow.
+pub const MAX_COORDINATE_M: f64 = 1e9;
+
 pub(super) struct RawFace {
     /// 0-based indices into `ParsedObj::vertices`, resolved and range-checked.
     pub vertices: Vec<u32>,
@@ -108,6 +112,15 @@ pub(super) fn parse(text: &str, file: &str) -> Result<ParsedObj, ModelError> {
                         .ok()
                         .filter(|x| x.is_finite())
                         .ok_or_else(|| err(at, format!("vertex coordinate '{tok}' is not a finite number")))?;
+                    if c.abs() > MAX_COORDINATE_M {
+                        return Err(err(
+                            at,
+                            format!(
+                                "vertex coordinate '{tok}' is beyond ±{MAX_COORDINATE_M:e} m (the model is in metres; \
+                                 even a georeferenced one stays far inside this)"
+                            ),
+                        ));
+                    }
                 }
                 vertices.push(Point3::from(xyz));
             }

@@ -114,7 +114,8 @@ pub(super) fn make_faces(vertices: &[Point3<f64>], idx: &[u32], tol: &SegmentTol
         perimeter += (b - a).norm();
     }
     let twice_area = newell.norm();
-    if twice_area <= 1e-12 * perimeter * perimeter || twice_area <= tol.weld_m * tol.weld_m {
+    // Not finite: coordinates so large that the products overflow (the reader bounds them).
+    if !twice_area.is_finite() || twice_area <= 1e-12 * perimeter * perimeter || twice_area <= tol.weld_m * tol.weld_m {
         return FaceShape::Degenerate;
     }
     let normal = Unit::new_unchecked(newell / twice_area);
@@ -122,7 +123,9 @@ pub(super) fn make_faces(vertices: &[Point3<f64>], idx: &[u32], tol: &SegmentTol
     let planar = pts
         .iter()
         .all(|p| (normal.dot(&p.coords) - offset).abs() <= tol.planar_m);
-    if planar {
+    // A triangle is planar by definition: one that tests otherwise has lost its plane to rounding,
+    // and splitting it again would never end.
+    if planar || corners.len() == 3 {
         return FaceShape::Planar(Face {
             vertices: corners,
             normal,
