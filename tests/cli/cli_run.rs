@@ -169,3 +169,27 @@ fn a_closed_standard_output_ends_quietly() {
         assert!(stderr.is_empty(), "{args:?}: {stderr}");
     }
 }
+
+/// A device or a FIFO given as an input file is refused at once: `/dev/zero` used to fill the
+/// memory and a FIFO to wait for a writer for ever.
+#[test]
+fn devices_and_fifos_are_refused_as_input_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let fifo = dir.path().join("fifo.toml");
+    assert!(std::process::Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .unwrap()
+        .success());
+    let fifo = fifo.to_str().unwrap();
+    for args in [
+        ["check", "--rig", "/dev/zero"],
+        ["check", "--model", "/dev/zero"],
+        ["check", "--config", fifo],
+        ["check", "--rig", fifo],
+    ] {
+        let (code, _, stderr) = omnitrack(&args);
+        assert_eq!(code, 2, "{args:?}: {stderr}");
+        assert!(stderr.trim_end().ends_with("not a regular file"), "{args:?}: {stderr}");
+    }
+}

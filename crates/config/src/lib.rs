@@ -330,10 +330,13 @@ impl TrackerConfig {
 
     pub fn load(path: &Path) -> Result<TrackerConfig, ConfigError> {
         let file = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|e| ConfigError {
-            file: file.clone(),
-            message: format!("cannot read tracker config: {e}"),
-        })?;
+        let text =
+            omnitrack_core::text_file::read_text(path, omnitrack_core::text_file::SMALL_FILE_LIMIT).map_err(|e| {
+                ConfigError {
+                    file: file.clone(),
+                    message: format!("cannot read tracker config: {e}"),
+                }
+            })?;
         TrackerConfig::from_toml_str(&text, &file)
     }
 

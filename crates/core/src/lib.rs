@@ -9,6 +9,7 @@ pub mod geometry;
 pub mod lines;
 pub mod model;
 pub mod rig;
+pub mod text_file;
 pub mod trajectory;
 
 pub use geometry::Pose;

@@ -99,7 +99,7 @@ impl Model {
     /// Reads an OBJ file and extracts its segments with the default tolerances.
     pub fn load(path: &Path) -> Result<Model, ModelError> {
         let file = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|e| ModelError {
+        let text = crate::text_file::read_text(path, crate::text_file::LARGE_FILE_LIMIT).map_err(|e| ModelError {
             file: file.clone(),
             line: None,
             message: format!("cannot read model: {e}"),

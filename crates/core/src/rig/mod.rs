@@ -133,7 +133,7 @@ impl Rig {
     /// Reads and validates a rig TOML file.
     pub fn load(path: &Path) -> Result<Rig, RigError> {
         let file = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|e| RigError {
+        let text = crate::text_file::read_text(path, crate::text_file::SMALL_FILE_LIMIT).map_err(|e| RigError {
             file: file.clone(),
             place: String::new(),
             message: format!("cannot read rig file: {e}"),

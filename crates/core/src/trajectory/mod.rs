@@ -76,7 +76,7 @@ pub fn parse_tum(text: &str, file: &str) -> Result<Trajectory, TumError> {
 /// Reads a TUM file.
 pub fn load_tum(path: &Path) -> Result<Trajectory, TumError> {
     let file = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|e| TumError {
+    let text = crate::text_file::read_text(path, crate::text_file::LARGE_FILE_LIMIT).map_err(|e| TumError {
         file: file.clone(),
         line: None,
         message: format!("cannot read trajectory: {e}"),

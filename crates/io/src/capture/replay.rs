@@ -121,10 +121,11 @@ impl ReplaySource {
         let mut warnings = WarningLimiter::new(WARN_LIMIT);
 
         let index_path = dir.join("frames.csv");
-        let text = std::fs::read_to_string(&index_path).map_err(|e| SourceError::Io {
-            path: index_path.clone(),
-            message: format!("cannot read frame index: {e}"),
-        })?;
+        let text = omnitrack_core::text_file::read_text(&index_path, omnitrack_core::text_file::LARGE_FILE_LIMIT)
+            .map_err(|e| SourceError::Io {
+                path: index_path.clone(),
+                message: format!("cannot read frame index: {e}"),
+            })?;
         let mut rows = parse_index(&text, &index_path, dir, &rig, &mut stats, &mut warnings)?;
         // Frame-number order, then sensor order; the sort is stable and (frame, sensor) unique.
         rows.sort_by_key(|r| (r.frame, r.sensor));
