@@ -178,6 +178,13 @@ pub fn run(a: Args) -> CommandResult {
         ..PipelineOptions::default()
     };
     let summary = run_pipeline(source, &model, &table, &cfg, &opts, &mut sink)?;
+    if let Some(e) = &summary.publisher_error {
+        return Err(format!(
+            "cannot publish: {e} (`--no-publish` tracks without publishing; another user's tracker, or files \
+             it left in /dev/shm, can hold the service)"
+        )
+        .into());
+    }
     let stats = &summary.tracker;
     eprintln!(
         "omnitrack: {} frames, {} tracked ({:.1} %), {} losses, {} re-initialisations, {} relocalisations",

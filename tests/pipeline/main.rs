@@ -687,3 +687,29 @@ fn a_search_volume_without_a_valid_node_says_so_on_the_status() {
     // Before any search the status says so.
     assert_eq!(SearchState::try_from(statuses[0].search), Ok(SearchState::None));
 }
+
+/// A pose service that cannot be opened (here: the name is taken by a service of another
+/// message type) stops the run before its first frame, and the summary says why; with
+/// `require_services` off the run goes on without it.
+#[test]
+fn a_service_that_cannot_be_opened_stops_the_run_before_its_first_frame() {
+    let _serial = serial();
+    let f = fixture();
+    let mut opts = options(f, "taken");
+    let taken = opts.pose_service.clone().unwrap();
+    let _other = omnitrack::publish::StatusPublisher::create(&taken).unwrap();
+    opts.run.max_frames = Some(3);
+    let cfg = TrackerConfig::default();
+    let mut sink = Recorder {
+        records: Vec::new(),
+        tum: None,
+        stop_after: None,
+    };
+    let summary = run_pipeline(replay(&f.rec), &f.model, &f.table, &cfg, &opts, &mut sink).unwrap();
+    assert!(summary.publisher_error.is_some());
+    assert_eq!(summary.frames_processed, 0);
+    opts.require_services = false;
+    let summary = run_pipeline(replay(&f.rec), &f.model, &f.table, &cfg, &opts, &mut sink).unwrap();
+    assert!(summary.publisher_error.is_some());
+    assert_eq!(summary.frames_processed, 3);
+}

@@ -79,6 +79,10 @@ pub struct PipelineOptions {
     pub lossless: bool,
     /// Called first thing on each pipeline thread (e.g. to mark threads for an allocation counter).
     pub on_thread_start: Option<fn(PipelineThread)>,
+    /// A service asked for that cannot be opened stops the run before its first frame (default):
+    /// a tracker whose poses reach no one is a fault, not a warning. Off, the run goes on without
+    /// it; either way [`PipelineSummary::publisher_error`](super::PipelineSummary) says why.
+    pub require_services: bool,
 }
 
 impl Default for PipelineOptions {
@@ -90,6 +94,7 @@ impl Default for PipelineOptions {
             handle_signals: false,
             pose_service: Some(POSE_SERVICE.to_string()),
             status_service: Some(STATUS_SERVICE.to_string()),
+            require_services: true,
             lossless: false,
             on_thread_start: None,
         }

@@ -322,6 +322,9 @@ pub(super) fn run_process(
     let mut publisher_error = None;
     let poses = create_publisher::<PoseSample>(opts.pose_service.as_deref(), &mut publisher_error);
     let status = create_publisher::<StatusSample>(opts.status_service.as_deref(), &mut publisher_error);
+    if opts.require_services && publisher_error.is_some() {
+        shared.halt.store(true, Ordering::Relaxed);
+    }
     let clocks = Stage::ALL
         .iter()
         .map(|s| StageClock::new(stage_budget(*s, &cfg.budgets)))

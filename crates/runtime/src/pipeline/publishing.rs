@@ -1,5 +1,6 @@
 //! The pipeline's side of the iceoryx2 services ([`omnitrack_io::publish`]): opening a
-//! publisher (a run goes on without a service it cannot open), and marking the publish calls,
+//! publisher (a service that cannot be opened stops the run unless the caller allows running
+//! without it), and marking the publish calls,
 //! which allocate once per sample inside iceoryx2 0.10, for allocation counters
 //! ([`inside_publish`]).
 //!
@@ -42,7 +43,7 @@ pub(super) fn create_publisher<T: omnitrack_io::publish::Message>(
             Some(p)
         }
         Err(e) => {
-            tracing::warn!("not publishing: {e}");
+            tracing::debug!("cannot open the service: {e}");
             errors.get_or_insert_with(|| e.to_string());
             None
         }

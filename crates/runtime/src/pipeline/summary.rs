@@ -47,7 +47,8 @@ pub struct PipelineSummary {
     pub poses_published: u64,
     pub status_published: u64,
     pub publish_errors: u64,
-    /// Why a service could not be opened (the run went on without it).
+    /// Why a service could not be opened (the run stopped before its first frame, or with
+    /// `require_services` off went on without it).
     pub publisher_error: Option<String>,
 }
 
