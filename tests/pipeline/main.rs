@@ -128,7 +128,8 @@ fn fixture() -> &'static Fixture {
 }
 
 /// A recording of `frames` frames going back and forth over the rendered ones (0, 1, …, 39, 38,
-/// …, 1, 0, 1, …) with increasing timestamps: the same PNGs, a new index.
+/// …, 1, 0, 1, …) with increasing timestamps: the same PNGs (hard links: a recording reads only
+/// files inside its folder), a new index.
 fn ping_pong(f: &Fixture, frames: usize) -> PathBuf {
     let out = f.dir.path().join(format!("pingpong-{frames}"));
     if out.join("frames.csv").exists() {
@@ -151,8 +152,12 @@ fn ping_pong(f: &Fixture, frames: usize) -> PathBuf {
         let src = if c < RENDERED { c } else { cycle - c };
         for (sensor, ts, path) in &rows[src] {
             let ts = j as u64 * period + (ts - rows[src][0].1);
-            let abs = f.rec.join(path);
-            csv.push_str(&format!("{j},{sensor},{ts},{}\n", abs.display()));
+            let linked = out.join(path);
+            if !linked.exists() {
+                std::fs::create_dir_all(linked.parent().unwrap()).unwrap();
+                std::fs::hard_link(f.rec.join(path), &linked).unwrap();
+            }
+            csv.push_str(&format!("{j},{sensor},{ts},{path}\n"));
         }
     }
     std::fs::write(out.join("frames.csv"), csv).unwrap();
