@@ -42,8 +42,23 @@ pub fn run(Args { rig, model, config }: Args) -> CommandResult {
             );
         }
     }
+    // The config first: the model is checked against it as `run` will use it.
+    let cfg = match &config {
+        Some(path) => TrackerConfig::load(path)?,
+        None => TrackerConfig::default(),
+    };
     if let Some(path) = model {
         let m = Model::load(&path)?;
+        if m.segments.is_empty() {
+            return Err(format!(
+                "{}: the model has no segments: nothing for the edges to match",
+                path.display()
+            )
+            .into());
+        }
+        let v = &cfg.visibility;
+        omnitrack::visibility::check_grid(&m, v.node_spacing_m, v.node_heights_m.len())
+            .map_err(|e| format!("{}: {e}", path.display()))?;
         eprintln!(
             "{}: {} vertices, {} faces, {} segments ({} free); skipped {} degenerate faces, \
              split {} non-planar faces, welded {} duplicate vertices, ignored {} records",
@@ -59,7 +74,6 @@ pub fn run(Args { rig, model, config }: Args) -> CommandResult {
         );
     }
     if let Some(path) = config {
-        TrackerConfig::load(&path)?;
         eprintln!("{}: tracker config valid", path.display());
     }
     Ok(())

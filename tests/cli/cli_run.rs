@@ -193,3 +193,19 @@ fn devices_and_fifos_are_refused_as_input_files() {
         assert!(stderr.trim_end().ends_with("not a regular file"), "{args:?}: {stderr}");
     }
 }
+
+/// `check` refuses what `run` would refuse about a model: one without segments, and one whose
+/// visibility grid is too large to build at the config's spacing.
+#[test]
+fn check_refuses_a_model_run_could_not_use() {
+    let dir = tempfile::tempdir().unwrap();
+    let empty = dir.path().join("empty.obj");
+    std::fs::write(&empty, "v 0 0 0\n").unwrap();
+    let wide = dir.path().join("wide.obj");
+    std::fs::write(&wide, "v 0 0 0\nv 1e5 0 0\nv 1e5 1e5 0\nv 0 1e5 0\nf 1 2 3 4\n").unwrap();
+    for (model, expected) in [(&empty, "no segments"), (&wide, "grid cells, more than")] {
+        let (code, _, stderr) = omnitrack(&["check", "--model", model.to_str().unwrap()]);
+        assert_eq!(code, 2, "{stderr}");
+        assert!(stderr.contains(expected), "{stderr}");
+    }
+}

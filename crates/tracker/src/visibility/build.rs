@@ -129,40 +129,14 @@ impl Default for BuildOptions {
     }
 }
 
-/// The node grid over a model's bounds.
-/// Most grid cells a table may have: a 10⁵ m² campus at the default 1 m spacing and three
-/// heights is 3·10⁵; this is 100 times that, about a gigabyte of node sets at most.
-pub const MAX_GRID_CELLS: u64 = 30_000_000;
-
-/// Whether `model`'s grid at `opts`' spacing is small enough to build (at most
-/// [`MAX_GRID_CELLS`]); checked before a byte of the table is allocated. The message says how
-/// to fix it.
+/// [`super::check_grid`] with a build's options.
 pub fn check_grid(model: &Model, opts: &BuildOptions) -> Result<(), String> {
-    let (_, [nx, ny, nz]) = grid(model, opts);
-    let cells = u64::from(nx) * u64::from(ny) * u64::from(nz);
-    if cells <= MAX_GRID_CELLS {
-        return Ok(());
-    }
-    let (lo, hi) = model.bounds().unwrap_or((Point3::origin(), Point3::origin()));
-    Err(format!(
-        "a {:.0} m × {:.0} m model at {} m node spacing is {cells} grid cells, more than {MAX_GRID_CELLS}: \
-         use a wider spacing ([visibility] node_spacing_m, --spacing-m) or one building per model",
-        hi.x - lo.x,
-        hi.y - lo.y,
-        opts.spacing_m
-    ))
+    super::check_grid(model, opts.spacing_m, opts.heights_m.len())
 }
 
+/// The node grid over a model's bounds ([`super::grid`]).
 fn grid(model: &Model, opts: &BuildOptions) -> ([f64; 3], [u32; 3]) {
-    let (lo, hi) = model.bounds().unwrap_or((Point3::origin(), Point3::origin()));
-    let s = opts.spacing_m;
-    // Saturating: a grid too large to count is refused by its caller, never wrapped.
-    let n = |a: f64, b: f64| (((b - a) / s).ceil().clamp(1.0, f64::from(u32::MAX))) as u32;
-    let (nx, ny) = (n(lo.x, hi.x), n(lo.y, hi.y));
-    // Centre the nodes: the grid spans (n·s) around the bounds' centre.
-    let ox = 0.5 * (lo.x + hi.x) - 0.5 * (nx as f64 - 1.0) * s;
-    let oy = 0.5 * (lo.y + hi.y) - 0.5 * (ny as f64 - 1.0) * s;
-    ([ox, oy, lo.z], [nx, ny, opts.heights_m.len() as u32])
+    super::grid(model, opts.spacing_m, opts.heights_m.len())
 }
 
 /// Summary of a build, for logs and the benchmark.

@@ -44,6 +44,42 @@ pub mod at_pose;
 #[cfg(feature = "build")]
 pub mod build;
 
+/// Most grid cells a table may have: a 10⁵ m² campus at the default 1 m spacing and three
+/// heights is 3·10⁵; this is 100 times that, about a gigabyte of node sets at most.
+pub const MAX_GRID_CELLS: u64 = 30_000_000;
+
+/// The node grid over a model's bounds at `spacing_m` with `layers` node heights: the origin of
+/// its first node (x, y; z the model's lowest point) and its size in nodes.
+pub(crate) fn grid(model: &Model, spacing_m: f64, layers: usize) -> ([f64; 3], [u32; 3]) {
+    let (lo, hi) = model.bounds().unwrap_or((Point3::origin(), Point3::origin()));
+    let s = spacing_m;
+    // Saturating: a grid too large to count is refused by `check_grid`, never wrapped.
+    let n = |a: f64, b: f64| (((b - a) / s).ceil().clamp(1.0, f64::from(u32::MAX))) as u32;
+    let (nx, ny) = (n(lo.x, hi.x), n(lo.y, hi.y));
+    // Centre the nodes: the grid spans (n·s) around the bounds' centre.
+    let ox = 0.5 * (lo.x + hi.x) - 0.5 * (nx as f64 - 1.0) * s;
+    let oy = 0.5 * (lo.y + hi.y) - 0.5 * (ny as f64 - 1.0) * s;
+    ([ox, oy, lo.z], [nx, ny, layers as u32])
+}
+
+/// Whether `model`'s table at `spacing_m` with `layers` heights is small enough to build (at
+/// most [`MAX_GRID_CELLS`]), checked before a byte of it is allocated (by the build, `run`'s own
+/// build and `check`); the message says how to fix it.
+pub fn check_grid(model: &Model, spacing_m: f64, layers: usize) -> Result<(), String> {
+    let (_, [nx, ny, nz]) = grid(model, spacing_m, layers);
+    let cells = u64::from(nx) * u64::from(ny) * u64::from(nz);
+    if cells <= MAX_GRID_CELLS {
+        return Ok(());
+    }
+    let (lo, hi) = model.bounds().unwrap_or((Point3::origin(), Point3::origin()));
+    Err(format!(
+        "a {:.0} m × {:.0} m model at {spacing_m} m node spacing is {cells} grid cells, more than {MAX_GRID_CELLS}: \
+         use a wider spacing ([visibility] node_spacing_m, --spacing-m) or one building per model",
+        hi.x - lo.x,
+        hi.y - lo.y,
+    ))
+}
+
 use nalgebra::Point3;
 use omnitrack_core::model::Model;
 use serde::{Deserialize, Serialize};
