@@ -786,3 +786,33 @@ fn a_grid_too_large_to_build_is_refused_before_it_is_allocated() {
         assert!(!out.exists());
     }
 }
+
+/// A table is saved by renaming a finished file over the path: a symbolic link there (the
+/// cache beside a model) is replaced, and the file it pointed to is left alone; a device is
+/// refused as a table to read.
+#[test]
+fn saving_replaces_a_link_and_never_writes_through_it() {
+    let mut obj = Obj::default();
+    obj.room([0.0, 0.0, 0.0], [4.0, 3.0, 2.6]);
+    let model = obj.model();
+    let table = build_table(&model, "room.obj", &options());
+    let dir = tempfile::tempdir().unwrap();
+    let precious = dir.path().join("precious.txt");
+    std::fs::write(&precious, "mine").unwrap();
+    let vis = dir.path().join("room.vis");
+    std::os::unix::fs::symlink(&precious, &vis).unwrap();
+    table.save(&vis).unwrap();
+    assert_eq!(std::fs::read_to_string(&precious).unwrap(), "mine");
+    assert!(!std::fs::symlink_metadata(&vis).unwrap().file_type().is_symlink());
+    assert_eq!(
+        VisibilityTable::load(&vis, &model).unwrap().node_count(),
+        table.node_count()
+    );
+    assert_eq!(
+        std::fs::read_dir(dir.path()).unwrap().count(),
+        2,
+        "no partial file left"
+    );
+    let e = VisibilityTable::load_unchecked(std::path::Path::new("/dev/zero")).unwrap_err();
+    assert!(e.to_string().contains("not a regular file"), "{e}");
+}

@@ -530,17 +530,42 @@ impl VisibilityTable {
 
     /// Writes the table file.
     pub fn save(&self, path: &Path) -> Result<(), VisibilityError> {
-        std::fs::write(path, self.to_bytes()).map_err(|e| VisibilityError::Io {
-            file: path.display().to_string(),
-            action: "write visibility table",
-            message: e.to_string(),
+        // Written beside it and renamed over it: a reader never sees half a table, a crash leaves
+        // the old one, and a symbolic link at `path` is replaced, not written through (the cache
+        // beside a model must not overwrite whatever a link there points to).
+        let mut temporary = path.as_os_str().to_owned();
+        temporary.push(format!(".partial-{}", std::process::id()));
+        let temporary = PathBuf::from(temporary);
+        let written = (|| {
+            let mut f = std::fs::File::create(&temporary)?;
+            std::io::Write::write_all(&mut f, &self.to_bytes())?;
+            f.sync_all()?;
+            std::fs::rename(&temporary, path)
+        })();
+        written.map_err(|e| {
+            let _ = std::fs::remove_file(&temporary);
+            VisibilityError::Io {
+                file: path.display().to_string(),
+                action: "write visibility table",
+                message: e.to_string(),
+            }
         })
     }
 
     /// Reads a table file without checking it against a model.
     pub fn load_unchecked(path: &Path) -> Result<VisibilityTable, VisibilityError> {
         let file = path.display().to_string();
-        let bytes = std::fs::read(path).map_err(|e| VisibilityError::Io {
+        let read = || {
+            // A device or a FIFO is no table (and /dev/zero would never end).
+            if !std::fs::metadata(path)?.is_file() {
+                return Err(std::io::Error::new(
+                    std::io::ErrorKind::InvalidInput,
+                    "not a regular file",
+                ));
+            }
+            std::fs::read(path)
+        };
+        let bytes = read().map_err(|e| VisibilityError::Io {
             file: file.clone(),
             action: "read visibility table",
             message: e.to_string(),
