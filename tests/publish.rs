@@ -368,3 +368,19 @@ fn listen_status_prints_one_documented_line_per_status_sample() {
     let one = String::from_utf8(one).unwrap();
     assert!(one.contains(" search=unknown(9) sensors=16 "), "{one}");
 }
+
+/// One tracker per service: a second publisher is refused while the first lives (its poses
+/// would interleave with the first's, and nothing in a sample tells them apart), and welcome
+/// once it is gone.
+#[test]
+fn a_second_publisher_on_a_service_is_refused() {
+    let name = unique("second");
+    let first = PosePublisher::create(&name).unwrap();
+    let e = PosePublisher::create(&name)
+        .err()
+        .expect("a second publisher")
+        .to_string();
+    assert!(e.contains("one tracker per service"), "{e}");
+    drop(first);
+    assert!(PosePublisher::create(&name).is_ok());
+}

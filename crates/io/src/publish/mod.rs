@@ -167,6 +167,16 @@ impl<T: Message> SamplePublisher<T> {
     pub fn create(service: &str) -> Result<Self, PublishError> {
         let (node, dead_nodes_cleaned) = create_node("omnitrack-publisher", service)?;
         let pubsub = open_pubsub::<T>(&node, service)?;
+        // One tracker per service: a second one would interleave its poses with the first's and
+        // nothing in a sample tells them apart. (Publishers of crashed runs were cleaned above.)
+        let others = iceoryx2::service::port_factory::PortFactory::dynamic_config(&pubsub).number_of_publishers();
+        if others > 0 {
+            return Err(PublishError::new(
+                "create publisher",
+                service,
+                format_args!("another process publishes on it ({others}): one tracker per service"),
+            ));
+        }
         let events = open_event(&node, service)?;
         let publisher = pubsub
             .publisher_builder()
