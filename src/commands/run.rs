@@ -153,8 +153,16 @@ pub fn run(a: Args) -> CommandResult {
         },
         ..SourceOptions::default()
     };
-    let source = open_pipeline_source(&a.source, rig.as_ref(), &options)?;
+    // The model before the cameras: a model that cannot be used fails before a device is opened.
     let model = Model::load(&a.model)?;
+    if model.segments.is_empty() {
+        return Err(format!(
+            "{}: the model has no segments: nothing for the edges to match",
+            a.model.display()
+        )
+        .into());
+    }
+    let source = open_pipeline_source(&a.source, rig.as_ref(), &options)?;
     let (table, origin) = load_or_build_table(&a.model, &model, a.visibility.as_deref(), &cfg)?;
     eprintln!("omnitrack: {origin}");
     let mut sink = RunSink {

@@ -42,6 +42,12 @@ fn bad_arguments_and_inputs_are_one_line_errors() {
         );
         assert!(!stderr.contains("panicked"), "{full:?} panicked: {stderr}");
     }
+    // A model with nothing to match is refused before the source is opened.
+    let empty = dir.path().join("empty.obj");
+    std::fs::write(&empty, "v 0 0 0\n").unwrap();
+    let (code, _, stderr) = omnitrack(&["run", "--model", empty.to_str().unwrap(), "--source", &replay]);
+    assert_eq!(code, 2);
+    assert!(last_line(&stderr).contains("the model has no segments"), "{stderr}");
 }
 
 /// clap's usage errors are one line too (its own report spans the problem, a tip and the usage);
