@@ -212,3 +212,41 @@ fn bad_rig_files_name_the_file_the_sensor_and_the_key() {
     let missing = Rig::load(Path::new("/no/rig.toml")).unwrap_err().to_string();
     assert!(missing.starts_with("/no/rig.toml: cannot read rig file"), "{missing}");
 }
+
+/// `crop` (docs/interfaces.md): read, checked against the sensor's resolution, written back;
+/// live capture refuses it in one line (it opens one camera per sensor), a replay does not care.
+#[test]
+fn a_crop_is_read_checked_written_back_and_refused_by_live_capture() {
+    let two = |crop1: &str| {
+        format!(
+            "name = \"dual\"\n\
+             [[sensors]]\nid = 0\nresolution = [640, 640]\nmodel = \"kb4\"\nintrinsics = [180.0, 180.0, 319.5, 319.5]\n\
+             distortion = [0.0, 0.0, 0.0, 0.0]\nrotation_wxyz = [0.5, -0.5, 0.5, -0.5]\ntranslation_m = [0.03, 0.0, 0.0]\n\
+             device = \"/dev/video0\"\ncrop = [0, 0, 640, 640]\n\
+             [[sensors]]\nid = 1\nresolution = [640, 640]\nmodel = \"kb4\"\nintrinsics = [180.0, 180.0, 319.5, 319.5]\n\
+             distortion = [0.0, 0.0, 0.0, 0.0]\nrotation_wxyz = [0.5, 0.5, 0.5, 0.5]\ntranslation_m = [-0.03, 0.0, 0.0]\n\
+             device = \"/dev/video0\"\ncrop = {crop1}\n"
+        )
+    };
+    let rig = Rig::from_toml_str(&two("[640, 0, 640, 640]"), "dual.toml").unwrap();
+    assert_eq!(rig.sensors[1].crop, Some([640, 0, 640, 640]));
+    assert_eq!(Rig::from_toml_str(&rig.to_toml_string(), "again.toml").unwrap(), rig);
+    for (crop, expected) in [
+        (
+            "[640, 0, 600, 640]",
+            "sensor 1, key 'crop': its width and height 600×640 must be the sensor's resolution",
+        ),
+        ("[640, 0, 640]", "sensor 1, key 'crop': must have 4 numbers, found 3"),
+        (
+            "[-1, 0, 640, 640]",
+            "sensor 1, key 'crop': must be four whole pixel counts",
+        ),
+    ] {
+        let e = Rig::from_toml_str(&two(crop), "dual.toml").unwrap_err().to_string();
+        assert!(e.contains(expected), "{e:?} should contain {expected:?}");
+    }
+    let e = omnitrack::capture::open::refuse_crop(&rig, "v4l")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("sensor 0 has a crop"), "{e}");
+}

@@ -75,19 +75,14 @@ def line(s: PoseSample) -> str:
     )
 
 
-def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--service", default="omnitrack/pose")
-    ap.add_argument("--count", type=int, default=None)
-    ap.add_argument("--timeout", type=float, default=10.0)
-    args = ap.parse_args()
-
+def subscribe(service_name: str):
+    """The node, a subscriber to the pose service and a listener on its event service, with the
+    same service settings as the Rust side (omnitrack::publish), so that either may start first."""
     # No warning about the optional iceoryx2 config file; IOX2_LOG_LEVEL still wins.
     iox2.set_log_level_from_env_or(iox2.LogLevel.Error)
     node = iox2.NodeBuilder.new().create(iox2.ServiceType.Ipc)
     node.try_cleanup_dead_nodes()  # resources left by crashed processes
-    name = iox2.ServiceName.new(args.service)
-    # Same settings as the Rust side (omnitrack::publish), so either may start first.
+    name = iox2.ServiceName.new(service_name)
     service = (
         node.service_builder(name)
         .publish_subscribe(PoseSample)
@@ -101,6 +96,18 @@ def main() -> int:
     subscriber = service.subscriber_builder().create()
     # The publisher notifies this event service after each sample: sleep on it instead of polling.
     listener = node.service_builder(name).event().open_or_create().listener_builder().create()
+    # The node owns the ports: the caller keeps it alive with them.
+    return node, subscriber, listener
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--service", default="omnitrack/pose")
+    ap.add_argument("--count", type=int, default=None)
+    ap.add_argument("--timeout", type=float, default=10.0)
+    args = ap.parse_args()
+
+    _node, subscriber, listener = subscribe(args.service)
 
     received = 0
     last = time.monotonic()

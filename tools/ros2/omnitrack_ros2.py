@@ -66,30 +66,13 @@ def main(argv=None):
     import iceoryx2 as iox2
 
     sys.path.insert(0, __file__.rsplit("/", 2)[0] + "/examples")
-    from listen_pose import PoseSample  # the C layout, defined once
+    from listen_pose import subscribe  # the C layout and the service settings, defined once
 
     rclpy.init()
     node = rclpy.create_node("omnitrack_bridge")
     publisher = node.create_publisher(PoseWithCovarianceStamped, args.topic, 10)
     broadcaster = TransformBroadcaster(node)
-
-    # The service exactly as listen_pose.py (and the Rust publisher) configure it.
-    iox2.set_log_level_from_env_or(iox2.LogLevel.Error)
-    iox_node = iox2.NodeBuilder.new().create(iox2.ServiceType.Ipc)
-    iox_node.try_cleanup_dead_nodes()
-    name = iox2.ServiceName.new(args.service)
-    service = (
-        iox_node.service_builder(name)
-        .publish_subscribe(PoseSample)
-        .history_size(1)
-        .subscriber_max_buffer_size(8)
-        .enable_safe_overflow(True)
-        .max_subscribers(16)
-        .max_publishers(2)
-        .open_or_create()
-    )
-    subscriber = service.subscriber_builder().create()
-    listener = iox_node.service_builder(name).event().open_or_create().listener_builder().create()
+    _iox_node, subscriber, listener = subscribe(args.service)
 
     while rclpy.ok():
         sample = subscriber.receive()

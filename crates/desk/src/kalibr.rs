@@ -126,6 +126,7 @@ pub fn rig_from_kalibr(yaml: &str, file: &str, name: &str, rig_frame: &str) -> R
             t_rig_sensor: Pose::from_parts(Translation3::from(t), rotation),
             device: None,
             usb_serial: None,
+            crop: None,
         });
     }
     let rig = Rig {

@@ -117,6 +117,7 @@ pub fn rig_from_opencv(
             t_rig_sensor: Pose::from_parts(Translation3::identity(), turn),
             device: None,
             usb_serial: None,
+            crop: None,
         }],
         usb: None,
     };

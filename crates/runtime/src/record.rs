@@ -116,14 +116,19 @@ pub fn record(source: &mut dyn FrameSource, out: &Path, opts: &RecordOptions) ->
 
     let queue = opts.queue.max(1);
     let (full_tx, full_rx) = bounded::<FrameSet>(queue);
-    let (free_tx, free_rx) = bounded::<FrameSet>(queue + 1);
-    for _ in 0..queue + 1 {
+    // Queue + 2 frames, all allocated here: at most `queue` wait in the queue and one is in the
+    // writer's hands, so the free channel (room for all of them) always holds one for capture,
+    // and neither side ever waits on it.
+    let frames = queue + 2;
+    let (free_tx, free_rx) = bounded::<FrameSet>(frames);
+    for _ in 0..frames {
         let _ = free_tx.send(FrameSet::for_rig(&rig));
     }
+    let returns = free_tx.clone();
     let mut summary = RecordSummary::default();
     let written = std::thread::scope(|scope| {
         let writer = scope.spawn(move || write_frames(full_rx, free_tx, out, csv, csv_path));
-        let captured = capture(source, opts, &full_tx, &free_rx, &rig, &mut summary);
+        let captured = capture(source, opts, &full_tx, &free_rx, &returns, &mut summary);
         drop(full_tx);
         let written = writer.join().unwrap_or_else(|_| {
             Err(RecordError::Encode {
@@ -139,28 +144,19 @@ pub fn record(source: &mut dyn FrameSource, out: &Path, opts: &RecordOptions) ->
     Ok(summary)
 }
 
-/// The caller's side: frames from the source into the pool and on to the writer.
+/// The caller's side: frames from the source into the pool and on to the writer; a frame the
+/// writer cannot take goes straight back to the pool (`returns`).
 fn capture(
     source: &mut dyn FrameSource,
     opts: &RecordOptions,
     full: &Sender<FrameSet>,
     free: &Receiver<FrameSet>,
-    rig: &omnitrack_core::rig::Rig,
+    returns: &Sender<FrameSet>,
     summary: &mut RecordSummary,
 ) -> Result<(), RecordError> {
-    // The frame in hand when every pool frame waits for the writer: capture goes on into it.
-    let mut spare = FrameSet::for_rig(rig);
     while opts.max_frames.is_none_or(|m| summary.frames_captured < m) && !opts.stop.load(Ordering::Relaxed) {
-        let mut frame = if opts.lossless {
-            match free.recv() {
-                Ok(f) => f,
-                // The writer stopped (its error is reported by the caller).
-                Err(_) => return Ok(()),
-            }
-        } else {
-            free.try_recv()
-                .unwrap_or_else(|_| std::mem::replace(&mut spare, FrameSet::for_rig(rig)))
-        };
+        // Never empty here (see `record`); `returns` keeps the channel open.
+        let Ok(mut frame) = free.recv() else { return Ok(()) };
         if !source.next_frame(&mut frame)? {
             break;
         }
@@ -170,12 +166,13 @@ fn capture(
             Ok(()) => {}
             Err(TrySendError::Full(frame)) if opts.lossless => {
                 if full.send(frame).is_err() {
+                    // The writer stopped (its error is reported by the caller).
                     return Ok(());
                 }
             }
             Err(TrySendError::Full(frame)) => {
                 summary.frames_dropped += 1;
-                spare = frame;
+                let _ = returns.try_send(frame);
             }
             Err(TrySendError::Disconnected(_)) => return Ok(()),
         }
@@ -219,8 +216,93 @@ fn write_frames(
             source,
         })?;
         frames += 1;
-        // The capture side may have gone; the frame is then simply dropped.
-        let _ = free.send(frame);
+        // The channel has room for every frame, so this never waits.
+        let _ = free.try_send(frame);
     }
     Ok((frames, images))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use omnitrack_core::rig::Rig;
+    use omnitrack_io::capture::SourceStats;
+
+    /// Frames as fast as a loop can make them: far faster than PNGs are written.
+    struct Flood {
+        rig: Rig,
+        stats: SourceStats,
+        left: u64,
+    }
+
+    impl FrameSource for Flood {
+        fn rig(&self) -> &Rig {
+            &self.rig
+        }
+        fn next_frame(&mut self, out: &mut FrameSet) -> Result<bool, SourceError> {
+            if self.left == 0 {
+                return Ok(false);
+            }
+            self.left -= 1;
+            out.sequence = 1000 - self.left;
+            let t = out.sequence * 1_000;
+            for s in out.sensors_mut() {
+                s.pixels_mut().fill((self.left % 251) as u8);
+                s.set_valid(t);
+            }
+            Ok(true)
+        }
+        fn stats(&self) -> &SourceStats {
+            &self.stats
+        }
+    }
+
+    fn flood(frames: u64) -> Flood {
+        let rig = Rig::from_toml_str(
+            "name = \"one\"\n[[sensors]]\nid = 0\nresolution = [320, 240]\nmodel = \"pinhole\"\n\
+             intrinsics = [300.0, 300.0, 159.5, 119.5]\nrotation_wxyz = [0.5, -0.5, 0.5, -0.5]\n\
+             translation_m = [0.0, 0.0, 0.0]\n",
+            "one.toml",
+        )
+        .unwrap();
+        Flood {
+            stats: SourceStats::new(1),
+            rig,
+            left: frames,
+        }
+    }
+
+    /// A source faster than the disk: capture never waits, the frames the writer cannot take are
+    /// dropped and counted, and the recording ends (no frame is ever lost to the pool).
+    #[test]
+    fn a_source_faster_than_the_disk_drops_and_counts_and_never_waits() {
+        let dir = tempfile::tempdir().unwrap();
+        let opts = RecordOptions {
+            queue: 1,
+            ..RecordOptions::default()
+        };
+        let s = record(&mut flood(400), &dir.path().join("rec"), &opts).unwrap();
+        assert_eq!(s.frames_captured, 400);
+        assert_eq!(s.frames_written + s.frames_dropped, 400, "{s}");
+        assert!(s.frames_dropped > 0, "{s}");
+        assert_eq!(s.images_written, s.frames_written);
+        let rows = std::fs::read_to_string(dir.path().join("rec/frames.csv"))
+            .unwrap()
+            .lines()
+            .count();
+        assert_eq!(rows as u64, 1 + s.frames_written);
+        // Lossless, every frame is written.
+        let opts = RecordOptions {
+            queue: 1,
+            lossless: true,
+            ..RecordOptions::default()
+        };
+        let s = record(&mut flood(50), &dir.path().join("all"), &opts).unwrap();
+        assert_eq!((s.frames_written, s.frames_dropped), (50, 0));
+        // A folder with something in it is never written into.
+        let e = record(&mut flood(1), &dir.path().join("all"), &opts)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("exists and is not empty"), "{e}");
+    }
 }

@@ -31,6 +31,10 @@ pub struct Sensor {
     /// Serial number of this sensor's USB3 Vision camera (`usb_serial`), if the rig file names
     /// one; either every sensor has one or none does (see [`UsbRig`]).
     pub usb_serial: Option<String>,
+    /// `crop = [x, y, width, height]`: this sensor's image is that window of its device's frame
+    /// (several sensors may share one device, e.g. a dual-fisheye camera); width and height are
+    /// the sensor's resolution.
+    pub crop: Option<[u32; 4]>,
 }
 
 /// How the rig's USB3 Vision cameras are found on the bus: the optional `[usb]` table.
@@ -68,7 +72,7 @@ pub struct RigError {
 /// The lens models a rig file may name.
 const LENS_MODELS: &str = "\"kb4\", \"pinhole\", \"radtan\" or \"equirectangular\"";
 
-const SENSOR_KEYS: [&str; 9] = [
+const SENSOR_KEYS: [&str; 10] = [
     "id",
     "resolution",
     "model",
@@ -78,6 +82,7 @@ const SENSOR_KEYS: [&str; 9] = [
     "translation_m",
     "device",
     "usb_serial",
+    "crop",
 ];
 
 impl Sensor {
@@ -237,6 +242,9 @@ impl Rig {
             if let Some(d) = &s.device {
                 let _ = writeln!(out, "device = {}", Value::String(d.clone()));
             }
+            if let Some([x, y, w, h]) = s.crop {
+                let _ = writeln!(out, "crop = [{x}, {y}, {w}, {h}]");
+            }
             if let Some(serial) = &s.usb_serial {
                 let _ = writeln!(out, "usb_serial = {}", Value::String(serial.clone()));
             }
@@ -382,6 +390,28 @@ fn parse_sensor(entry: &Value, index: usize, count: usize) -> Result<Sensor, Pla
             ))
         }
     };
+    let crop = match t.get("crop") {
+        None => None,
+        Some(_) => {
+            let c = numbers("crop", 4)?;
+            if c.iter().any(|&v| !(0.0..=65535.0).contains(&v) || v.fract() != 0.0) {
+                return Err(fail(
+                    "crop",
+                    format!("must be four whole pixel counts [x, y, width, height], found {c:?}"),
+                ));
+            }
+            if (c[2], c[3]) != (resolution[0], resolution[1]) {
+                return Err(fail(
+                    "crop",
+                    format!(
+                        "its width and height {}×{} must be the sensor's resolution {}×{}",
+                        c[2], c[3], resolution[0], resolution[1]
+                    ),
+                ));
+            }
+            Some([c[0] as u32, c[1] as u32, c[2] as u32, c[3] as u32])
+        }
+    };
     Ok(Sensor {
         id,
         width: resolution[0] as u32,
@@ -390,6 +420,7 @@ fn parse_sensor(entry: &Value, index: usize, count: usize) -> Result<Sensor, Pla
         t_rig_sensor,
         device,
         usb_serial,
+        crop,
     })
 }
 

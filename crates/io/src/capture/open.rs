@@ -100,10 +100,12 @@ pub fn open_source_with(
     match spec {
         "v4l" => {
             let rig = need_rig("V4L2 device")?;
+            refuse_crop(rig, spec)?;
             open_v4l(rig, options)
         }
         "usb" => {
             let rig = need_rig("USB3 Vision camera")?;
+            refuse_crop(rig, spec)?;
             open_usb(rig, options)
         }
         "replay" => Err(spec_error(
@@ -137,6 +139,24 @@ fn open_usb(_rig: &Rig, _options: &SourceOptions) -> Result<Box<dyn FrameSource 
         device: "usb".into(),
         message: USB_DISABLED.into(),
     })
+}
+
+/// Live capture opens one camera per sensor; a rig whose sensors are windows of a shared
+/// device's frame (`crop`) needs one camera split among them, which the live drivers do not do
+/// yet: refused in one line rather than failing on the second open of the device. Replays of
+/// such a rig need nothing of the kind (a recording holds each sensor's image).
+pub fn refuse_crop(rig: &Rig, spec: &str) -> Result<(), SourceError> {
+    match rig.sensors.iter().find(|s| s.crop.is_some()) {
+        None => Ok(()),
+        Some(s) => Err(SourceError::Device {
+            device: spec.to_string(),
+            message: format!(
+                "sensor {} has a crop (a window of a shared device's frame): live capture opens one camera per \
+                 sensor and cannot split one device's frame yet (a replay of such a rig works)",
+                s.id
+            ),
+        }),
+    }
 }
 
 /// A `--rig` given with a recording must have the recording's sensors (count and sizes).

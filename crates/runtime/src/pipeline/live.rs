@@ -156,6 +156,7 @@ pub fn live_sensors<C: LiveCamera + 'static>(
 where
     C::Env: 'static,
 {
+    omnitrack_io::capture::open::refuse_crop(rig, "live capture")?;
     let env = Arc::new(Mutex::new(env));
     let now = Instant::now();
     let mut sensors: Vec<Box<dyn SensorCapture>> = Vec::with_capacity(rig.sensors.len());
