@@ -2,12 +2,13 @@
 //! sources' handling of a sensor that disappears and comes back, and the rig's optional USB keys.
 
 use image::{Rgb, RgbImage};
+use omnitrack::capture::device::CaptureDevice;
 use omnitrack::capture::open::{FailureDetail, LiveCamera, ReadFailure, USB_DISABLED, V4L_DISABLED};
 use omnitrack::capture::{
     open_source, open_source_with, FrameSet, FrameSource, ImageFault, LiveSource, Pacing, SensorImage, SourceError,
     SourceOptions,
 };
-use omnitrack::rig::{Rig, Sensor, UsbRig};
+use omnitrack::rig::{Rig, UsbRig};
 use std::fmt::Write as _;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
@@ -174,6 +175,7 @@ fn usb_without_cameras_or_bus_is_a_clear_error_not_a_panic() {
 /// A fake camera: sensor k's image is filled with k; `plugged[k]` says whether it is there.
 struct FakeCamera {
     sensor: usize,
+    size: (u32, u32),
     name: String,
     plugged: Arc<Mutex<Vec<bool>>>,
     reads: u64,
@@ -182,16 +184,17 @@ struct FakeCamera {
 impl LiveCamera for FakeCamera {
     type Env = Arc<Mutex<Vec<bool>>>;
 
-    fn open(env: &mut Self::Env, sensor: &Sensor, _: &SourceOptions) -> Result<FakeCamera, SourceError> {
-        if !env.lock().unwrap()[sensor.id] {
+    fn open(env: &mut Self::Env, device: &CaptureDevice, _: &SourceOptions) -> Result<FakeCamera, SourceError> {
+        if !env.lock().unwrap()[device.index] {
             return Err(SourceError::Device {
-                device: format!("fake{}", sensor.id),
-                message: format!("sensor {}: no such device", sensor.id),
+                device: format!("fake{}", device.index),
+                message: format!("{}: no such device", device.label),
             });
         }
         Ok(FakeCamera {
-            sensor: sensor.id,
-            name: format!("fake{}", sensor.id),
+            sensor: device.index,
+            size: (device.width, device.height),
+            name: format!("fake{}", device.index),
             plugged: env.clone(),
             reads: 0,
         })
@@ -199,6 +202,10 @@ impl LiveCamera for FakeCamera {
 
     fn name(&self) -> &str {
         &self.name
+    }
+
+    fn frame_size(&self) -> (u32, u32) {
+        self.size
     }
 
     fn read(&mut self, img: &mut SensorImage) -> Result<u64, ReadFailure> {
@@ -272,6 +279,124 @@ fn a_lost_sensor_is_reported_reopened_and_the_others_go_on() {
     ));
 }
 
+/// Whether the pattern device is plugged in, and the frame size it forces (else the one asked).
+type PatternEnv = Arc<Mutex<(bool, Option<(u32, u32)>)>>;
+
+/// A device delivering frames whose pixel (u, v) is (u, v, n) for its n-th read, of the size
+/// asked for, or of `forced` when set; `plugged` says whether it is there.
+struct PatternCamera {
+    size: (u32, u32),
+    plugged: PatternEnv,
+    reads: u8,
+}
+
+impl LiveCamera for PatternCamera {
+    type Env = PatternEnv;
+
+    fn open(env: &mut Self::Env, device: &CaptureDevice, _: &SourceOptions) -> Result<PatternCamera, SourceError> {
+        let (plugged, forced) = *env.lock().unwrap();
+        if !plugged {
+            return Err(SourceError::Device {
+                device: "pattern".into(),
+                message: format!("{}: no such device", device.label),
+            });
+        }
+        Ok(PatternCamera {
+            size: forced.unwrap_or((device.width, device.height)),
+            plugged: env.clone(),
+            reads: 0,
+        })
+    }
+
+    fn name(&self) -> &str {
+        "pattern"
+    }
+
+    fn frame_size(&self) -> (u32, u32) {
+        self.size
+    }
+
+    fn read(&mut self, img: &mut SensorImage) -> Result<u64, ReadFailure> {
+        if !self.plugged.lock().unwrap().0 {
+            return Err(ReadFailure {
+                fault: ImageFault::Missing,
+                lost: true,
+                detail: FailureDetail::Os(19),
+            });
+        }
+        self.reads += 1;
+        assert_eq!((img.width(), img.height()), self.size);
+        let w = self.size.0 as usize;
+        for (i, p) in img.pixels_mut().chunks_exact_mut(3).enumerate() {
+            p.copy_from_slice(&[(i % w) as u8, (i / w) as u8, self.reads]);
+        }
+        Ok(u64::from(self.reads) * 1000)
+    }
+}
+
+/// Two sensors cropped from one device's frame (a dual-fisheye camera): one device opened, each
+/// sensor's image is its window, a device that vanishes takes both, and a frame too small for a
+/// window is one line naming it.
+#[test]
+fn sensors_cropped_from_one_device_get_their_windows_of_each_frame() {
+    let r = rig(&[(4, 3), (4, 3), (2, 2)], "", &|id| match id {
+        0 => "device = \"/dev/video0\"\ncrop = [0, 0, 4, 3]".into(),
+        1 => "device = \"/dev/video0\"\ncrop = [5, 1, 4, 3]".into(),
+        _ => "device = \"/dev/video1\"".into(),
+    });
+    let env = Arc::new(Mutex::new((true, None)));
+    let options = SourceOptions {
+        reopen_interval: Duration::from_millis(20),
+        ..SourceOptions::default()
+    };
+    let mut source = LiveSource::<PatternCamera>::open_with_env(r.clone(), env.clone(), options).unwrap();
+    assert_eq!(source.connected(), 2, "two devices for three sensors");
+    let mut frame = FrameSet::for_rig(source.rig());
+    assert!(source.next_frame(&mut frame).unwrap());
+    assert_eq!(frame.valid_count(), 3);
+    // Sensor 1's pixel (u, v) is the device's (5 + u, 1 + v); both carry the device's time.
+    assert_eq!(frame.sensor(0).rgb(3, 2), [3, 2, 1]);
+    assert_eq!(frame.sensor(1).rgb(0, 0), [5, 1, 1]);
+    assert_eq!(frame.sensor(1).rgb(3, 2), [8, 3, 1]);
+    assert_eq!(frame.sensor(2).rgb(1, 1), [1, 1, 1]);
+    assert_eq!(frame.sensor(0).timestamp_ns, frame.sensor(1).timestamp_ns);
+
+    env.lock().unwrap().0 = false;
+    assert!(source.next_frame(&mut frame).unwrap());
+    assert_eq!(frame.valid_count(), 0);
+    assert_eq!(source.stats().sensors[1].missing, 1);
+    assert!(!source.is_connected(0) && !source.is_connected(1));
+    env.lock().unwrap().0 = true;
+    std::thread::sleep(Duration::from_millis(30));
+    assert!(source.next_frame(&mut frame).unwrap());
+    assert_eq!(frame.valid_count(), 3);
+    assert_eq!(frame.sensor(1).rgb(0, 0)[..2], [5, 1]);
+
+    // A larger frame than the windows need is taken; a smaller one is refused, naming the window.
+    *env.lock().unwrap() = (true, Some((12, 5)));
+    let r0 = rig(&[(4, 3), (4, 3)], "", &|id| {
+        format!("device = \"/dev/video0\"\ncrop = [{}, 1, 4, 3]", 5 * id)
+    });
+    let mut wide = LiveSource::<PatternCamera>::open_with_env(r0.clone(), env.clone(), options).unwrap();
+    let mut frame = FrameSet::for_rig(wide.rig());
+    assert!(wide.next_frame(&mut frame).unwrap());
+    assert_eq!(frame.sensor(1).rgb(3, 2), [8, 3, 1]);
+    *env.lock().unwrap() = (true, Some((8, 5)));
+    let e = LiveSource::<PatternCamera>::open_with_env(r0, env.clone(), options).unwrap_err();
+    assert_eq!(
+        e.to_string(),
+        "pattern: sensors 0 and 1: crop [5, 1, 4, 3] of sensor 1 lies outside the device's 8x5 frame"
+    );
+    // Two sensors on one device without crops cannot be told apart: one line.
+    let r1 = rig(&[(4, 3), (4, 3)], "", &|_| "device = \"/dev/video0\"".into());
+    let e = LiveSource::<PatternCamera>::open_with_env(r1, env, options).unwrap_err();
+    assert!(
+        e.to_string()
+            .starts_with("test-rig: sensors 0 and 1 share '/dev/video0', but sensor 0 has no crop"),
+        "{e}"
+    );
+}
+
 #[test]
 fn rig_usb_keys_parse_validate_and_round_trip() {
     let head = "[usb]\nvendor_id = 0x1E10\nproduct_id = 16384";
@@ -317,7 +442,7 @@ fn rig_usb_keys_parse_validate_and_round_trip() {
     .starts_with("rig.toml: sensor 1, key 'usb_serial': missing, while 1 other sensor(s) have one"));
     assert_eq!(
         err("", &|_| "usb_serial = \"A\"".into()),
-        "rig.toml: sensor 1, key 'usb_serial': duplicate serial 'A' (also sensor 0)"
+        "rig.toml: sensor 1, key 'usb_serial': duplicate serial 'A' (also sensor 0); sensors sharing one camera each need a crop"
     );
     assert!(err("", &|_| "usb_serial = \"\"".into()).starts_with("rig.toml: sensor 0, key 'usb_serial': must be"));
 }

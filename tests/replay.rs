@@ -646,3 +646,70 @@ fn a_recording_reads_nothing_outside_its_folder() {
     assert_eq!(source.stats().sensors[0].missing, 2);
     assert_eq!(source.stats().sensors[1].missing, 1);
 }
+
+/// A rig whose two sensors are windows of one device's frame (`crop`, a dual-fisheye camera):
+/// a recording whose rows of both sensors name the same whole frame gives each sensor its
+/// window, in any pixel format; a sensor's own image (of its size) is taken as it is; a frame
+/// that does not hold a window is a wrong-size image, counted, and the stream goes on.
+#[test]
+fn sensors_with_a_crop_take_their_window_of_a_shared_frame() {
+    let (w, h) = (6u32, 4u32);
+    let mut rig = pinhole_rig_toml(&[(w, h), (w, h)]);
+    // Sensor 0 is the left half of a 13 × 5 frame, sensor 1 the right half one row down.
+    rig = rig.replacen(
+        "translation_m = [0, 0.0, 0.0]\n",
+        "translation_m = [0, 0.0, 0.0]\ncrop = [0, 0, 6, 4]\n",
+        1,
+    );
+    rig = rig.replacen(
+        "translation_m = [0.01, 0.0, 0.0]\n",
+        "translation_m = [0.01, 0.0, 0.0]\ncrop = [7, 1, 6, 4]\n",
+        1,
+    );
+    assert_eq!(rig.matches("crop").count(), 2, "{rig}");
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path();
+    std::fs::write(root.join("rig.toml"), &rig).unwrap();
+    let whole = |frame: u64| RgbImage::from_fn(13, 5, |u, v| Rgb(expected_rgb(frame, 9, u, v)));
+    whole(0).save(root.join("f0.png")).unwrap();
+    RgbaImage::from_fn(13, 5, |u, v| {
+        let [r, g, b] = expected_rgb(1, 9, u, v);
+        image::Rgba([r, g, b, 200])
+    })
+    .save(root.join("f1.png"))
+    .unwrap();
+    // Frame 2: sensor 0 has its own image, sensor 1 a frame too small for its window.
+    frame_image(2, 0, w, h).save(root.join("own.png")).unwrap();
+    RgbImage::from_fn(12, 5, |u, v| Rgb(expected_rgb(2, 9, u, v)))
+        .save(root.join("small.png"))
+        .unwrap();
+    let mut rows = Vec::new();
+    for (frame, paths) in [
+        (0u64, ["f0.png", "f0.png"]),
+        (1, ["f1.png", "f1.png"]),
+        (2, ["own.png", "small.png"]),
+    ] {
+        for (sensor, path) in paths.iter().enumerate() {
+            rows.push(format!("{frame},{sensor},{},{path}", timestamp(frame, 0)));
+        }
+    }
+    write_index(root, &rows);
+
+    let (mut source, mut frame) = open(&dir);
+    for f in 0..2u64 {
+        assert!(source.next_frame(&mut frame).unwrap());
+        assert_eq!(frame.valid_count(), 2, "frame {f}");
+        for v in 0..h {
+            for u in 0..w {
+                assert_eq!(frame.sensor(0).rgb(u, v), expected_rgb(f, 9, u, v));
+                assert_eq!(frame.sensor(1).rgb(u, v), expected_rgb(f, 9, u + 7, v + 1));
+            }
+        }
+    }
+    assert!(source.next_frame(&mut frame).unwrap());
+    assert_pixels(&frame, 0);
+    assert!(!frame.sensor(1).valid);
+    assert_eq!(frame.sensor(1).fault, Some(ImageFault::WrongSize));
+    assert_eq!(source.stats().sensors[1].wrong_size, 1);
+    assert!(!source.next_frame(&mut frame).unwrap());
+}

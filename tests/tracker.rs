@@ -11,6 +11,7 @@ use omnitrack::edges::EdgeDetector;
 use omnitrack::runtime::{track, FrameRecord, RunOptions};
 use omnitrack::tracker::{SearchVolume, Tracker, TrackerEvent, TrackerState, TrackerStats};
 use omnitrack::Rig;
+use std::path::Path;
 use std::sync::OnceLock;
 
 mod common;
@@ -563,16 +564,24 @@ const OTHER_RIG_FRAMES: usize = 40;
 
 /// Every rig of the TOML format is first-class: the lab, rendered through `rig`, initialises
 /// from the same 3 m volume within 10 cm and 1° and tracks every frame to the shipped rig's
-/// limits (those of the first test above).
-fn tracks_through(rig: &str, sensors: usize) {
+/// limits (those of the first test above). Returns the recording and each frame's pose.
+fn tracks_through(rig: &str, sensors: usize) -> (LabRecording, Vec<Option<omnitrack::Pose>>) {
     let f = common::lab_recording_with_rig(OTHER_RIG_FRAMES, rig);
-    let mut source = ReplaySource::open(&f.rec, Pacing::AsFastAsPossible).unwrap();
+    let poses = tracks_recording(&f, &f.rec, rig, sensors);
+    (f, poses)
+}
+
+/// [`tracks_through`] on the recording at `rec` (of `f`'s lab and truth).
+fn tracks_recording(f: &LabRecording, rec: &Path, rig: &str, sensors: usize) -> Vec<Option<omnitrack::Pose>> {
+    let mut source = ReplaySource::open(rec, Pacing::AsFastAsPossible).unwrap();
     assert_eq!(source.rig().sensors.len(), sensors, "{rig}");
     let mut errs = Vec::new();
-    let stats = run_hinted(&f, &mut source, &mut |r, _| {
+    let mut poses = Vec::new();
+    let stats = run_hinted(f, &mut source, &mut |r, _| {
         if let Some(p) = &r.result.pose {
-            errs.push(errors(&f, r.timestamp_ns, p));
+            errs.push(errors(f, r.timestamp_ns, p));
         }
+        poses.push(r.result.pose);
         Ok(())
     });
     assert_eq!(stats.frames, OTHER_RIG_FRAMES as u64, "{rig}");
@@ -596,6 +605,7 @@ fn tracks_through(rig: &str, sensors: usize) {
         rmse * 100.0,
         worst * 100.0
     );
+    poses
 }
 
 /// Four landscape pinhole sensors 90° apart, none of which sees up (`tools/rigs/pinhole4.toml`):
@@ -610,7 +620,15 @@ fn a_rig_of_four_landscape_pinhole_sensors_tracks_as_the_shipped_one() {
 /// image at all, and each sensor covers more than a hemisphere.
 #[test]
 fn a_rig_of_two_fisheye_lenses_seeing_past_90_degrees_tracks_as_the_shipped_one() {
-    tracks_through("tools/rigs/dual_fisheye.toml", 2);
+    let (f, poses) = tracks_through("tools/rigs/dual_fisheye.toml", 2);
+    // The same two fisheyes as one dual-fisheye camera: both images in one frame of one device,
+    // each sensor cropped from it on replay. The pixels are the same, so are the poses.
+    let joined = f.dir.path().join("one-frame");
+    assert!(omnitrack::desk::recording::join_sensors(&f.rec, &joined, "/dev/video0").unwrap());
+    let rig = Rig::load(&joined.join("rig.toml")).unwrap();
+    assert_eq!(rig.sensors[1].crop, Some([640, 0, 640, 640]));
+    let one_frame = tracks_recording(&f, &joined, "dual fisheye in one frame", 2);
+    assert_eq!(one_frame, poses);
 }
 
 #[test]

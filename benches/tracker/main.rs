@@ -15,6 +15,8 @@
 //! per frame), `--upright` (KT §5.4 mode for the rolling scenarios), `--no-hint` (search the
 //! whole model instead of a 3 m volume around the first ground-truth pose), `--config tracker.toml`,
 //! `--rig RIG.toml` (render and track with another rig: `tools/rigs/` has examples),
+//! `--one-frame` (track the rendered images joined into one device frame per instant, each
+//! sensor `crop`ped from it on replay, as a dual-fisheye 360° camera delivers them),
 //! `--appearance realistic` (render with `Appearance::realistic()`: floorboards, trims, built-ins,
 //! closed doors, walls a few cm off the model, blur and JPEG — the world of the real photos,
 //! issue 19; cached apart from the default renders; any `Appearance::from_spec` spec works, e.g.
@@ -101,6 +103,7 @@ struct Args {
     pins: Option<String>,
     seconds: f64,
     starts: usize,
+    one_frame: bool,
 }
 
 fn args() -> Args {
@@ -124,6 +127,7 @@ fn args() -> Args {
         pins: None,
         seconds: 40.0,
         starts: 10,
+        one_frame: false,
     };
     let mut it = std::env::args().skip(1);
     while let Some(x) = it.next() {
@@ -140,6 +144,7 @@ fn args() -> Args {
             "--config" => a.config = it.next().map(PathBuf::from),
             "--rig" => a.rig = Some(it.next().map(PathBuf::from).expect("--rig RIG.toml")),
             "--no-figure15" => a.figure15 = false,
+            "--one-frame" => a.one_frame = true,
             "--appearance" => {
                 let spec = it.next().expect("--appearance SPEC");
                 a.appearance = (spec != "default").then_some(spec);
@@ -242,6 +247,19 @@ fn main() {
         if made {
             eprintln!();
         }
+        let dir = if a.one_frame {
+            // The same images as one device's frames, each sensor cropped from them on replay.
+            let joined = dir.with_file_name(format!("{}-one-frame", dir.file_name().unwrap().to_string_lossy()));
+            if omnitrack::desk::recording::join_sensors(&dir, &joined, "/dev/video0").unwrap() {
+                eprintln!(
+                    "{name}: joined every frame's images into one device frame: {}",
+                    joined.display()
+                );
+            }
+            joined
+        } else {
+            dir
+        };
         let model_path = dir.join("model.obj");
         let model = Model::load(&model_path).unwrap();
         let mut cfg = match &a.config {

@@ -41,6 +41,22 @@ pub fn run(Args { rig, model, config }: Args) -> CommandResult {
                 c.z
             );
         }
+        // How live capture will open the rig's cameras: a shared device without crops is an error
+        // here rather than at the first `run`.
+        let devices =
+            omnitrack::capture::device::capture_devices(&rig).map_err(|e| format!("{}: {e}", path.display()))?;
+        for d in devices.iter().filter(|d| !d.direct) {
+            eprintln!(
+                "  {}: windows of one device's frame ({}), at least {}×{}",
+                d.label,
+                d.device
+                    .as_deref()
+                    .or(d.usb_serial.as_deref())
+                    .unwrap_or("its own camera"),
+                d.width,
+                d.height
+            );
+        }
     }
     // The config first: the model is checked against it as `run` will use it.
     let cfg = match &config {

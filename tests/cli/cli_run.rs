@@ -215,3 +215,29 @@ fn check_refuses_a_model_run_could_not_use() {
         assert!(stderr.contains(expected), "{stderr}");
     }
 }
+
+/// `check` says how live capture will open a rig of cropped sensors, and refuses two sensors on
+/// one device without crops (live capture could not tell their images apart).
+#[test]
+fn check_shows_shared_devices_and_refuses_one_without_crops() {
+    let root = env!("CARGO_MANIFEST_DIR");
+    let rig = format!("{root}/tools/rigs/dual_fisheye_one_frame.toml");
+    let (code, _, stderr) = omnitrack(&["check", "--rig", &rig]);
+    assert_eq!(code, 0, "{stderr}");
+    assert!(
+        stderr.contains("sensors 0 and 1: windows of one device's frame (/dev/video0), at least 2048×1024"),
+        "{stderr}"
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let no_crop = dir.path().join("no_crop.toml");
+    let text = std::fs::read_to_string(&rig)
+        .unwrap()
+        .replace("crop = [1024, 0, 1024, 1024]\n", "");
+    std::fs::write(&no_crop, text).unwrap();
+    let (code, _, stderr) = omnitrack(&["check", "--rig", no_crop.to_str().unwrap()]);
+    assert_eq!(code, 2, "{stderr}");
+    assert!(
+        last_line(&stderr).ends_with("sensors 0 and 1 share '/dev/video0', but sensor 1 has no crop: each sensor of a shared device needs crop = [x, y, width, height], its window of the device's frame"),
+        "{stderr}"
+    );
+}

@@ -214,9 +214,9 @@ fn bad_rig_files_name_the_file_the_sensor_and_the_key() {
 }
 
 /// `crop` (docs/interfaces.md): read, checked against the sensor's resolution, written back;
-/// live capture refuses it in one line (it opens one camera per sensor), a replay does not care.
+/// the two sensors naming one device become one capture device of two windows.
 #[test]
-fn a_crop_is_read_checked_written_back_and_refused_by_live_capture() {
+fn a_crop_is_read_checked_written_back_and_makes_one_capture_device() {
     let two = |crop1: &str| {
         format!(
             "name = \"dual\"\n\
@@ -245,8 +245,8 @@ fn a_crop_is_read_checked_written_back_and_refused_by_live_capture() {
         let e = Rig::from_toml_str(&two(crop), "dual.toml").unwrap_err().to_string();
         assert!(e.contains(expected), "{e:?} should contain {expected:?}");
     }
-    let e = omnitrack::capture::open::refuse_crop(&rig, "v4l")
-        .unwrap_err()
-        .to_string();
-    assert!(e.contains("sensor 0 has a crop"), "{e}");
+    let devices = omnitrack::capture::device::capture_devices(&rig).unwrap();
+    assert_eq!(devices.len(), 1);
+    assert_eq!(devices[0].label, "sensors 0 and 1");
+    assert_eq!((devices[0].width, devices[0].height), (1280, 640));
 }

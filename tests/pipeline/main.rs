@@ -15,13 +15,13 @@ mod common;
 mod per_sensor;
 
 use nalgebra::Point3;
+use omnitrack::capture::device::CaptureDevice;
 use omnitrack::capture::open::{FailureDetail, LiveCamera, ReadFailure};
 use omnitrack::capture::{
     FrameSet, FrameSource, ImageFault, Pacing, ReplaySource, SensorImage, SourceError, SourceOptions, SourceStats,
 };
 use omnitrack::config::TrackerConfig;
 use omnitrack::publish::{PoseStatus, PoseSubscriber, SearchState, StatusSample, StatusSubscriber};
-use omnitrack::rig::Sensor;
 use omnitrack::runtime::pipeline::{
     inside_publish, live_sensors, run_pipeline, FrameSink, PipelineOptions, PipelineThread, RunEnd, Stage, TumSink,
 };

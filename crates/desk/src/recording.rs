@@ -214,3 +214,83 @@ fn cached(
     write_file(&marker, b"")?;
     Ok((dir.to_path_buf(), true))
 }
+
+/// A recording of `src` as a one-device camera would have made it: each frame's sensor images
+/// side by side in one image (`frames/NNNNNN.png`, sensors left to right, top-aligned), every
+/// sensor a `crop` of that frame on the shared `device`, and every row of a frame naming the same
+/// file (with the sensor's own timestamp). What a dual-fisheye 360° camera delivers, made from a
+/// rendered per-sensor recording. Ground truth and model are copied; the images stay lossless,
+/// so tracking `out` sees exactly the pixels of `src`. Made once: a `complete` marker is written
+/// last and a complete `out` is reused. Returns whether it was made now.
+pub fn join_sensors(src: &Path, out: &Path, device: &str) -> Result<bool, RecordingError> {
+    let marker = out.join("complete");
+    if marker.exists() {
+        return Ok(false);
+    }
+    let mut rig = Rig::load(&src.join("rig.toml")).map_err(|e| err(src, e))?;
+    let mut x = 0;
+    for s in rig.sensors.iter_mut() {
+        s.device = Some(device.to_string());
+        s.usb_serial = None;
+        s.crop = Some([x, 0, s.width, s.height]);
+        x += s.width;
+    }
+    let (width, height) = (x, rig.sensors.iter().map(|s| s.height).max().unwrap_or(0));
+    let frames_dir = out.join("frames");
+    std::fs::create_dir_all(&frames_dir).map_err(|e| err(&frames_dir, format!("cannot create directory: {e}")))?;
+    write_file(&out.join("rig.toml"), rig.to_toml_string().as_bytes())?;
+    for name in ["groundtruth.tum", "model.obj"] {
+        if src.join(name).is_file() {
+            std::fs::copy(src.join(name), out.join(name))
+                .map_err(|e| err(&out.join(name), format!("cannot copy: {e}")))?;
+        }
+    }
+    let index_path = src.join("frames.csv");
+    let index = std::fs::read_to_string(&index_path).map_err(|e| err(&index_path, format!("cannot read: {e}")))?;
+    // frame → [(sensor, timestamp, path)]
+    let mut frames: std::collections::BTreeMap<u64, Vec<(usize, u64, String)>> = Default::default();
+    for (n, line) in index.lines().enumerate().skip(1) {
+        let f: Vec<&str> = line.split(',').collect();
+        let parsed = match f.as_slice() {
+            [frame, sensor, ts, path] => frame
+                .parse()
+                .ok()
+                .zip(sensor.parse().ok())
+                .zip(ts.parse().ok())
+                .map(|((a, b), c)| (a, b, c, path.to_string())),
+            _ => None,
+        };
+        let Some((frame, sensor, ts, path)) = parsed else {
+            return Err(err(
+                &index_path,
+                format!("line {}: not frame,sensor,timestamp_ns,path", n + 1),
+            ));
+        };
+        frames.entry(frame).or_default().push((sensor, ts, path));
+    }
+    let mut csv = String::from("frame,sensor,timestamp_ns,path\n");
+    for (frame, rows) in &frames {
+        let mut joined = RgbImage::new(width, height);
+        for (sensor, _, path) in rows {
+            let Some([x, _, _, _]) = rig.sensors.get(*sensor).and_then(|s| s.crop) else {
+                return Err(err(
+                    &index_path,
+                    format!("frame {frame}: no sensor {sensor} in the rig"),
+                ));
+            };
+            let p = src.join(path);
+            let img = image::open(&p)
+                .map_err(|e| err(&p, format!("cannot read: {e}")))?
+                .to_rgb8();
+            image::imageops::replace(&mut joined, &img, i64::from(x), 0);
+        }
+        let name = format!("frames/{frame:06}.png");
+        write_png(&out.join(&name), &joined)?;
+        for (sensor, ts, _) in rows {
+            let _ = writeln!(csv, "{frame},{sensor},{ts},{name}");
+        }
+    }
+    write_file(&out.join("frames.csv"), csv.as_bytes())?;
+    write_file(&marker, b"")?;
+    Ok(true)
+}

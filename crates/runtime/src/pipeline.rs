@@ -2,14 +2,15 @@
 //! tracker → pose and status publishers → the caller's sink (trajectory writer).
 //!
 //! In: a [`PipelineSource`] — a whole-rig [`FrameSource`] (replay, or a live source opened as
-//! one), or one [`SensorCapture`] per sensor ([`open_pipeline_source`] opens the V4L2 and USB3
+//! one), or one [`SensorCapture`] per capture device ([`open_pipeline_source`] opens the V4L2 and USB3
 //! Vision drivers built into this binary that way) — the model, its visibility table, the tracker
 //! config and [`PipelineOptions`]. Out: one [`FrameRecord`] per processed frame to the caller's
 //! [`FrameSink`], one [`PoseSample`] per processed frame on the pose service, a [`StatusSample`]
 //! every `budgets.status_interval_ms` on the status service, and a [`PipelineSummary`].
 //!
 //! Threads (all scoped, joined before [`run_pipeline`] returns):
-//! - **capture**: one per sensor for per-sensor sources, one for a whole-rig source. Each fills a
+//! - **capture**: one per capture device for per-device sources (a device delivers one sensor, or
+//!   the windows of several cropped from its frame), one for a whole-rig source. Each fills a
 //!   buffer taken from a preallocated pool and passes its index (a handle) on through a bounded
 //!   crossbeam channel.
 //! - **assembly** (per-sensor sources only): matches the images of one instant by timestamp within
@@ -74,7 +75,7 @@ mod sink;
 mod stats;
 mod summary;
 
-pub use live::{live_sensors, open_pipeline_source, LiveSensor, SensorCapture};
+pub use live::{live_sensors, open_pipeline_source, LiveDevice, SensorCapture};
 pub use logging::init_logging;
 pub use omnitrack_io::publish::Stage;
 pub use options::{PipelineOptions, PipelineSource, PipelineThread};
@@ -120,11 +121,18 @@ pub fn run_pipeline(
     let rig = source.rig().clone();
     let n = rig.sensors.len();
     if let PipelineSource::Sensors { sensors, .. } = &source {
-        let ids: Vec<usize> = sensors.iter().map(|s| s.sensor()).collect();
-        if ids != (0..n).collect::<Vec<_>>() {
+        let mut ids: Vec<usize> = sensors.iter().flat_map(|s| s.sensors().iter().copied()).collect();
+        ids.sort_unstable();
+        let too_many = sensors.iter().any(|s| {
+            s.sensors().is_empty() || s.sensors().len() > omnitrack_io::capture::device::MAX_WINDOWS_PER_DEVICE
+        });
+        if too_many || ids != (0..n).collect::<Vec<_>>() {
             return Err(RunError::Source(SourceError::Device {
                 device: rig.name.clone(),
-                message: format!("per-sensor capture must list sensors 0..{n} in order, found {ids:?}"),
+                message: format!(
+                    "per-device capture must deliver each of sensors 0..{n} once, by 1 to {} per device, found {ids:?}",
+                    omnitrack_io::capture::device::MAX_WINDOWS_PER_DEVICE
+                ),
             }));
         }
     }
@@ -150,7 +158,7 @@ pub fn run_pipeline(
     tracing::info!(
         rig = %rig.name,
         sensors = n,
-        threads = match &source { PipelineSource::Rig(_) => "one capture thread", PipelineSource::Sensors { .. } => "one capture thread per sensor" },
+        threads = match &source { PipelineSource::Rig(_) => "one capture thread", PipelineSource::Sensors { .. } => "one capture thread per capture device" },
         pool = opts.pool_size.max(3),
         lossless = opts.lossless,
         "pipeline starting"

@@ -472,11 +472,15 @@ fn check_usb_serials(sensors: &[Sensor]) -> Result<(), PlaceError> {
         ));
     }
     for (i, a) in sensors.iter().enumerate() {
-        if let Some(b) = sensors[..i].iter().find(|b| b.usb_serial == a.usb_serial) {
+        // Sensors cropped from one camera's frame share its serial (a dual-fisheye camera).
+        if let Some(b) = sensors[..i]
+            .iter()
+            .find(|b| b.usb_serial == a.usb_serial && (a.crop.is_none() || b.crop.is_none()))
+        {
             return Err((
                 format!("sensor {}, key 'usb_serial': ", a.id),
                 format!(
-                    "duplicate serial '{}' (also sensor {})",
+                    "duplicate serial '{}' (also sensor {}); sensors sharing one camera each need a crop",
                     a.usb_serial.as_deref().unwrap_or_default(),
                     b.id
                 ),

@@ -5,8 +5,9 @@
 //! or USB3 Vision cameras (`usb`, cargo feature `usb`, over the always-compiled stream parser
 //! [`u3v`]). [`open_source`] picks one from a `--source` spec (`replay:DIR`, `v4l`, `usb`) and
 //! answers a live source left out of the build with the cargo command that enables it. The live
-//! sources share [`LiveSource`] (one camera per sensor, a lost sensor reopened every second while
-//! the others go on) and the pixel conversions of [`convert`].
+//! sources share [`LiveSource`] (one camera per capture device, a lost one reopened every second while
+//! the others go on), the split of the rig into capture devices of [`device`] (several sensors
+//! may be windows of one device's frame) and the pixel conversions of [`convert`].
 //! Out: [`FrameSet`]s — one RGB8 image per rig sensor, with its capture time and whether the
 //! sensor delivered for this frame — plus [`SourceStats`] counting everything that went wrong.
 //!
@@ -23,6 +24,7 @@
 //! [`SourceError`] is only for the whole source failing (cannot open, wrong frame set).
 
 pub mod convert;
+pub mod device;
 pub mod open;
 pub mod replay;
 pub mod u3v;

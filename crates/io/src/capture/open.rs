@@ -11,21 +11,25 @@
 //! device (`device`, `usb_serial`, `[usb]`).
 //!
 //! [`LiveSource`] is the frame source of both live drivers ([`LiveCamera`] implementations, one
-//! camera per sensor): each [`FrameSource::next_frame`] reads one image from every connected
-//! sensor in turn, straight into the frame set. A sensor whose read fails is marked invalid for
-//! that frame (its [`ImageFault`] counted and warned, rate-limited); when the failure means the
-//! device is gone (unplugged, I/O error, or [`LOST_AFTER_TIMEOUTS`] timeouts in a row) it is
-//! closed, reported on standard error, and reopened every [`SourceOptions::reopen_interval`]
-//! until it comes back (reported again); the other sensors go on meanwhile. With no sensor
-//! connected, `next_frame` waits for the next reopening attempt instead of spinning.
+//! camera per capture device: per sensor, or shared by the sensors cropped from its frame, see
+//! [`super::device`]): each [`FrameSource::next_frame`] reads one frame from every connected
+//! device in turn, straight into the sensor's image or, for a shared device, into a frame buffer
+//! sized at opening whose windows are copied into the sensors' images. A device whose read
+//! fails marks its sensors invalid for that frame (the [`ImageFault`] counted and warned,
+//! rate-limited); when the failure means the device is gone (unplugged, I/O error, or
+//! [`LOST_AFTER_TIMEOUTS`] timeouts in a row) it is closed, reported on standard error, and
+//! reopened every [`SourceOptions::reopen_interval`] until it comes back (reported again); the
+//! other devices go on meanwhile. With no device connected, `next_frame` waits for the next
+//! reopening attempt instead of spinning.
 //!
 //! Clock: image timestamps are nanoseconds of the host's monotonic clock: the drivers' own
 //! (V4L2 buffers stamped `CLOCK_MONOTONIC`) or, where a driver has none, [`host_time_ns`], the
 //! time since the first call in this process (also monotonic, but another origin).
 
+use super::device::{capture_devices, copy_window, CaptureDevice};
 use super::{FrameSet, FrameSource, ImageFault, Pacing, ReplaySource, SensorImage, SourceError, SourceStats};
 use super::{WarningKind, WarningLimiter};
-use omnitrack_core::rig::{Rig, Sensor};
+use omnitrack_core::rig::Rig;
 use std::fmt;
 use std::path::Path;
 use std::sync::OnceLock;
@@ -100,12 +104,10 @@ pub fn open_source_with(
     match spec {
         "v4l" => {
             let rig = need_rig("V4L2 device")?;
-            refuse_crop(rig, spec)?;
             open_v4l(rig, options)
         }
         "usb" => {
             let rig = need_rig("USB3 Vision camera")?;
-            refuse_crop(rig, spec)?;
             open_usb(rig, options)
         }
         "replay" => Err(spec_error(
@@ -139,24 +141,6 @@ fn open_usb(_rig: &Rig, _options: &SourceOptions) -> Result<Box<dyn FrameSource 
         device: "usb".into(),
         message: USB_DISABLED.into(),
     })
-}
-
-/// Live capture opens one camera per sensor; a rig whose sensors are windows of a shared
-/// device's frame (`crop`) needs one camera split among them, which the live drivers do not do
-/// yet: refused in one line rather than failing on the second open of the device. Replays of
-/// such a rig need nothing of the kind (a recording holds each sensor's image).
-pub fn refuse_crop(rig: &Rig, spec: &str) -> Result<(), SourceError> {
-    match rig.sensors.iter().find(|s| s.crop.is_some()) {
-        None => Ok(()),
-        Some(s) => Err(SourceError::Device {
-            device: spec.to_string(),
-            message: format!(
-                "sensor {} has a crop (a window of a shared device's frame): live capture opens one camera per \
-                 sensor and cannot split one device's frame yet (a replay of such a rig works)",
-                s.id
-            ),
-        }),
-    }
 }
 
 /// A `--rig` given with a recording must have the recording's sensors (count and sizes).
@@ -221,36 +205,67 @@ pub struct ReadFailure {
     pub detail: FailureDetail,
 }
 
-/// A live camera for one sensor of the rig: a V4L2 device or a USB3 Vision camera.
+/// A live camera: a V4L2 device or a USB3 Vision camera, delivering the images of one or more
+/// sensors of the rig ([`CaptureDevice`]).
 pub trait LiveCamera: Sized + Send {
     /// What every (re)opening shares (e.g. the USB context); `()` when nothing.
     type Env: Send;
 
-    /// Opens the camera of `sensor`. Errors are one line naming the device and the sensor.
-    fn open(env: &mut Self::Env, sensor: &Sensor, options: &SourceOptions) -> Result<Self, SourceError>;
+    /// Opens the camera of `device`, asking for its `width × height` frames (exactly, when
+    /// `device.exact`; else at least that). Errors are one line naming the device and its
+    /// sensors (`device.label`).
+    fn open(env: &mut Self::Env, device: &CaptureDevice, options: &SourceOptions) -> Result<Self, SourceError>;
 
     /// The device, for messages (e.g. `/dev/video0`).
     fn name(&self) -> &str;
 
-    /// Reads the next image into `img`'s pixels (without marking it); returns its timestamp (ns).
+    /// The size of the frames it delivers, as negotiated when it was opened.
+    fn frame_size(&self) -> (u32, u32);
+
+    /// Reads the next frame into `img`'s pixels (an image of [`LiveCamera::frame_size`], not
+    /// marked); returns its timestamp (ns).
     fn read(&mut self, img: &mut SensorImage) -> Result<u64, ReadFailure>;
 }
 
-/// One sensor's camera slot: connected or waiting to be reopened.
+/// Opens `device`'s camera and checks that its frames hold every window; sizes `scratch` (the
+/// frame buffer of a device split into windows) to the negotiated frame.
+pub fn open_device<C: LiveCamera>(
+    env: &mut C::Env,
+    device: &CaptureDevice,
+    options: &SourceOptions,
+    scratch: &mut Option<SensorImage>,
+) -> Result<C, SourceError> {
+    let camera = C::open(env, device, options)?;
+    let (w, h) = camera.frame_size();
+    device.check_fits(camera.name(), w, h)?;
+    if !device.direct && scratch.as_ref().is_none_or(|s| (s.width(), s.height()) != (w, h)) {
+        // Only at (re)opening, never per frame.
+        *scratch = Some(SensorImage::new(device.windows[0].sensor, w, h));
+    }
+    Ok(camera)
+}
+
+/// One device's camera slot: connected or waiting to be reopened.
 struct Slot<C> {
+    device: CaptureDevice,
     camera: Option<C>,
+    /// The whole frame of a device split into windows; `None` for a direct device.
+    scratch: Option<SensorImage>,
     /// The device name of the last connection, for messages while disconnected.
     name: String,
     retry_at: Instant,
     timeouts: u32,
 }
 
-/// The [`FrameSource`] of a live driver: one [`LiveCamera`] per sensor. See the module doc.
+/// The [`FrameSource`] of a live driver: one [`LiveCamera`] per capture device. See the module
+/// doc.
 pub struct LiveSource<C: LiveCamera> {
     rig: Rig,
     env: C::Env,
     options: SourceOptions,
     slots: Vec<Slot<C>>,
+    /// Device slot of each sensor.
+    slot_of: Vec<usize>,
     stats: SourceStats,
     warnings: WarningLimiter,
     sequence: u64,
@@ -267,17 +282,25 @@ impl<C: LiveCamera> fmt::Debug for LiveSource<C> {
 }
 
 impl<C: LiveCamera> LiveSource<C> {
-    /// Opens every sensor's camera; the first that fails is the error (one line naming device
-    /// and sensor). The frame buffers are the caller's ([`FrameSet::for_rig`]); each camera sizes
-    /// its own scratch space here.
+    /// Opens every capture device's camera ([`capture_devices`]); the first that fails is the
+    /// error (one line naming device and sensors). The frame buffers are the caller's
+    /// ([`FrameSet::for_rig`]); each device sizes its own scratch space here.
     pub fn open_with_env(rig: Rig, mut env: C::Env, options: SourceOptions) -> Result<LiveSource<C>, SourceError> {
         let now = Instant::now();
-        let mut slots = Vec::with_capacity(rig.sensors.len());
-        for sensor in &rig.sensors {
-            let camera = C::open(&mut env, sensor, &options)?;
+        let devices = capture_devices(&rig)?;
+        let mut slot_of = vec![0; rig.sensors.len()];
+        let mut slots = Vec::with_capacity(devices.len());
+        for (d, device) in devices.into_iter().enumerate() {
+            let mut scratch = None;
+            let camera = open_device::<C>(&mut env, &device, &options, &mut scratch)?;
+            for k in device.sensors() {
+                slot_of[k] = d;
+            }
             slots.push(Slot {
                 name: camera.name().to_string(),
+                device,
                 camera: Some(camera),
+                scratch,
                 retry_at: now,
                 timeouts: 0,
             });
@@ -288,33 +311,44 @@ impl<C: LiveCamera> LiveSource<C> {
             env,
             options,
             slots,
+            slot_of,
             warnings: WarningLimiter::new(WARN_LIMIT),
             sequence: 0,
         })
     }
 
-    /// Whether each sensor's camera is connected now, by sensor id.
+    /// Whether a sensor's camera is connected now, by sensor id.
     pub fn is_connected(&self, sensor: usize) -> bool {
-        self.slots.get(sensor).is_some_and(|s| s.camera.is_some())
+        self.slot_of
+            .get(sensor)
+            .is_some_and(|&d| self.slots[d].camera.is_some())
     }
 
-    /// Sensors connected now.
+    /// Devices connected now.
     pub fn connected(&self) -> usize {
         self.slots.iter().filter(|s| s.camera.is_some()).count()
     }
 
     /// The camera of a sensor, if connected.
     pub fn camera(&self, sensor: usize) -> Option<&C> {
-        self.slots.get(sensor).and_then(|s| s.camera.as_ref())
+        self.slot_of.get(sensor).and_then(|&d| self.slots[d].camera.as_ref())
     }
 
-    fn capture(&mut self, k: usize, img: &mut SensorImage) {
+    /// Marks every sensor of device `d` invalid with `fault` and counts it.
+    fn fail_device(&mut self, d: usize, fault: ImageFault, out: &mut FrameSet) {
+        for w in &self.slots[d].device.windows {
+            out.sensor_mut(w.sensor).set_invalid(fault, 0);
+            self.stats.sensors[w.sensor].count(fault);
+        }
+    }
+
+    fn capture(&mut self, d: usize, out: &mut FrameSet) {
         let now = Instant::now();
-        let slot = &mut self.slots[k];
+        let slot = &mut self.slots[d];
         if slot.camera.is_none() && now >= slot.retry_at {
-            match C::open(&mut self.env, &self.rig.sensors[k], &self.options) {
+            match open_device::<C>(&mut self.env, &slot.device, &self.options, &mut slot.scratch) {
                 Ok(camera) => {
-                    eprintln!("sensor {k} ({}): connected again, capturing", camera.name());
+                    eprintln!("{} ({}): connected again, capturing", slot.device.label, camera.name());
                     self.stats.warnings_printed += 1;
                     slot.name.clear();
                     slot.name.push_str(camera.name());
@@ -335,19 +369,26 @@ impl<C: LiveCamera> LiveSource<C> {
             }
         }
         let Some(camera) = slot.camera.as_mut() else {
-            img.set_invalid(ImageFault::Missing, 0);
-            self.stats.sensors[k].count(ImageFault::Missing);
+            self.fail_device(d, ImageFault::Missing, out);
             return;
         };
-        match camera.read(img) {
+        let read = match slot.scratch.as_mut() {
+            None => camera.read(out.sensor_mut(slot.device.windows[0].sensor)),
+            Some(frame) => camera.read(frame),
+        };
+        match read {
             Ok(ts) => {
-                img.set_valid(ts);
-                self.stats.sensors[k].delivered += 1;
+                for w in &slot.device.windows {
+                    let img = out.sensor_mut(w.sensor);
+                    if let Some(frame) = slot.scratch.as_ref() {
+                        copy_window(frame, w, img);
+                    }
+                    img.set_valid(ts);
+                    self.stats.sensors[w.sensor].delivered += 1;
+                }
                 slot.timeouts = 0;
             }
             Err(failure) => {
-                img.set_invalid(failure.fault, 0);
-                self.stats.sensors[k].count(failure.fault);
                 let timed_out = failure.detail == FailureDetail::TimedOut;
                 slot.timeouts = if timed_out { slot.timeouts + 1 } else { 0 };
                 let lost = failure.lost || slot.timeouts >= LOST_AFTER_TIMEOUTS;
@@ -357,17 +398,18 @@ impl<C: LiveCamera> LiveSource<C> {
                     slot.retry_at = now + self.options.reopen_interval;
                     slot.timeouts = 0;
                     eprintln!(
-                        "sensor {k} ({}): lost ({}); going on without it, reopening every {:?}",
-                        slot.name, failure.detail, self.options.reopen_interval
+                        "{} ({}): lost ({}); going on without it, reopening every {:?}",
+                        slot.device.label, slot.name, failure.detail, self.options.reopen_interval
                     );
                     self.stats.warnings_printed += 1;
                 } else {
                     self.warnings.warn(
                         &mut self.stats,
                         WarningKind::Image(failure.fault),
-                        format_args!("sensor {k} ({}): {}", slot.name, failure.detail),
+                        format_args!("{} ({}): {}", slot.device.label, slot.name, failure.detail),
                     );
                 }
+                self.fail_device(d, failure.fault, out);
             }
         }
     }
@@ -393,8 +435,8 @@ impl<C: LiveCamera> FrameSource for LiveSource<C> {
                 }
             }
         }
-        for (k, img) in out.sensors_mut().iter_mut().enumerate() {
-            self.capture(k, img);
+        for d in 0..self.slots.len() {
+            self.capture(d, out);
         }
         out.sequence = self.sequence;
         self.sequence += 1;

@@ -24,11 +24,19 @@
 //! directory, a corrupt PNG, a PNG of the wrong size or of 16-bit depth makes that sensor invalid
 //! for that frame, counted and warned (the first few per kind); the stream goes on.
 //!
+//! A sensor with `crop` (several sensors cropped from one device's frame, e.g. a dual-fisheye
+//! camera) takes either its own image, of its size, or the device's whole frame, whose window it
+//! copies out: the rows of those sensors may all name one file, which is then decoded once per
+//! frame into a buffer that grows once, at the first such frame, to the frame's size (at most
+//! four times the smallest frame holding every crop). A frame that does not hold the window is a
+//! wrong-size image, counted and warned.
+//!
 //! Allocation: this module allocates nothing per frame of its own. The `image` crate's PNG decoder
 //! (`png` underneath) does allocate internally each time a decoder is created — its inflate state
 //! and row buffers — and offers no way to reuse them across images; the count is a small constant
 //! per image (`tests/replay.rs` measures it). Removing it needs a reusable decoder (a later issue).
 
+use super::device::{crop_into, Window};
 use super::{FrameSet, FrameSource, ImageFault, SensorImage, SourceError, SourceStats, WarningKind, WarningLimiter};
 use image::codecs::png::PngDecoder;
 use image::{ColorType, ImageDecoder, ImageError, Limits};
@@ -100,6 +108,8 @@ pub struct ReplaySource {
     file_buf: Vec<u8>,
     /// width × height × 4 of the largest sensor, for RGBA → RGB conversion.
     rgba_buf: Box<[u8]>,
+    /// The last whole device frame decoded for sensors with a `crop` (see the module doc).
+    device_frame: DeviceFrame,
     /// (when the first frame was delivered, its recorded time) for [`Pacing::RealTime`].
     clock: Option<(Instant, u64)>,
     stats: SourceStats,
@@ -156,6 +166,7 @@ impl ReplaySource {
             message: format!("cannot resolve the recording directory: {e}"),
         })?;
         Ok(ReplaySource {
+            device_frame: DeviceFrame::for_rig(&rig),
             root,
             dir: dir.to_path_buf(),
             rig,
@@ -252,9 +263,22 @@ impl FrameSource for ReplaySource {
         for img in out.sensors_mut() {
             img.set_invalid(ImageFault::Dropped, 0);
         }
+        self.device_frame.forget();
         for row in &self.rows[rows] {
             let img = out.sensor_mut(row.sensor);
-            match load_png(&row.path, &self.root, &mut self.file_buf, &mut self.rgba_buf, img) {
+            let loaded = match self.rig.sensors[row.sensor].crop {
+                None => load_png(&row.path, &self.root, &mut self.file_buf, &mut self.rgba_buf, img),
+                Some(crop) => load_window(
+                    &row.path,
+                    &self.root,
+                    &mut self.file_buf,
+                    &mut self.rgba_buf,
+                    &mut self.device_frame,
+                    crop,
+                    img,
+                ),
+            };
+            match loaded {
                 Ok(()) => {
                     img.set_valid(row.timestamp_ns);
                     self.stats.sensors[row.sensor].delivered += 1;
@@ -306,6 +330,11 @@ enum Problem {
         expected: (u32, u32),
     },
     Format(ColorType),
+    /// A device frame that does not hold the sensor's crop window.
+    Window {
+        found: (u32, u32),
+        crop: [u32; 4],
+    },
 }
 
 impl fmt::Display for Problem {
@@ -324,6 +353,11 @@ impl fmt::Display for Problem {
                     found.0, found.1, expected.0, expected.1
                 )
             }
+            Problem::Window { found, crop } => write!(
+                f,
+                "image is {}x{}: neither the sensor's own image nor a device frame holding its crop {crop:?}",
+                found.0, found.1
+            ),
             Problem::Format(c) => write!(
                 f,
                 "pixel format {c:?} cannot be used (8-bit RGB, RGBA or grey expected)"
@@ -341,6 +375,125 @@ fn load_png(
     rgba: &mut [u8],
     img: &mut SensorImage,
 ) -> Result<(), (ImageFault, Problem)> {
+    // A PNG is never much larger than its raw pixels: past this it is not the sensor's image.
+    let most = 4 * u64::from(img.width()) * u64::from(img.height()) + (1 << 20);
+    read_file(path, root, file_buf, most)?;
+    let decoder = png_decoder(file_buf)?;
+    let found = decoder.dimensions();
+    let expected = (img.width(), img.height());
+    if found != expected {
+        return Err((ImageFault::WrongSize, Problem::Size { found, expected }));
+    }
+    decode_rgb(decoder, rgba, img)
+}
+
+/// The image of a sensor with `crop` at `path`: either its own image (of the sensor's size,
+/// e.g. recorded by `omnitrack record`) or the whole frame of its device, whose window is copied
+/// out. The frame is decoded once per recorded frame however many sensors' rows name its file.
+fn load_window(
+    path: &Path,
+    root: &Path,
+    file_buf: &mut Vec<u8>,
+    rgba: &mut [u8],
+    device: &mut DeviceFrame,
+    crop: [u32; 4],
+    img: &mut SensorImage,
+) -> Result<(), (ImageFault, Problem)> {
+    let [x, y, width, height] = crop;
+    let window = Window {
+        sensor: img.sensor(),
+        x,
+        y,
+        width,
+        height,
+    };
+    let fits = |w: u32, h: u32| {
+        u64::from(x) + u64::from(width) <= u64::from(w) && u64::from(y) + u64::from(height) <= u64::from(h)
+    };
+    if device.holds(path) {
+        if !fits(device.width, device.height) {
+            let found = (device.width, device.height);
+            return Err((ImageFault::WrongSize, Problem::Window { found, crop }));
+        }
+        crop_into(&device.pixels, device.width, device.channels, &window, img);
+        return Ok(());
+    }
+    read_file(path, root, file_buf, 4 * device.max_pixels + (1 << 20))?;
+    let decoder = png_decoder(file_buf)?;
+    let found = decoder.dimensions();
+    if found == (img.width(), img.height()) {
+        return decode_rgb(decoder, rgba, img);
+    }
+    let pixels = u64::from(found.0) * u64::from(found.1);
+    if !fits(found.0, found.1) || pixels > device.max_pixels {
+        return Err((ImageFault::WrongSize, Problem::Window { found, crop }));
+    }
+    let channels = match decoder.color_type() {
+        ColorType::L8 => 1,
+        ColorType::La8 => 2,
+        ColorType::Rgb8 => 3,
+        ColorType::Rgba8 => 4,
+        other => return Err((ImageFault::WrongFormat, Problem::Format(other))),
+    };
+    let bytes = pixels as usize * channels;
+    if device.pixels.len() < bytes {
+        // Once, at the first device frame (then kept): its size is not known before.
+        device.pixels.resize(bytes, 0);
+    }
+    decoder
+        .read_image(&mut device.pixels[..bytes])
+        .map_err(|e| (ImageFault::Corrupt, Problem::Decode(e)))?;
+    device.path.clear();
+    device.path.push(path);
+    (device.width, device.height, device.channels) = (found.0, found.1, channels);
+    device.valid = true;
+    crop_into(&device.pixels, device.width, channels, &window, img);
+    Ok(())
+}
+
+/// The device frame shared by the cropped sensors of one recorded frame.
+#[derive(Debug)]
+struct DeviceFrame {
+    /// Whether `pixels` holds the frame at `path` of the frame being read.
+    valid: bool,
+    path: PathBuf,
+    width: u32,
+    height: u32,
+    channels: usize,
+    /// 8-bit pixels as decoded (1–4 channels); grows once, at the first device frame.
+    pixels: Vec<u8>,
+    /// Largest device frame accepted (pixels): four times the smallest frame holding every crop
+    /// of the rig, so that a wrong file cannot make the replay decode gigabytes.
+    max_pixels: u64,
+}
+
+impl DeviceFrame {
+    fn for_rig(rig: &Rig) -> DeviceFrame {
+        let crops = rig.sensors.iter().filter_map(|s| s.crop);
+        let w = crops.clone().map(|[x, _, w, _]| u64::from(x + w)).max().unwrap_or(0);
+        let h = crops.map(|[_, y, _, h]| u64::from(y + h)).max().unwrap_or(0);
+        DeviceFrame {
+            valid: false,
+            path: PathBuf::new(),
+            width: 0,
+            height: 0,
+            channels: 3,
+            pixels: Vec::new(),
+            max_pixels: 4 * w * h,
+        }
+    }
+
+    fn forget(&mut self) {
+        self.valid = false;
+    }
+
+    fn holds(&self, path: &Path) -> bool {
+        self.valid && self.path == path
+    }
+}
+
+/// Reads the regular file at `path` (inside `root`, at most `most` bytes) into `file_buf`.
+fn read_file(path: &Path, root: &Path, file_buf: &mut Vec<u8>, most: u64) -> Result<(), (ImageFault, Problem)> {
     file_buf.clear();
     let missing = |e| (ImageFault::Missing, Problem::Io(e));
     // Only a regular file inside the recording: a link out of it, a FIFO (which would block the
@@ -357,25 +510,30 @@ fn load_png(
     if !meta.is_file() {
         return Err((ImageFault::Missing, Problem::NotAFile));
     }
-    // A PNG is never much larger than its raw pixels: past this it is not the sensor's image.
-    let most = 4 * u64::from(img.width()) * u64::from(img.height()) + (1 << 20);
     if meta.len() > most {
         return Err((ImageFault::Corrupt, Problem::TooLarge(meta.len())));
     }
     File::open(path)
         .and_then(|f| f.take(most).read_to_end(file_buf))
         .map_err(missing)?;
+    Ok(())
+}
 
-    let corrupt = |e: ImageError| (ImageFault::Corrupt, Problem::Decode(e));
+/// A PNG decoder over the bytes read, its header parsed.
+fn png_decoder(file_buf: &[u8]) -> Result<PngDecoder<Cursor<&[u8]>>, (ImageFault, Problem)> {
     let mut limits = Limits::default();
     limits.max_alloc = Some(DECODER_MAX_ALLOC);
-    let decoder = PngDecoder::with_limits(Cursor::new(&file_buf[..]), limits).map_err(corrupt)?;
-    let found = decoder.dimensions();
-    let expected = (img.width(), img.height());
-    if found != expected {
-        return Err((ImageFault::WrongSize, Problem::Size { found, expected }));
-    }
-    let n = expected.0 as usize * expected.1 as usize;
+    PngDecoder::with_limits(Cursor::new(file_buf), limits).map_err(|e| (ImageFault::Corrupt, Problem::Decode(e)))
+}
+
+/// Decodes a PNG of `img`'s size into its buffer as RGB8.
+fn decode_rgb(
+    decoder: PngDecoder<Cursor<&[u8]>>,
+    rgba: &mut [u8],
+    img: &mut SensorImage,
+) -> Result<(), (ImageFault, Problem)> {
+    let corrupt = |e: ImageError| (ImageFault::Corrupt, Problem::Decode(e));
+    let n = img.width() as usize * img.height() as usize;
     let pixels = img.pixels_mut();
     match decoder.color_type() {
         ColorType::Rgb8 => decoder.read_image(pixels).map_err(corrupt),

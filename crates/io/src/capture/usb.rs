@@ -1,4 +1,6 @@
-//! Live capture from USB3 Vision cameras over libusb (cargo feature `usb`): one camera per sensor.
+//! Live capture from USB3 Vision cameras over libusb (cargo feature `usb`): one camera per capture
+//! device of the rig (per sensor, or shared by the sensors cropped from its frame,
+//! [`super::device`]).
 //!
 //! In: the rig with its `[usb]` table (`vendor_id`, `product_id`) and, optionally, each sensor's
 //! `usb_serial` ([`UsbRig`]). Out: [`UsbSource`], a [`FrameSource`](super::FrameSource)
@@ -7,9 +9,10 @@
 //!
 //! Finding the cameras: an explicit `rusb::Context` is created (never libusb's global context,
 //! which panics in `rusb` where there is no USB bus); every device with the rig's vendor and
-//! product id is a candidate. A sensor with `usb_serial` takes the camera with that serial number;
-//! without serials, sensor *k* takes the *k*-th camera in USB port order (bus, then port path) and
-//! keeps that port: when it is lost it is reopened at the same port, so that the mapping follows
+//! product id is a candidate. A sensor with `usb_serial` takes the camera with that serial number
+//! (sensors naming the same serial share its frame through crops); without serials, capture device
+//! *k* (sensor *k* when no sensors share a camera) takes the *k*-th camera in USB port order (bus,
+//! then port path) and keeps that port: when it is lost it is reopened at the same port, so that the mapping follows
 //! the cabling. On the camera, the USB3 Vision streaming interface (class `0xEF`, subclass `0x05`,
 //! protocol `0x02`) is claimed (detaching a kernel driver if one is bound) and its bulk-IN
 //! endpoint is read in transfers of [`TRANSFER_SIZE`] bytes into the [`u3v`](super::u3v) parser,
@@ -31,10 +34,11 @@
 //! buffer); reading allocates nothing in Rust. libusb's synchronous bulk transfer allocates its
 //! transfer structure with C `malloc` on each call, outside Rust's allocator.
 
+use super::device::CaptureDevice;
 use super::open::{host_time_ns, FailureDetail, LiveCamera, LiveSource, ReadFailure, SourceOptions};
 use super::u3v::{U3vEvent, U3vStream};
 use super::{ImageFault, SensorImage, SourceError};
-use omnitrack_core::rig::{Rig, Sensor, UsbRig};
+use omnitrack_core::rig::{Rig, UsbRig};
 use rusb::{Context, Device, DeviceHandle, Direction, TransferType, UsbContext};
 use std::time::{Duration, Instant};
 
@@ -74,6 +78,7 @@ impl UsbEnv {
         Ok(UsbEnv {
             context,
             usb,
+            // At most one camera per sensor.
             ports: vec![None; rig.sensors.len()],
         })
     }
@@ -101,6 +106,9 @@ pub struct UsbCamera {
     endpoint: u8,
     buffer: Box<[u8]>,
     parser: U3vStream,
+    /// The frame size the parser accepts: the capture device's (cameras are not configured here,
+    /// see the module doc).
+    size: (u32, u32),
     timeout: Duration,
 }
 
@@ -120,7 +128,7 @@ impl UsbCamera {
     }
 }
 
-fn usb_error(device: &str, sensor: usize, what: &str, e: rusb::Error) -> SourceError {
+fn usb_error(device: &str, sensors: &str, what: &str, e: rusb::Error) -> SourceError {
     let why = match e {
         rusb::Error::Access => "permission denied (add a udev rule giving the user access to the camera)".to_string(),
         rusb::Error::Busy => "busy (claimed by another program or driver)".to_string(),
@@ -129,7 +137,7 @@ fn usb_error(device: &str, sensor: usize, what: &str, e: rusb::Error) -> SourceE
     };
     SourceError::Device {
         device: device.to_string(),
-        message: format!("sensor {sensor}: {why}"),
+        message: format!("{sensors}: {why}"),
     }
 }
 
@@ -159,13 +167,14 @@ fn streaming_endpoint(device: &Device<Context>) -> Option<(u8, u8)> {
 impl LiveCamera for UsbCamera {
     type Env = UsbEnv;
 
-    fn open(env: &mut UsbEnv, sensor: &Sensor, options: &SourceOptions) -> Result<UsbCamera, SourceError> {
-        let id = sensor.id;
+    fn open(env: &mut UsbEnv, target: &CaptureDevice, options: &SourceOptions) -> Result<UsbCamera, SourceError> {
+        let label = target.label.as_str();
+        let id = target.index;
         let ids = env.ids();
         let list = env
             .context
             .devices()
-            .map_err(|e| usb_error(&ids, id, "cannot list USB devices", e))?;
+            .map_err(|e| usb_error(&ids, label, "cannot list USB devices", e))?;
         let mut cameras: Vec<(u8, Vec<u8>, Device<Context>)> = list
             .iter()
             .filter(|d| {
@@ -180,7 +189,7 @@ impl LiveCamera for UsbCamera {
         cameras.sort_by(|a, b| (a.0, &a.1).cmp(&(b.0, &b.1)));
         let found = cameras.len();
         let mut chosen = None;
-        if let Some(serial) = sensor.usb_serial.as_deref() {
+        if let Some(serial) = target.usb_serial.as_deref() {
             for (_, _, device) in &cameras {
                 let Ok(desc) = device.device_descriptor() else { continue };
                 let Ok(handle) = device.open() else { continue };
@@ -194,7 +203,7 @@ impl LiveCamera for UsbCamera {
                 return Err(SourceError::Device {
                     device: ids,
                     message: format!(
-                        "sensor {id}: no camera with serial '{serial}' ({found} camera(s) with these ids on the bus)"
+                        "{label}: no camera with serial '{serial}' ({found} camera(s) with these ids on the bus)"
                     ),
                 });
             }
@@ -209,20 +218,20 @@ impl LiveCamera for UsbCamera {
             let Some(device) = device else {
                 let place = match &env.ports[id] {
                     Some((bus, ports)) => format!("at its port (bus {bus}, ports {ports:?})"),
-                    None => format!("(sensor {id} takes camera {} in port order; {found} found)", id + 1),
+                    None => format!("({label} takes camera {} in port order; {found} found)", id + 1),
                 };
                 return Err(SourceError::Device {
                     device: ids,
-                    message: format!("sensor {id}: no camera {place}"),
+                    message: format!("{label}: no camera {place}"),
                 });
             };
-            let handle = device.open().map_err(|e| usb_error(&ids, id, "cannot open", e))?;
+            let handle = device.open().map_err(|e| usb_error(&ids, label, "cannot open", e))?;
             chosen = Some((device, handle));
         }
         let Some((device, handle)) = chosen else {
             return Err(SourceError::Device {
                 device: ids,
-                message: format!("sensor {id}: no camera"),
+                message: format!("{label}: no camera"),
             });
         };
         let (bus, ports) = port_of(&device);
@@ -230,29 +239,32 @@ impl LiveCamera for UsbCamera {
         let Some((interface, endpoint)) = streaming_endpoint(&device) else {
             return Err(SourceError::Device {
                 device: name,
-                message: format!(
-                    "sensor {id}: not a USB3 Vision camera (no streaming interface with a bulk-IN endpoint)"
-                ),
+                message: format!("{label}: not a USB3 Vision camera (no streaming interface with a bulk-IN endpoint)"),
             });
         };
         // Not every platform can detach kernel drivers; claiming reports what matters.
         let _ = handle.set_auto_detach_kernel_driver(true);
         handle
             .claim_interface(interface)
-            .map_err(|e| usb_error(&name, id, "cannot claim the streaming interface", e))?;
+            .map_err(|e| usb_error(&name, label, "cannot claim the streaming interface", e))?;
         env.ports[id] = Some((bus, ports));
         Ok(UsbCamera {
             name,
             handle,
             endpoint,
             buffer: vec![0u8; TRANSFER_SIZE].into_boxed_slice(),
-            parser: U3vStream::new(sensor.width, sensor.height),
+            parser: U3vStream::new(target.width, target.height),
+            size: (target.width, target.height),
             timeout: options.frame_timeout,
         })
     }
 
     fn name(&self) -> &str {
         &self.name
+    }
+
+    fn frame_size(&self) -> (u32, u32) {
+        self.size
     }
 
     fn read(&mut self, img: &mut SensorImage) -> Result<u64, ReadFailure> {

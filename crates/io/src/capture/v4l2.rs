@@ -1,12 +1,15 @@
-//! Live capture from V4L2 devices (cargo feature `v4l`): one device per rig sensor.
+//! Live capture from V4L2 devices (cargo feature `v4l`): one device per capture device of the rig
+//! (per sensor, or shared by the sensors cropped from its frame, [`super::device`]).
 //!
 //! In: the rig, whose sensors each name a `device` (e.g. `/dev/video0`). Out: [`V4l2Source`], a
 //! [`FrameSource`](super::FrameSource) ([`LiveSource`] over [`V4l2Camera`]) delivering every
 //! sensor's latest image per frame, converted into the frame set's RGB8 buffers.
 //!
-//! Opening a sensor: the device is opened (errors: no `device` key, no such device, permission
-//! denied, busy, not a streaming capture device — one line each naming the device and the sensor),
-//! and the first format of [`PREFERENCE`] the device offers is set at the sensor's resolution:
+//! Opening a device: the device is opened (errors: no `device` key, no such device, permission
+//! denied, busy, not a streaming capture device — one line each naming the device and its
+//! sensors), and the first format of [`PREFERENCE`] the device offers is set at the capture
+//! device's size (the sensor's resolution; for a device split into crops, the smallest frame
+//! holding them, where a larger frame the driver settles on is accepted):
 //! `RGB3`, then `YUYV`, `MJPG`, `GREY`, then the 8-bit Bayer mosaics `RGGB`, `GRBG`, `GBRG`,
 //! `BA81` (BGGR). A device whose offered formats all fail at that size is an error listing what it
 //! offers. Then [`BUFFERS`] driver buffers are memory-mapped and streaming starts on the first read.
@@ -33,9 +36,10 @@
 //! the stream (its mappings and file descriptor) rather than panic.
 
 use super::convert::{self, BayerPattern, ConvertError, YuvOrder, YuvRange};
+use super::device::CaptureDevice;
 use super::open::{host_time_ns, FailureDetail, LiveCamera, LiveSource, ReadFailure, SourceOptions};
 use super::{ImageFault, SensorImage, SourceError};
-use omnitrack_core::rig::{Rig, Sensor};
+use omnitrack_core::rig::Rig;
 use std::io;
 use v4l::buffer::{Flags, Type};
 use v4l::capability::Flags as CapFlags;
@@ -152,7 +156,8 @@ impl LiveSource<V4l2Camera> {
 /// One sensor's V4L2 device, streaming.
 pub struct V4l2Camera {
     path: String,
-    sensor: usize,
+    /// Its sensors, for messages.
+    label: String,
     width: u32,
     height: u32,
     format: V4l2Format,
@@ -167,7 +172,6 @@ impl std::fmt::Debug for V4l2Camera {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("V4l2Camera")
             .field("path", &self.path)
-            .field("sensor", &self.sensor)
             .field("format", &self.format)
             .field("stride", &self.stride)
             .finish()
@@ -187,7 +191,7 @@ impl V4l2Camera {
 }
 
 /// One line for an error of opening or configuring a device.
-fn device_error(path: &str, sensor: usize, what: &str, e: &io::Error) -> SourceError {
+fn device_error(path: &str, sensors: &str, what: &str, e: &io::Error) -> SourceError {
     let why = match (e.kind(), e.raw_os_error()) {
         (io::ErrorKind::NotFound, _) | (_, Some(2)) => "no such device".to_string(),
         (io::ErrorKind::PermissionDenied, _) | (_, Some(13)) => {
@@ -200,19 +204,22 @@ fn device_error(path: &str, sensor: usize, what: &str, e: &io::Error) -> SourceE
     };
     SourceError::Device {
         device: path.to_string(),
-        message: format!("sensor {sensor}: {why}"),
+        message: format!("{sensors}: {why}"),
     }
 }
 
 impl LiveCamera for V4l2Camera {
     type Env = ();
 
-    fn open(_env: &mut (), sensor: &Sensor, options: &SourceOptions) -> Result<V4l2Camera, SourceError> {
-        let id = sensor.id;
-        let Some(path) = sensor.device.as_deref() else {
+    fn open(_env: &mut (), target: &CaptureDevice, options: &SourceOptions) -> Result<V4l2Camera, SourceError> {
+        let id = &target.label;
+        let Some(path) = target.device.as_deref() else {
             return Err(SourceError::Device {
                 device: "v4l".into(),
-                message: format!("sensor {id} has no 'device' key in the rig file (e.g. device = \"/dev/video{id}\")"),
+                message: format!(
+                    "{id} has no 'device' key in the rig file (e.g. device = \"/dev/video{}\")",
+                    target.index
+                ),
             });
         };
         let fail = |what: &str, e: &io::Error| device_error(path, id, what, e);
@@ -224,10 +231,7 @@ impl LiveCamera for V4l2Camera {
         {
             return Err(SourceError::Device {
                 device: path.into(),
-                message: format!(
-                    "sensor {id}: '{}' is not a video capture device with streaming I/O",
-                    caps.card
-                ),
+                message: format!("{id}: '{}' is not a video capture device with streaming I/O", caps.card),
             });
         }
         let offered: Vec<[u8; 4]> = device
@@ -236,13 +240,20 @@ impl LiveCamera for V4l2Camera {
             .iter()
             .map(|d| d.fourcc.repr)
             .collect();
-        let (w, h) = (sensor.width, sensor.height);
+        let (w, h) = (target.width, target.height);
+        let size_ok = |sw: u32, sh: u32| {
+            if target.exact {
+                (sw, sh) == (w, h)
+            } else {
+                sw >= w && sh >= h
+            }
+        };
         let mut chosen = None;
         for format in candidates(&offered) {
             let set = device
                 .set_format(&Format::new(w, h, FourCC::new(&format.fourcc())))
                 .map_err(|e| fail("cannot set format", &e))?;
-            if set.width == w && set.height == h && set.fourcc.repr == format.fourcc() {
+            if size_ok(set.width, set.height) && set.fourcc.repr == format.fourcc() {
                 chosen = Some((format, set));
                 break;
             }
@@ -256,7 +267,7 @@ impl LiveCamera for V4l2Camera {
             return Err(SourceError::Device {
                 device: path.into(),
                 message: format!(
-                    "sensor {id}: no supported format at {w}x{h} (device offers: {}; supported: {})",
+                    "{id}: no supported format at {w}x{h} (device offers: {}; supported: {})",
                     if names.is_empty() {
                         "none".into()
                     } else {
@@ -266,6 +277,8 @@ impl LiveCamera for V4l2Camera {
                 ),
             });
         };
+        // The driver's size: larger than asked for a device split into crops.
+        let (w, h) = (set.width, set.height);
         let packed = w as usize * format.bytes_per_pixel();
         let stride = (set.stride as usize).max(packed);
         let mut stream =
@@ -273,7 +286,7 @@ impl LiveCamera for V4l2Camera {
         stream.set_timeout(options.frame_timeout);
         Ok(V4l2Camera {
             path: path.to_string(),
-            sensor: id,
+            label: target.label.clone(),
             width: w,
             height: h,
             format,
@@ -285,6 +298,10 @@ impl LiveCamera for V4l2Camera {
 
     fn name(&self) -> &str {
         &self.path
+    }
+
+    fn frame_size(&self) -> (u32, u32) {
+        (self.width, self.height)
     }
 
     fn read(&mut self, img: &mut SensorImage) -> Result<u64, ReadFailure> {
@@ -355,8 +372,8 @@ impl Drop for V4l2Camera {
             Err(e) if e.raw_os_error() == Some(19) => drop_guarded(stream),
             Err(e) => {
                 eprintln!(
-                    "warning: {} (sensor {}): cannot stop streaming ({e}); leaking its buffers rather than panic",
-                    self.path, self.sensor
+                    "warning: {} ({}): cannot stop streaming ({e}); leaking its buffers rather than panic",
+                    self.path, self.label
                 );
                 std::mem::forget(stream);
             }

@@ -1,4 +1,5 @@
-//! The capture threads: one for a whole-rig [`FrameSource`], or one per [`SensorCapture`] plus
+//! The capture threads: one for a whole-rig [`FrameSource`], or one per [`SensorCapture`] (one
+//! capture device, delivering one sensor's images or several sensors' windows of one frame) plus
 //! the assembly thread ([`assembly`]).
 //!
 //! In: the source. Out: frames in pool slots posted through the [`Handover`] (whole-rig), or
@@ -14,6 +15,7 @@ use super::{PipelineSource, PipelineThread, TICK};
 use crossbeam::channel::{bounded, Receiver, RecvTimeoutError, Sender};
 use omnitrack_config::BudgetConfig;
 use omnitrack_core::rig::Rig;
+use omnitrack_io::capture::device::MAX_WINDOWS_PER_DEVICE;
 use omnitrack_io::capture::{FrameSource, SensorImage, SourceStats};
 use std::sync::{Mutex, MutexGuard};
 use std::thread::{Scope, ScopedJoinHandle};
@@ -117,45 +119,80 @@ pub(super) struct Arrival {
     pub(super) arrived: Instant,
 }
 
-/// The capture thread of one sensor.
-fn capture_sensor(
+/// The capture thread of one capture device: one image of each of its sensors per read, each
+/// taken from that sensor's buffers and announced as an [`Arrival`] of its own.
+fn capture_device(
     capture: &mut dyn SensorCapture,
-    k: usize,
     shared: &Shared,
-    images: &SensorImages,
+    images: &[&SensorImages],
     arrivals: Sender<Arrival>,
 ) {
-    shared.thread_started(PipelineThread::Capture { sensor: Some(k) });
-    while let Some(i) = images.take(shared) {
-        let mut img = images.image(i);
+    let sensors = capture.sensors().to_vec();
+    shared.thread_started(PipelineThread::Capture {
+        sensor: sensors.first().copied(),
+    });
+    // Fixed-size lists: nothing is allocated per frame.
+    let mut taken = heapless::Vec::<usize, MAX_WINDOWS_PER_DEVICE>::new();
+    'frames: loop {
+        taken.clear();
+        for sensor_images in images {
+            match sensor_images.take(shared) {
+                Some(i) => {
+                    let _ = taken.push(i);
+                }
+                None => {
+                    for (sensor_images, &i) in images.iter().zip(&taken) {
+                        sensor_images.release(i);
+                    }
+                    break 'frames;
+                }
+            }
+        }
+        let mut guards: heapless::Vec<_, MAX_WINDOWS_PER_DEVICE> =
+            images.iter().zip(&taken).map(|(s, &i)| s.image(i)).collect();
         let started = Instant::now();
-        let got = capture.capture(&mut img);
+        let got = {
+            let mut imgs: heapless::Vec<&mut SensorImage, MAX_WINDOWS_PER_DEVICE> =
+                guards.iter_mut().map(|g| &mut **g).collect();
+            capture.capture(&mut imgs)
+        };
         shared.record_capture(started.elapsed());
         match got {
             Ok(true) => {
-                if !img.valid {
-                    SensorCounters::add(&shared.sensors[k].faults, 1);
+                for (g, &k) in guards.iter().zip(&sensors) {
+                    if !g.valid {
+                        SensorCounters::add(&shared.sensors[k].faults, 1);
+                    }
                 }
-                drop(img);
-                let a = Arrival {
-                    sensor: k,
-                    slot: i,
-                    arrived: Instant::now(),
-                };
-                // Room for every buffer of every sensor: never blocks for long.
-                if arrivals.send(a).is_err() {
-                    break;
+                drop(guards);
+                let arrived = Instant::now();
+                for (&k, &slot) in sensors.iter().zip(&taken) {
+                    // Room for every buffer of every sensor: never blocks for long.
+                    if arrivals
+                        .send(Arrival {
+                            sensor: k,
+                            slot,
+                            arrived,
+                        })
+                        .is_err()
+                    {
+                        break 'frames;
+                    }
                 }
             }
             Ok(false) => {
-                drop(img);
-                images.release(i);
-                tracing::info!(sensor = k, "sensor stream ended");
+                drop(guards);
+                for (sensor_images, &i) in images.iter().zip(&taken) {
+                    sensor_images.release(i);
+                }
+                tracing::info!(?sensors, "capture stream ended");
                 break;
             }
             Err(e) => {
-                drop(img);
-                images.release(i);
+                drop(guards);
+                for (sensor_images, &i) in images.iter().zip(&taken) {
+                    sensor_images.release(i);
+                }
                 shared.fail(e);
                 break;
             }
@@ -190,15 +227,23 @@ pub(super) fn spawn_capture<'scope>(
         }
         PipelineSource::Sensors { sensors, .. } => {
             let (arrivals_tx, arrivals_rx) = bounded::<Arrival>(n * IMAGES_PER_SENSOR);
-            for (k, capture) in sensors.iter_mut().enumerate() {
-                let images = &sensor_images[k];
-                let tx = arrivals_tx.clone();
+            for capture in sensors.iter_mut() {
                 let capture: &mut dyn SensorCapture = capture.as_mut();
+                let ids = capture.sensors();
+                let images: Vec<&SensorImages> = ids.iter().map(|&k| &sensor_images[k]).collect();
+                let name = match ids {
+                    [k] => format!("omnitrack-capture-{k}"),
+                    _ => format!(
+                        "omnitrack-capture-{}",
+                        ids.iter().map(|k| k.to_string()).collect::<Vec<_>>().join("+")
+                    ),
+                };
+                let tx = arrivals_tx.clone();
                 capture_handles.push(
                     std::thread::Builder::new()
-                        .name(format!("omnitrack-capture-{k}"))
+                        .name(name)
                         .spawn_scoped(scope, move || {
-                            capture_sensor(capture, k, shared, images, tx);
+                            capture_device(capture, shared, &images, tx);
                             None
                         })
                         .expect("spawn a capture thread"),

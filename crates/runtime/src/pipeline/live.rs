@@ -1,39 +1,48 @@
-//! Per-sensor capture: a [`SensorCapture`] per rig sensor, each read on its own thread, and
-//! [`LiveSensor`], the one for any [`LiveCamera`] driver (V4L2, USB3 Vision).
+//! Per-device capture: a [`SensorCapture`] per capture device of the rig (one sensor, or the
+//! sensors cropped from one device's frame), each read on its own thread, and [`LiveDevice`], the
+//! one for any [`LiveCamera`] driver (V4L2, USB3 Vision).
 //!
-//! [`LiveSensor`] keeps the behaviour of the capture module's whole-rig `LiveSource`, per sensor:
-//! a failed read marks the image invalid with its fault; a device that is gone (unplugged, I/O
-//! error, [`LOST_AFTER_TIMEOUTS`] timeouts in a row) is closed, logged, and reopened every
-//! `reopen_interval` while the other sensors go on; coming back is logged too. What every
-//! (re)opening shares (e.g. the USB context) sits behind a mutex, taken only to open.
+//! [`LiveDevice`] keeps the behaviour of the capture module's whole-rig `LiveSource`, per device:
+//! a failed read marks its sensors' images invalid with its fault; a device that is gone
+//! (unplugged, I/O error, [`LOST_AFTER_TIMEOUTS`] timeouts in a row) is closed, logged, and
+//! reopened every `reopen_interval` while the other devices go on; coming back is logged too.
+//! What every (re)opening shares (e.g. the USB context) sits behind a mutex, taken only to open.
+//! A device split into windows reads into a frame buffer sized at (re)opening and copies each
+//! window into its sensor's image.
 
 use super::PipelineSource;
-use omnitrack_core::rig::{Rig, Sensor};
-use omnitrack_io::capture::open::{FailureDetail, LiveCamera, LOST_AFTER_TIMEOUTS};
+use omnitrack_core::rig::Rig;
+use omnitrack_io::capture::device::{capture_devices, copy_window, CaptureDevice};
+use omnitrack_io::capture::open::{open_device, FailureDetail, LiveCamera, LOST_AFTER_TIMEOUTS};
 use omnitrack_io::capture::{open_source_with, FrameSource, ImageFault, SensorImage, SourceError, SourceOptions};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
-/// Warnings of one fault kind per sensor logged at `warn` before the rest go to `debug`.
+/// Warnings of one fault kind per device logged at `warn` before the rest go to `debug`.
 const WARN_LIMIT: u32 = 5;
 
-/// One sensor's images, read on a thread of its own.
+/// The images of one capture device's sensors, read on a thread of its own.
 pub trait SensorCapture: Send {
-    /// Sensor id (index in the rig).
-    fn sensor(&self) -> usize;
+    /// The sensor ids it delivers (indices in the rig), in order; at most
+    /// [`MAX_WINDOWS_PER_DEVICE`](omnitrack_io::capture::device::MAX_WINDOWS_PER_DEVICE).
+    fn sensors(&self) -> &[usize];
 
-    /// Reads the next image into `img` (sized for this sensor) and marks it: valid with its
-    /// capture time (ns, a clock shared by all sensors of the rig), or invalid with its fault.
-    /// `Ok(false)`: this sensor's stream has ended. A per-image failure is never an `Err`.
-    fn capture(&mut self, img: &mut SensorImage) -> Result<bool, SourceError>;
+    /// Reads the next images into `imgs` (one per sensor of [`SensorCapture::sensors`], in that
+    /// order, each sized for its sensor) and marks each: valid with its capture time (ns, a clock
+    /// shared by all sensors of the rig), or invalid with its fault. `Ok(false)`: this device's
+    /// stream has ended. A per-image failure is never an `Err`.
+    fn capture(&mut self, imgs: &mut [&mut SensorImage]) -> Result<bool, SourceError>;
 }
 
 /// The [`SensorCapture`] of one [`LiveCamera`]. See the module doc.
-pub struct LiveSensor<C: LiveCamera> {
-    sensor: Sensor,
+pub struct LiveDevice<C: LiveCamera> {
+    device: CaptureDevice,
+    sensors: Vec<usize>,
     env: Arc<Mutex<C::Env>>,
     options: SourceOptions,
     camera: Option<C>,
+    /// The whole frame of a device split into windows; `None` for a direct device.
+    scratch: Option<SensorImage>,
     /// The device name of the last connection, for messages while disconnected.
     name: String,
     retry_at: Instant,
@@ -41,17 +50,17 @@ pub struct LiveSensor<C: LiveCamera> {
     warned: [u32; ImageFault::ALL.len()],
 }
 
-impl<C: LiveCamera> std::fmt::Debug for LiveSensor<C> {
+impl<C: LiveCamera> std::fmt::Debug for LiveDevice<C> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("LiveSensor")
-            .field("sensor", &self.sensor.id)
+        f.debug_struct("LiveDevice")
+            .field("sensors", &self.device.label)
             .field("device", &self.name)
             .field("connected", &self.camera.is_some())
             .finish()
     }
 }
 
-impl<C: LiveCamera> LiveSensor<C> {
+impl<C: LiveCamera> LiveDevice<C> {
     /// Whether the camera is connected now.
     pub fn is_connected(&self) -> bool {
         self.camera.is_some()
@@ -60,26 +69,23 @@ impl<C: LiveCamera> LiveSensor<C> {
     fn warn(&mut self, fault: ImageFault, detail: &FailureDetail) {
         let n = &mut self.warned[fault.index()];
         *n = n.saturating_add(1);
-        let k = self.sensor.id;
+        let sensors = &self.device.label;
         if *n <= WARN_LIMIT {
-            tracing::warn!(sensor = k, device = %self.name, %fault, "{detail}");
+            tracing::warn!(%sensors, device = %self.name, %fault, "{detail}");
         } else {
-            tracing::debug!(sensor = k, device = %self.name, %fault, "{detail}");
+            tracing::debug!(%sensors, device = %self.name, %fault, "{detail}");
         }
     }
 
     fn reopen(&mut self, now: Instant) {
         let opened = {
             let mut env = self.env.lock().unwrap_or_else(|e| e.into_inner());
-            C::open(&mut env, &self.sensor, &self.options)
+            open_device::<C>(&mut env, &self.device, &self.options, &mut self.scratch)
         };
+        let sensors = &self.device.label;
         match opened {
             Ok(camera) => {
-                tracing::warn!(
-                    sensor = self.sensor.id,
-                    device = camera.name(),
-                    "connected again, capturing"
-                );
+                tracing::warn!(%sensors, device = camera.name(), "connected again, capturing");
                 self.name.clear();
                 self.name.push_str(camera.name());
                 self.camera = Some(camera);
@@ -90,19 +96,19 @@ impl<C: LiveCamera> LiveSensor<C> {
                 let n = &mut self.warned[ImageFault::Missing.index()];
                 *n = n.saturating_add(1);
                 if *n <= WARN_LIMIT {
-                    tracing::warn!(sensor = self.sensor.id, interval = ?self.options.reopen_interval, "{e} (still unavailable, retrying)");
+                    tracing::warn!(%sensors, interval = ?self.options.reopen_interval, "{e} (still unavailable, retrying)");
                 }
             }
         }
     }
 }
 
-impl<C: LiveCamera> SensorCapture for LiveSensor<C> {
-    fn sensor(&self) -> usize {
-        self.sensor.id
+impl<C: LiveCamera> SensorCapture for LiveDevice<C> {
+    fn sensors(&self) -> &[usize] {
+        &self.sensors
     }
 
-    fn capture(&mut self, img: &mut SensorImage) -> Result<bool, SourceError> {
+    fn capture(&mut self, imgs: &mut [&mut SensorImage]) -> Result<bool, SourceError> {
         let now = Instant::now();
         if self.camera.is_none() {
             if now < self.retry_at {
@@ -112,16 +118,29 @@ impl<C: LiveCamera> SensorCapture for LiveSensor<C> {
             self.reopen(Instant::now());
         }
         let Some(camera) = self.camera.as_mut() else {
-            img.set_invalid(ImageFault::Missing, 0);
+            for img in imgs.iter_mut() {
+                img.set_invalid(ImageFault::Missing, 0);
+            }
             return Ok(true);
         };
-        match camera.read(img) {
+        let read = match self.scratch.as_mut() {
+            None => camera.read(imgs[0]),
+            Some(frame) => camera.read(frame),
+        };
+        match read {
             Ok(ts) => {
-                img.set_valid(ts);
+                for (img, w) in imgs.iter_mut().zip(&self.device.windows) {
+                    if let Some(frame) = self.scratch.as_ref() {
+                        copy_window(frame, w, img);
+                    }
+                    img.set_valid(ts);
+                }
                 self.timeouts = 0;
             }
             Err(failure) => {
-                img.set_invalid(failure.fault, 0);
+                for img in imgs.iter_mut() {
+                    img.set_invalid(failure.fault, 0);
+                }
                 let timed_out = failure.detail == FailureDetail::TimedOut;
                 self.timeouts = if timed_out { self.timeouts + 1 } else { 0 };
                 if failure.lost || self.timeouts >= LOST_AFTER_TIMEOUTS {
@@ -130,7 +149,7 @@ impl<C: LiveCamera> SensorCapture for LiveSensor<C> {
                     self.retry_at = now + self.options.reopen_interval;
                     self.timeouts = 0;
                     tracing::warn!(
-                        sensor = self.sensor.id,
+                        sensors = %self.device.label,
                         device = %self.name,
                         interval = ?self.options.reopen_interval,
                         "lost ({}); going on without it, reopening",
@@ -145,9 +164,9 @@ impl<C: LiveCamera> SensorCapture for LiveSensor<C> {
     }
 }
 
-/// Opens every sensor's camera of `rig` with driver `C` (one [`LiveSensor`] each, read on its own
-/// thread by the pipeline). The first camera that fails is the error: one line naming device and
-/// sensor.
+/// Opens the camera of every capture device of `rig` ([`capture_devices`]) with driver `C` (one
+/// [`LiveDevice`] each, read on its own thread by the pipeline). The first camera that fails is
+/// the error: one line naming device and sensors.
 pub fn live_sensors<C: LiveCamera + 'static>(
     rig: &Rig,
     env: C::Env,
@@ -156,21 +175,24 @@ pub fn live_sensors<C: LiveCamera + 'static>(
 where
     C::Env: 'static,
 {
-    omnitrack_io::capture::open::refuse_crop(rig, "live capture")?;
     let env = Arc::new(Mutex::new(env));
     let now = Instant::now();
-    let mut sensors: Vec<Box<dyn SensorCapture>> = Vec::with_capacity(rig.sensors.len());
-    for sensor in &rig.sensors {
+    let devices = capture_devices(rig)?;
+    let mut sensors: Vec<Box<dyn SensorCapture>> = Vec::with_capacity(devices.len());
+    for device in devices {
+        let mut scratch = None;
         let camera = {
             let mut e = env.lock().unwrap_or_else(|e| e.into_inner());
-            C::open(&mut e, sensor, options)?
+            open_device::<C>(&mut e, &device, options, &mut scratch)?
         };
-        sensors.push(Box::new(LiveSensor::<C> {
-            sensor: sensor.clone(),
+        sensors.push(Box::new(LiveDevice::<C> {
+            sensors: device.sensors().collect(),
+            device,
             env: Arc::clone(&env),
             options: *options,
             name: camera.name().to_string(),
             camera: Some(camera),
+            scratch,
             retry_at: now,
             timeouts: 0,
             warned: [0; ImageFault::ALL.len()],
@@ -183,7 +205,7 @@ where
 }
 
 /// Opens the source named by `spec` (`replay:DIR`, `v4l`, `usb`) for the pipeline: live drivers
-/// built into this binary as one [`SensorCapture`] per sensor (one capture thread each), anything
+/// built into this binary as one [`SensorCapture`] per capture device (one capture thread each), anything
 /// else as the whole-rig source of [`open_source_with`] (one capture thread), whose errors —
 /// including a live source left out of the build, with the cargo command that enables it — are
 /// one line each.

@@ -16,8 +16,8 @@ use std::sync::Arc;
 pub enum PipelineSource {
     /// A whole-rig source: one capture thread calls `next_frame`.
     Rig(Box<dyn FrameSource + Send>),
-    /// One capture per sensor (indexed by sensor id, one each), each on its own thread, and the
-    /// assembly of frames by timestamp.
+    /// One capture per capture device (together delivering every sensor once), each on its own
+    /// thread, and the assembly of frames by timestamp.
     Sensors {
         rig: Rig,
         sensors: Vec<Box<dyn SensorCapture>>,
