@@ -49,7 +49,10 @@ use iceoryx2::prelude::{
 use iceoryx2::service::port_factory::{event as event_factory, publish_subscribe as pubsub_factory};
 
 pub use listen::{format_pose_line, format_status_line, listen, listen_status, ListenError};
-pub use sample::{PoseSample, PoseStatus, SearchState, Stage, StatusSample, STATUS_MAX_SENSORS, STATUS_STAGES};
+pub use sample::{
+    PoseSample, PoseStatus, SearchState, Stage, StatusSample, WireError, POSE_WIRE_BYTES, STATUS_MAX_SENSORS,
+    STATUS_STAGES,
+};
 
 /// Name of the pose service (docs/interfaces.md).
 pub const POSE_SERVICE: &str = "omnitrack/pose";

@@ -157,6 +157,112 @@ impl PoseSample {
     pub fn covariance_matrix(&self) -> Matrix6<f64> {
         Matrix6::from_row_slice(&self.covariance)
     }
+
+    /// The sample as bytes for a network link: the C layout of the table above, little-endian,
+    /// padding zero. The same bytes a little-endian subscriber reads from shared memory, so a
+    /// far host decodes them with the same struct declaration, and no protocol of our own.
+    pub fn to_wire(&self) -> [u8; POSE_WIRE_BYTES] {
+        let mut b = [0u8; POSE_WIRE_BYTES];
+        b[0..8].copy_from_slice(&self.timestamp_ns.to_le_bytes());
+        b[8..16].copy_from_slice(&self.sequence.to_le_bytes());
+        b[16] = self.status;
+        let floats = self
+            .position_m
+            .iter()
+            .chain(&self.rotation_wxyz)
+            .chain(&self.covariance);
+        for (i, v) in floats.enumerate() {
+            b[24 + 8 * i..32 + 8 * i].copy_from_slice(&v.to_le_bytes());
+        }
+        b[368..372].copy_from_slice(&self.inliers.to_le_bytes());
+        b[376..384].copy_from_slice(&self.xi_rad2.to_le_bytes());
+        b
+    }
+
+    /// A sample from [`PoseSample::to_wire`]'s bytes; `Err` says in a few words why they are
+    /// not one (wrong length, an unknown status byte).
+    pub fn from_wire(b: &[u8]) -> Result<PoseSample, WireError> {
+        if b.len() != POSE_WIRE_BYTES {
+            return Err(WireError::Length(b.len()));
+        }
+        let u64_at = |o: usize| u64::from_le_bytes(b[o..o + 8].try_into().expect("8 bytes"));
+        let f64_at = |o: usize| f64::from_le_bytes(b[o..o + 8].try_into().expect("8 bytes"));
+        PoseStatus::try_from(b[16]).map_err(WireError::Status)?;
+        let mut s = PoseSample {
+            timestamp_ns: u64_at(0),
+            sequence: u64_at(8),
+            status: b[16],
+            inliers: u32::from_le_bytes(b[368..372].try_into().expect("4 bytes")),
+            xi_rad2: f64_at(376),
+            ..PoseSample::default()
+        };
+        for i in 0..3 {
+            s.position_m[i] = f64_at(24 + 8 * i);
+        }
+        for i in 0..4 {
+            s.rotation_wxyz[i] = f64_at(48 + 8 * i);
+        }
+        for i in 0..36 {
+            s.covariance[i] = f64_at(80 + 8 * i);
+        }
+        Ok(s)
+    }
+}
+
+/// Bytes of a [`PoseSample`] on a network link ([`PoseSample::to_wire`]): its C size.
+pub const POSE_WIRE_BYTES: usize = 384;
+
+/// Bytes that are not a [`PoseSample`] ([`PoseSample::from_wire`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum WireError {
+    #[error("{0} bytes, a pose sample has {POSE_WIRE_BYTES}")]
+    Length(usize),
+    #[error("status byte {0} is none of initializing (0), tracking (1), lost (2)")]
+    Status(u8),
+}
+
+#[cfg(test)]
+mod wire_tests {
+    use super::*;
+
+    #[test]
+    fn the_wire_bytes_are_the_c_layout_and_decode_back() {
+        assert_eq!(std::mem::size_of::<PoseSample>(), POSE_WIRE_BYTES);
+        let mut s = PoseSample {
+            timestamp_ns: 0x0102_0304_0506_0708,
+            sequence: 42,
+            status: PoseStatus::Tracking as u8,
+            position_m: [1.5, -2.25, 1e-300],
+            rotation_wxyz: [0.5, 0.5, -0.5, 0.5],
+            inliers: 77,
+            xi_rad2: 2.5e-5,
+            ..PoseSample::default()
+        };
+        for (i, c) in s.covariance.iter_mut().enumerate() {
+            *c = i as f64 * 0.125 - 1.0;
+        }
+        let b = s.to_wire();
+        assert_eq!(PoseSample::from_wire(&b), Ok(s));
+        // Field for field at the offsets of the table: what a C reader of the struct sees.
+        let c = unsafe {
+            let mut c = std::mem::MaybeUninit::<PoseSample>::zeroed();
+            std::ptr::copy_nonoverlapping(b.as_ptr(), c.as_mut_ptr().cast::<u8>(), POSE_WIRE_BYTES);
+            c.assume_init()
+        };
+        if cfg!(target_endian = "little") {
+            assert_eq!(c, s);
+        }
+        assert_eq!(&b[0..8], &[8, 7, 6, 5, 4, 3, 2, 1]);
+        assert_eq!(&b[17..24], &[0; 7], "padding is zero");
+        assert_eq!(PoseSample::from_wire(&b[..383]), Err(WireError::Length(383)));
+        let mut bad = b;
+        bad[16] = 9;
+        assert_eq!(PoseSample::from_wire(&bad), Err(WireError::Status(9)));
+        assert_eq!(
+            WireError::Status(9).to_string(),
+            "status byte 9 is none of initializing (0), tracking (1), lost (2)"
+        );
+    }
 }
 
 /// What the tracker's last search for a pose made of its volume, as carried in
