@@ -173,9 +173,10 @@ fn lens_of(cam: &Yaml, n: usize, file: &str, names: &[String]) -> Result<Lens, K
             return Err(KalibrError::Unsupported {
                 file: file.into(),
                 camera: names[n].clone(),
-                model,
-                distortion,
-            })
+                // The file's own strings, escaped: a message stays one line whatever they hold.
+                model: model.escape_debug().to_string(),
+                distortion: distortion.escape_debug().to_string(),
+            });
         }
     };
     lens.map_err(|e| key_error("intrinsics", e.to_string()))
