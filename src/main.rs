@@ -50,6 +50,9 @@ enum Command {
         /// timings.
         #[arg(long)]
         status: bool,
+        /// The tracker's service prefix (its `run --services`): PREFIX/pose, PREFIX/status.
+        #[arg(long, value_name = "PREFIX", default_value = "omnitrack")]
+        services: String,
     },
     /// Prints a shell completion script for omnitrack (bash, zsh, fish, elvish or powershell).
     Completions {
@@ -96,13 +99,21 @@ fn run(command: Command) -> CommandResult {
         Command::Pose(args) => commands::pose::run(args),
         Command::Edges(args) => commands::edges::run(args),
         Command::Visibility { command } => commands::visibility::run(command),
-        Command::Listen { count, status: false } => Ok(omnitrack::publish::listen(
-            omnitrack::publish::POSE_SERVICE,
+        Command::Listen {
+            count,
+            status: false,
+            services,
+        } => Ok(omnitrack::publish::listen(
+            &commands::service_name(&services, "pose")?,
             count,
             &mut std::io::stdout().lock(),
         )?),
-        Command::Listen { count, status: true } => Ok(omnitrack::publish::listen_status(
-            omnitrack::publish::STATUS_SERVICE,
+        Command::Listen {
+            count,
+            status: true,
+            services,
+        } => Ok(omnitrack::publish::listen_status(
+            &commands::service_name(&services, "status")?,
             count,
             &mut std::io::stdout().lock(),
         )?),

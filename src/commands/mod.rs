@@ -39,3 +39,22 @@ pub fn is_broken_pipe(e: &(dyn std::error::Error + 'static)) -> bool {
     }
     false
 }
+
+/// `PREFIX/leaf` for `--services PREFIX`: `omnitrack/pose` by default. A prefix iceoryx2 could
+/// not name a service with is refused here, in one line, before anything starts.
+pub fn service_name(prefix: &str, leaf: &str) -> Result<String, String> {
+    let ok = !prefix.is_empty()
+        && prefix.len() <= 200
+        && !prefix.starts_with('/')
+        && !prefix.ends_with('/')
+        && prefix
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || matches!(c, '/' | '-' | '_' | '.'));
+    if ok {
+        Ok(format!("{prefix}/{leaf}"))
+    } else {
+        Err(format!(
+            "--services {prefix:?}: a prefix is letters, digits, '-', '_', '.' and inner '/' (at most 200), e.g. omnitrack/rig2"
+        ))
+    }
+}

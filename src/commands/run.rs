@@ -38,6 +38,10 @@ pub struct Args {
     /// Do not publish on iceoryx2.
     #[arg(long)]
     no_publish: bool,
+    /// Service prefix: poses on PREFIX/pose, status on PREFIX/status. A second tracker on the
+    /// same computer (another rig) takes another prefix; `omnitrack listen --services` follows it.
+    #[arg(long, value_name = "PREFIX", default_value = "omnitrack")]
+    services: String,
     /// Replay at the recorded frame rate (default: as fast as the tracker goes).
     #[arg(long)]
     realtime: bool,
@@ -68,13 +72,17 @@ fn parse_init(text: &str, default_diameter: f64) -> Result<omnitrack::tracker::S
 
 pub fn run(a: Args) -> CommandResult {
     use omnitrack::capture::{Pacing, SourceOptions};
-    use omnitrack::publish::{POSE_SERVICE, STATUS_SERVICE};
     use omnitrack::runtime::load_or_build_table;
     use omnitrack::runtime::pipeline::{
         init_logging, open_pipeline_source, run_pipeline, FrameSink, PipelineOptions, TumSink,
     };
     use omnitrack::runtime::{FrameRecord, RunOptions, SinkError};
     use omnitrack::tracker::TrackerEvent;
+
+    let (pose_service, status_service) = (
+        super::service_name(&a.services, "pose")?,
+        super::service_name(&a.services, "status")?,
+    );
 
     /// Progress lines on standard error and, if asked, the TUM trajectory.
     struct RunSink {
@@ -179,8 +187,8 @@ pub fn run(a: Args) -> CommandResult {
             max_frames: a.frames,
         },
         handle_signals: true,
-        pose_service: publish.map(|_| POSE_SERVICE.to_string()),
-        status_service: publish.map(|_| STATUS_SERVICE.to_string()),
+        pose_service: publish.map(|_| pose_service),
+        status_service: publish.map(|_| status_service),
         // A replay not paced in real time would otherwise race ahead while the tracker works.
         lossless: !a.realtime && a.source.starts_with("replay:"),
         ..PipelineOptions::default()

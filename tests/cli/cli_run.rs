@@ -29,6 +29,10 @@ fn bad_arguments_and_inputs_are_one_line_errors() {
             vec!["--source", &replay, "--trajectory", model],
             "refusing to overwrite",
         ),
+        (
+            vec!["--source", &replay, "--services", "/rig 2"],
+            "--services \"/rig 2\": a prefix is",
+        ),
     ] {
         let mut full = vec!["run", "--model", model, "--no-publish"];
         full.extend(args.iter().copied());
@@ -240,4 +244,121 @@ fn check_shows_shared_devices_and_refuses_one_without_crops() {
         last_line(&stderr).ends_with("sensors 0 and 1 share '/dev/video0', but sensor 1 has no crop: each sensor of a shared device needs crop = [x, y, width, height], its window of the device's frame"),
         "{stderr}"
     );
+}
+
+/// SIGKILL at a random moment of a run (the OOM killer, a pulled plug of the process): of the
+/// poses it published, the trajectory lacks at most one, every line of it is whole, and the next
+/// run on the same services starts and publishes normally.
+#[cfg(feature = "desk")]
+#[test]
+fn a_killed_run_keeps_the_poses_it_published_and_the_next_run_publishes() {
+    use omnitrack::publish::{PoseStatus, PoseSubscriber};
+    use std::process::{Command, Stdio};
+    use std::time::{Duration, Instant};
+
+    let lab = crate::common::lab_recording(40);
+    lab.table.save(&lab.rec.join("model.vis")).unwrap();
+    let prefix = format!("omnitrack-test/kill-{}", std::process::id());
+    let model = lab.rec.join("model.obj");
+    let model = model.to_str().unwrap();
+    let t0 = lab.truth[0].pose.translation.vector;
+    let init = format!("{},{},{},1.5", t0.x, t0.y, t0.z);
+    let replay = format!("replay:{}", lab.rec.display());
+    let killed = lab.dir.path().join("killed.tum");
+    let killed_str: &'static str = Box::leak(killed.to_str().unwrap().to_string().into_boxed_str());
+    let args = |tum: &'static str| -> Vec<&str> {
+        vec![
+            "run",
+            "--model",
+            model,
+            "--source",
+            &replay,
+            "--init",
+            &init,
+            "--trajectory",
+            tum,
+            "--services",
+            &prefix,
+        ]
+    };
+    let subscriber = PoseSubscriber::create(&format!("{prefix}/pose")).unwrap();
+    // "A random moment": after 3 to 25 tracked poses, chosen by the clock.
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .subsec_nanos();
+    let kill_after = 3 + (nanos % 23) as usize;
+    let mut child = Command::new(env!("CARGO_BIN_EXE_omnitrack"))
+        .args(args(killed_str))
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut published = Vec::new();
+    let start = Instant::now();
+    while published.len() < kill_after {
+        assert!(
+            start.elapsed() < Duration::from_secs(120),
+            "{} poses in 2 minutes",
+            published.len()
+        );
+        if let Some(s) = subscriber.wait(Duration::from_millis(100)).unwrap() {
+            if s.status == PoseStatus::Tracking as u8 {
+                published.push(s.timestamp_ns);
+            }
+        }
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    // The poses published before the kill that the subscriber had not taken yet.
+    while let Some(s) = subscriber.receive().unwrap() {
+        if s.status == PoseStatus::Tracking as u8 {
+            published.push(s.timestamp_ns);
+        }
+    }
+    let text = std::fs::read_to_string(&killed).unwrap();
+    assert!(text.is_empty() || text.ends_with('\n'), "a partial last line: {text:?}");
+    let written = omnitrack::trajectory::parse_tum(&text, "killed.tum").unwrap();
+    assert!(
+        written.windows(2).all(|w| w[0].timestamp_ns < w[1].timestamp_ns),
+        "in time order"
+    );
+    let lost = published
+        .iter()
+        .filter(|t| !written.iter().any(|w| w.timestamp_ns == **t))
+        .count();
+    eprintln!(
+        "killed after {kill_after} tracked poses: {} published, {} written, {lost} lost",
+        published.len(),
+        written.len()
+    );
+    assert!(
+        lost <= 1,
+        "{lost} of {} published poses missing from the trajectory",
+        published.len()
+    );
+
+    // The next start cleans up after the killed one and publishes.
+    let again = lab.dir.path().join("again.tum");
+    let mut next = args(Box::leak(again.to_str().unwrap().to_string().into_boxed_str()));
+    next.extend(["--frames", "3"]);
+    let mut run = Command::new(env!("CARGO_BIN_EXE_omnitrack"))
+        .args(&next)
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // The surviving subscriber (a navigation process outliving the tracker) receives from it.
+    let mut after = 0;
+    let status = loop {
+        if let Some(s) = subscriber.wait(Duration::from_millis(20)).unwrap() {
+            after += 1;
+            assert!(s.sequence < 3, "{s:?}");
+        }
+        if let Some(status) = run.try_wait().unwrap() {
+            break status;
+        }
+    };
+    let mut stderr = String::new();
+    std::io::Read::read_to_string(run.stderr.as_mut().unwrap(), &mut stderr).unwrap();
+    assert!(status.success(), "{stderr}");
+    assert!(after > 0, "the next run published nothing: {stderr}");
 }
