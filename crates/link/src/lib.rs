@@ -4,7 +4,8 @@
 //! other local consumer); on a far host, a Zenoh session that reaches the rig's. Out: every
 //! [`PoseSample`] put on the Zenoh key expression `omnitrack/pose` as its
 //! [`PoseSample::to_wire`] bytes (the C layout of the shared-memory sample, little-endian), and
-//! on the far host one line per sample in `omnitrack listen`'s format.
+//! on the far host one line per sample in `omnitrack listen`'s format and, if asked, the same
+//! sample on a local iceoryx2 service of the far host.
 //!
 //! Why not iceoryx2's own Zenoh tunnel: the tunnel crates on crates.io stop at iceoryx2 0.8
 //! (`iceoryx2-tunnel-zenoh` 0.8.1), and the tracker speaks iceoryx2 0.10, whose shared-memory
@@ -23,7 +24,7 @@
 //! The link is not on the device path: it allocates per sample (Zenoh's buffers) and runs beside
 //! the tracker, which never waits for it.
 
-use omnitrack_io::publish::{format_pose_line, PoseSample, PoseSubscriber, WireError};
+use omnitrack_io::publish::{format_pose_line, PoseSample, PoseSubscriber, SamplePublisher, WireError};
 use std::io::Write;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -161,17 +162,40 @@ impl ListenSummary {
     }
 }
 
+/// What `listen` does with each pose besides printing it.
+#[derive(Debug, Clone, Default)]
+pub struct ListenOptions {
+    /// Stop after this many poses.
+    pub count: Option<u64>,
+    /// Stop when none came for this long.
+    pub idle: Option<Duration>,
+    /// Keep each pose's age on arrival ([`ListenSummary::latencies_us`]).
+    pub latency: bool,
+    /// Publish each pose on this local iceoryx2 service too, so that programs on the far host
+    /// read it with the same zero-copy subscriber as on the rig (`omnitrack listen --services`).
+    pub republish: Option<String>,
+}
+
 /// Receives poses from Zenoh key `key`, one line each to `out`, until `stop` is set, `count`
 /// samples came, or none came for `idle` (when given).
 pub fn listen(
     key: &str,
     endpoints: &Endpoints,
-    count: Option<u64>,
-    idle: Option<Duration>,
-    latency: bool,
+    options: &ListenOptions,
     stop: &AtomicBool,
     out: &mut dyn Write,
 ) -> Result<ListenSummary, LinkError> {
+    let ListenOptions {
+        count,
+        idle,
+        latency,
+        republish,
+    } = options;
+    let (count, idle, latency) = (*count, *idle, *latency);
+    let local = republish
+        .as_deref()
+        .map(SamplePublisher::<PoseSample>::create)
+        .transpose()?;
     let session = open_session(endpoints)?;
     let subscriber = session
         .declare_subscriber(key.to_string())
@@ -209,6 +233,9 @@ pub fn listen(
             summary
                 .latencies_us
                 .push(now.saturating_sub(pose.timestamp_ns) as f64 / 1e3);
+        }
+        if let Some(local) = &local {
+            local.publish(&pose)?;
         }
         format_pose_line(&pose, out)?;
         writeln!(out)?;

@@ -2,7 +2,7 @@
 //!
 //! ```text
 //! omnitrack-link send   [--service omnitrack/pose] [--key omnitrack/pose] [--listen EP]... [--connect EP]... [--count N]
-//! omnitrack-link listen [--key omnitrack/pose] [--listen EP]... [--connect EP]... [--count N] [--idle-s S] [--latency]
+//! omnitrack-link listen [--key omnitrack/pose] [--listen EP]... [--connect EP]... [--count N] [--idle-s S] [--latency] [--republish SERVICE]
 //! ```
 //!
 //! `send` runs beside the tracker; `listen` on the far host prints one line per pose, as
@@ -12,7 +12,7 @@
 //! error and exit code 1; a broken standard output ends quietly.
 
 use clap::{Parser, Subcommand};
-use omnitrack_link::{listen, send, stop_on_signals, Endpoints, LinkError, POSE_KEY};
+use omnitrack_link::{listen, send, stop_on_signals, Endpoints, LinkError, ListenOptions, POSE_KEY};
 use std::time::Duration;
 
 #[derive(Parser)]
@@ -65,6 +65,10 @@ enum Command {
         /// Print the poses' age on arrival (p50, p99, max) when done.
         #[arg(long)]
         latency: bool,
+        /// Publish each pose on this local iceoryx2 service too (e.g. omnitrack/pose), for
+        /// programs on this host that subscribe as they would on the rig.
+        #[arg(long, value_name = "SERVICE")]
+        republish: Option<String>,
     },
 }
 
@@ -91,6 +95,7 @@ fn run(cli: Cli) -> Result<(), LinkError> {
             count,
             idle_s,
             latency,
+            republish,
         } => {
             let idle = match idle_s {
                 Some(s) if !(s.is_finite() && s > 0.0) => {
@@ -101,15 +106,13 @@ fn run(cli: Cli) -> Result<(), LinkError> {
                 s => s.map(Duration::from_secs_f64),
             };
             let mut out = std::io::stdout().lock();
-            let s = listen(
-                &network.key,
-                &endpoints(&network),
+            let options = ListenOptions {
                 count,
                 idle,
                 latency,
-                &stop,
-                &mut out,
-            )?;
+                republish,
+            };
+            let s = listen(&network.key, &endpoints(&network), &options, &stop, &mut out)?;
             eprintln!("received {} poses, {} missing", s.received, s.missing);
             if let (Some(p50), Some(p99), Some(max)) = (
                 s.latency_quantile_us(0.5),

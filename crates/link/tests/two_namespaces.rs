@@ -7,7 +7,7 @@
 //! Namespaces need root (CI runs as root). Elsewhere the test says why it did not run, and fails
 //! if `CI` is set, so that CI can never pass it by skipping.
 
-use omnitrack_io::publish::{PoseSample, PoseStatus, SamplePublisher};
+use omnitrack_io::publish::{PoseSample, PoseStatus, PoseSubscriber, SamplePublisher};
 use std::io::{BufRead, BufReader};
 use std::process::{Child, Command, Stdio};
 use std::sync::mpsc;
@@ -129,10 +129,24 @@ fn every_pose_crosses_from_one_namespace_to_another() {
     let publisher = SamplePublisher::<PoseSample>::create(&service).unwrap();
     let endpoint = format!("tcp/{}:7447", hosts.addr_a);
     let mut sender = hosts.spawn(&hosts.a, &["send", "--service", &service, "--listen", &endpoint]);
+    // The far host also republishes on a local service of its own; /dev/shm is not namespaced,
+    // so this process can subscribe to it as a program on the far host would.
+    let far_service = format!("omnitrack-link-test/{}/far/pose", std::process::id());
+    let far = PoseSubscriber::create(&far_service).unwrap();
     let mut listener = hosts.spawn(
         &hosts.b,
-        &["listen", "--connect", &endpoint, "--latency", "--idle-s", "3"],
+        &[
+            "listen",
+            "--connect",
+            &endpoint,
+            "--latency",
+            "--idle-s",
+            "3",
+            "--republish",
+            &far_service,
+        ],
     );
+    let mut far_seqs = Vec::new();
 
     // Lines of the far side, as they come.
     let (tx, rx) = mpsc::channel::<String>();
@@ -159,7 +173,16 @@ fn every_pose_crosses_from_one_namespace_to_another() {
     for k in 0..POSES {
         let due = Instant::now() + PERIOD;
         publisher.publish(&pose(FIRST + k)).unwrap();
+        while let Some(s) = far.receive().unwrap() {
+            far_seqs.push(s.sequence);
+        }
         std::thread::sleep(due.saturating_duration_since(Instant::now()));
+    }
+    let drain_until = Instant::now() + Duration::from_secs(2);
+    while Instant::now() < drain_until {
+        if let Some(s) = far.wait(Duration::from_millis(50)).unwrap() {
+            far_seqs.push(s.sequence);
+        }
     }
     let listened = listener.wait_with_output().unwrap();
     reader.join().unwrap();
@@ -176,6 +199,8 @@ fn every_pose_crosses_from_one_namespace_to_another() {
         .collect();
     let expected: Vec<u64> = (FIRST..FIRST + POSES).collect();
     assert_eq!(seqs, expected, "every pose, in order, once");
+    far_seqs.retain(|&s| s >= FIRST);
+    assert_eq!(far_seqs, expected, "every pose on the far host's own service too");
     let latency = stderr.lines().find(|l| l.starts_with("latency:")).unwrap_or("");
     println!("{POSES} poses at 200 Hz across two network namespaces over Zenoh (plus {warm} warm-up): {latency}");
     assert!(latency.contains("p99"), "{stderr}");
