@@ -15,7 +15,9 @@
 //! The load average is printed: other work on the machine slows every stage.
 //!
 //! Run: `cargo bench --bench pipeline` (needs the `desk` feature, on by default). Options after
-//! `--`: `--frames N` (default 300), `--seed S` (default 11). Recordings are cached in
+//! `--`: `--frames N` (default 300), `--seed S` (default 11), `--hogs N` (N threads spinning at
+//! the tracker's priority for the whole measurement: a machine busy with other work, issue 24's
+//! "two CPU hogs"). Recordings are cached in
 //! `target/omnitrack-cache/` (or `$OMNITRACK_CACHE`), as for `benches/tracker/`.
 
 #[cfg(feature = "desk")]
@@ -213,11 +215,13 @@ mod bench {
     pub fn main() {
         let mut frames = 300usize;
         let mut seed = 11u64;
+        let mut hogs = 0usize;
         let mut it = std::env::args().skip(1);
         while let Some(x) = it.next() {
             match x.as_str() {
                 "--frames" => frames = it.next().and_then(|s| s.parse().ok()).expect("--frames N"),
                 "--seed" => seed = it.next().and_then(|s| s.parse().ok()).expect("--seed S"),
+                "--hogs" => hogs = it.next().and_then(|s| s.parse().ok()).expect("--hogs N"),
                 _ => {}
             }
         }
@@ -256,6 +260,21 @@ mod bench {
         let load = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
         let load = load.split_whitespace().take(3).collect::<Vec<_>>().join(" ");
         let pace = Some(Duration::from_nanos(33_333_333));
+        // Busy threads for the whole measurement, as other programs on the rig's computer would be.
+        let hogging = Arc::new(AtomicBool::new(true));
+        let hog_threads: Vec<_> = (0..hogs)
+            .map(|_| {
+                let on = Arc::clone(&hogging);
+                std::thread::spawn(move || {
+                    let mut x = 0u64;
+                    while on.load(Ordering::Relaxed) {
+                        for _ in 0..10_000 {
+                            x = std::hint::black_box(x.wrapping_mul(6364136223846793005).wrapping_add(1));
+                        }
+                    }
+                })
+            })
+            .collect();
         let runs = [
             ("as fast as it decodes, lossless", None, true, false),
             ("paced 30 Hz, latest wins, standing still to start", pace, false, true),
@@ -264,10 +283,14 @@ mod bench {
         .map(|(name, pace, lossless, still)| {
             run(name, &rec, &model, &table, &cfg, hint, frames, pace, lossless, still)
         });
+        hogging.store(false, Ordering::Relaxed);
+        for h in hog_threads {
+            let _ = h.join();
+        }
 
         println!();
         println!(
-            "Threaded pipeline, replayed `lab` at 30 Hz ({frames} frames of six 512×384 sensors, {cores} cores, load average before: {load}):"
+            "Threaded pipeline, replayed `lab` at 30 Hz ({frames} frames of six 512×384 sensors, {cores} cores, {hogs} CPU hogs, load average before: {load}):"
         );
         println!();
         println!("| run | captured | processed | dropped | tracked | frames/s | init (ms) | latency p50 / p99 / max (ms) | edges p50 / p99 (ms) | track p50 / p99 (ms) | publish p50 / p99 (µs) | overruns edges / track / frame |");
