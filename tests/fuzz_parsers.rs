@@ -10,7 +10,8 @@
 //! Per parser: `OMNITRACK_FUZZ_CASES` inputs (default 10,000). A panic saves its input under
 //! `target/fuzz-failures/` and fails the test; a case that runs longer than [`HANG_LIMIT`] is a
 //! hang (its input saved likewise); an abort or stack overflow kills the process, which fails
-//! the run. The figures are printed per parser.
+//! the run. The figures are printed per parser; a recording "refuses" an input when replay
+//! skipped an image or a row of it (and went on).
 #![cfg(feature = "desk")]
 
 use omnitrack::capture::{FrameSet, FrameSource, Pacing, ReplaySource};
@@ -397,7 +398,14 @@ impl Recording {
             frames += 1;
             assert!(frames <= 64, "more frames than rows");
         }
-        Ok(())
+        // Replay goes on past a bad image or row, counting it: those count as refused here
+        // (each was warned in one line), so that the tally says what the inputs did.
+        let stats = source.stats();
+        let skipped: u64 = stats.sensors.iter().map(|s| s.total_faults() - s.dropped).sum();
+        match skipped + stats.bad_rows.total() {
+            0 => Ok(()),
+            n => Err(format!("{n} images or rows skipped")),
+        }
     }
 }
 
@@ -406,14 +414,20 @@ fn recording_indexes() {
     let rec = Recording::new();
     let png = png_rgb(8, 6);
     std::fs::write(rec.dir.path().join("sensor0/000000.png"), &png).unwrap();
-    let csv = "frame,sensor,timestamp_ns,path\n0,0,1700000000000000000,sensor0/000000.png\n\
-               0,1,1700000000000700000,sensor0/000000.png\n1,0,1700000000033000000,sensor0/000000.png\n\
-               2,1,1700000000066000000,../outside.png\n3,0,18446744073709551615,/etc/hostname\n";
+    // A valid index, and one with rows that must be refused, for the splices to draw on.
+    let valid = "frame,sensor,timestamp_ns,path\n0,0,1700000000000000000,sensor0/000000.png\n\
+                 0,1,1700000000000700000,sensor0/000000.png\n1,0,1700000000033000000,sensor0/000000.png\n";
+    let hostile = format!("{valid}2,1,1700000000066000000,../outside.png\n3,0,18446744073709551615,/etc/hostname\n");
     let path = rec.dir.path().join("frames.csv");
-    fuzz("frames.csv", 10, vec![csv.as_bytes().to_vec()], move |b| {
-        std::fs::write(&path, b).unwrap();
-        rec.replay()
-    });
+    fuzz(
+        "frames.csv",
+        10,
+        vec![valid.as_bytes().to_vec(), hostile.into_bytes()],
+        move |b| {
+            std::fs::write(&path, b).unwrap();
+            rec.replay()
+        },
+    );
 }
 
 fn png_rgb(w: u32, h: u32) -> Vec<u8> {
