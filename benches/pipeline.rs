@@ -17,7 +17,7 @@
 //! Run: `cargo bench --bench pipeline` (needs the `desk` feature, on by default). Options after
 //! `--`: `--frames N` (default 300), `--seed S` (default 11), `--hogs N` (N threads spinning at
 //! the tracker's priority for the whole measurement: a machine busy with other work, issue 24's
-//! "two CPU hogs"). Recordings are cached in
+//! "two CPU hogs"), `--scenario lab|corridor|handheld` (default `lab`). Recordings are cached in
 //! `target/omnitrack-cache/` (or `$OMNITRACK_CACHE`), as for `benches/tracker/`.
 
 #[cfg(feature = "desk")]
@@ -216,17 +216,25 @@ mod bench {
         let mut frames = 300usize;
         let mut seed = 11u64;
         let mut hogs = 0usize;
+        let mut name = ScenarioName::Lab;
         let mut it = std::env::args().skip(1);
         while let Some(x) = it.next() {
             match x.as_str() {
                 "--frames" => frames = it.next().and_then(|s| s.parse().ok()).expect("--frames N"),
                 "--seed" => seed = it.next().and_then(|s| s.parse().ok()).expect("--seed S"),
                 "--hogs" => hogs = it.next().and_then(|s| s.parse().ok()).expect("--hogs N"),
+                "--scenario" => {
+                    let want = it.next().expect("--scenario lab|corridor|handheld");
+                    name = *ScenarioName::ALL
+                        .iter()
+                        .find(|n| n.as_str() == want)
+                        .expect("--scenario lab|corridor|handheld");
+                }
                 _ => {}
             }
         }
         let rig = Rig::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("firmware_config/ladybug2.toml")).unwrap();
-        let mut scenario = Scenario::get(ScenarioName::Lab);
+        let mut scenario = Scenario::get(name);
         scenario.frame_rate_hz = 30.0;
         let (rec, made) = cached_scenario(
             &cache_root(),
@@ -236,7 +244,7 @@ mod bench {
             "30hz",
             &rig,
             &RecordingOptions::default(),
-            |d, t| eprint!("\rrendering lab: {d}/{t}"),
+            |d, t| eprint!("\rrendering {}: {d}/{t}", name.as_str()),
         )
         .unwrap();
         if made {
@@ -290,7 +298,8 @@ mod bench {
 
         println!();
         println!(
-            "Threaded pipeline, replayed `lab` at 30 Hz ({frames} frames of six 512×384 sensors, {cores} cores, {hogs} CPU hogs, load average before: {load}):"
+            "Threaded pipeline, replayed `{}` at 30 Hz ({frames} frames of six 512×384 sensors, {cores} cores, {hogs} CPU hogs, load average before: {load}):",
+            name.as_str()
         );
         println!();
         println!("| run | captured | processed | dropped | tracked | frames/s | init (ms) | latency p50 / p99 / max (ms) | edges p50 / p99 (ms) | track p50 / p99 (ms) | publish p50 / p99 (µs) | overruns edges / track / frame |");

@@ -26,6 +26,9 @@ pub struct InitialisationConfig {
     pub search_diameter_m: f64,
     pub best_edges_per_segment: u32,
     pub max_samples: u32,
+    /// The search's work budget in reference milliseconds (`omnitrack_tracker::init::work`): the
+    /// work decides where it stops, never the load of the machine; the wall clock stops it only
+    /// at four times the budget, and says so.
     pub time_budget_ms: f64,
     pub simplex_refinement: bool,
     pub confirm_frames: u32,
@@ -37,6 +40,7 @@ pub struct InitialisationConfig {
     pub samples_per_cell: u32,
     pub dihedral_tolerance_deg: f64,
     pub max_dihedral_range_deg: f64,
+    /// The whole-model search's work budget (reference milliseconds, as `time_budget_ms`).
     pub whole_model_time_budget_ms: f64,
     pub clear_winner_ratio: f64,
     pub accept_explained_fraction: f64,
@@ -75,7 +79,8 @@ pub struct MaintenanceConfig {
     pub max_jump_m: f64,
     pub max_jump_deg: f64,
     pub relocalise_diameter_m: f64,
-    /// The deadline of that search (ms). It runs inside one frame, so it is a few frame budgets,
+    /// The work budget of that search (reference milliseconds, as `initialisation.time_budget_ms`).
+    /// It runs inside one frame, so it is a few frame budgets,
     /// not the first start's `initialisation.time_budget_ms`: a walking rig is ~1 m on by the
     /// next frame after a 1-second search, and then needs another.
     pub relocalise_time_budget_ms: f64,

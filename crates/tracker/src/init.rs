@@ -64,11 +64,19 @@
 //! node spacing often has its node inside a wall. This runs first; the triplets get what is
 //! left of the time budget.
 //!
-//! **The time budget is a deadline** for the whole search: the lattice, the climbs (best
-//! first), the triplets, the polish of their samples and the vote all stop at it. The triplets
-//! stop early by twice what polishing their best samples takes at the pace of the grid's own
-//! polishes. Measured on the ZInD benchmark from the 3 m hint: the polish of the triplets'
-//! samples used to run 35–55 ms past the budget (up to 0.5 s with four pinholes).
+//! **The budget is work, not time** (issue 24): every step charges the work it does in *work
+//! units*, about a microsecond of one core of the reference machine (module [`work`], measured
+//! per step on the ZInD panoramas and `lab`), and the lattice, the climbs (best first), the
+//! triplets, the polish of their samples and the vote stop when the search has spent its budget
+//! (`time_budget_ms` is that budget in reference milliseconds). So a search does the same work
+//! and gives the same answer on an idle or a loaded machine; with a clock deadline, three runs
+//! of one recording under CPU hogs differed by up to 8.4 cm and the whole-model search settled
+//! 10.9 m off. The lattice's scan stops at [`GRID_SHARE`] of the budget so that its best
+//! positions are always climbed and polished (the whole model's scan used to take all of it and
+//! return nothing). The triplets stop early by twice what polishing their best samples costs.
+//! The clock is only a backstop: a search still running at [`BACKSTOP_FACTOR`] times its budget
+//! (a machine far slower than the reference, or starved) stops, and [`InitReport::backstop`]
+//! says so.
 //!
 //! **Visibility at the pose** (`crate::visibility::at_pose`; beyond the paper). The grid, the
 //! polish and the scores predict the segments in sight from the candidate position itself (ray
@@ -102,10 +110,11 @@
 //! With `upright` set (KT §5.4), the cells are those of the layer nearest the known height, the
 //! rotation is the yaw alone (closed form) and every fit solves x, y and yaw only.
 //!
-//! **The whole model** (start-up without a hint, over a thousand cells in `lab`) is dealt out to
-//! one worker per core, each with its own per-cell buffers and a generator seeded per cell, so
-//! the answer does not depend on the dealing. On 2 cores the 1,177 cells of `lab` take 8.1 s,
-//! against 16 s on one.
+//! **The whole model** (start-up without a hint, over a thousand cells in `lab`) deals its cells
+//! to [`LANES`] lanes, each with its own per-cell buffers, its share of the work budget and a
+//! generator seeded per cell; up to one thread per core runs the lanes. What each lane searches
+//! is fixed by the dealing alone, so the answer does not depend on the number of cores or on
+//! how the threads were scheduled.
 //!
 //! Fixed memory: all tables are sized in [`Initialiser::new`]. A bounded volume (a hint, a
 //! re-initialisation, a relocalisation) is searched on the calling thread and allocates nothing;
@@ -180,6 +189,35 @@ const CLIMB: [(f64, f64); 3] = [
 /// Step of the height sweep at a voted plan position (m).
 const HEIGHT_STEP_M: f64 = 0.1;
 
+/// The costs the search charges, in work units (about a microsecond of one core of the
+/// reference machine, the 2-core x86-64 VM this was measured on: per step, the mean time over
+/// the searches of the ZInD benchmark from the 1.5 and 3 m hints and of `lab`, within ±20 % of
+/// both; a cell's cost fitted over 399 cells, median error 18 %). That VM's own pace varies by
+/// ±30 % from one hour to the next, which is why the budget is not the clock.
+pub mod work {
+    /// [`Initialiser::coarse_merit`](super::Initialiser): per segment scored, per 100 edges
+    /// it is scored against.
+    pub const MERIT_PER_SEGMENT_100_EDGES: u64 = 1;
+    /// The segments in sight from a position (ray cast against the model).
+    pub const SIGHT: u64 = 400;
+    /// A polish (gathers and refits at three gates, the simplex, the scores).
+    pub const POLISH: u64 = 5_000;
+    /// One truncated-ξ score of a pose.
+    pub const SCORE: u64 = 450;
+    /// The translation vote under one rotation, per edge voting.
+    pub const VOTE_PER_EDGE: u64 = 64;
+    /// One cell of INIT-SEGMENT-EDGE: fixed, per 50 triplet matches, per sample drawn.
+    pub const CELL: u64 = 600;
+    pub const CELL_PER_50_MATCHES: u64 = 1;
+    pub const CELL_PER_SAMPLE: u64 = 12;
+}
+
+/// The share of the budget the lattice's scan may spend: the rest is for climbing and polishing
+/// its best positions, the triplets and the vote.
+pub const GRID_SHARE: f64 = 0.75;
+/// A search still running at this many times its budget on the wall clock stops (reported).
+pub const BACKSTOP_FACTOR: u32 = 4;
+
 /// Tunables of [`Initialiser`] (from tracker.toml `[initialisation]` and the noise model).
 #[derive(Debug, Clone, PartialEq)]
 pub struct InitOptions {
@@ -191,7 +229,8 @@ pub struct InitOptions {
     pub best_edges_per_segment: usize,
     /// Random correspondence samples per cell.
     pub samples_per_cell: usize,
-    /// The whole run stops by this deadline (anytime: the cells nearest the centre come first).
+    /// The work the whole run may do, in reference time (module [`work`]; anytime: the cells
+    /// nearest the centre come first).
     pub time_budget: Duration,
     /// Half-width of an observed dihedral angle's interval (rad).
     pub dihedral_tolerance_rad: f64,
@@ -294,7 +333,13 @@ pub struct InitReport {
     pub triplet_matches: u64,
     pub samples: u64,
     pub elapsed: Duration,
+    /// The work budget ran out before everything in the volume was searched.
     pub timed_out: bool,
+    /// Work units spent (module [`work`]).
+    pub work: u64,
+    /// The wall clock stopped the search at [`BACKSTOP_FACTOR`] × its budget before the work
+    /// budget did: the answer then depends on the machine's speed and load.
+    pub backstop: bool,
     /// Samples dropped because the rig would be tilted further than `max_tilt_rad` allows.
     pub tilted: u64,
     /// Of `elapsed`, the grid search under the vanishing directions' rotations (with its
@@ -306,8 +351,8 @@ pub struct InitReport {
     pub widened_to_m: Option<f64>,
 }
 
-/// Most threads the whole-model search uses.
-const MAX_WORKERS: usize = 4;
+/// Lanes of the whole-model search (and most threads it uses).
+pub const LANES: usize = 4;
 
 /// One worker's per-cell buffers (Figure 4's ℒ, dihedral ranges, score table A, the k best
 /// edges and the sampling weights) and the best samples it found.
@@ -397,9 +442,10 @@ pub struct Initialiser<'m> {
     view: ViewMap,
     /// Scratch of [`Self::edge_support`]: the predicted segments.
     support_pred: Vec<Predicted>,
-    /// Time spent polishing in this run, and how many polishes: what the pool's polish will
-    /// take, so that the triplets leave it.
-    polish_time: (Duration, u32),
+    /// Work spent in this run (module [`work`]), and when the wall clock's backstop falls.
+    work: u64,
+    backstop: Instant,
+    backstop_hit: bool,
     /// The segments in sight from a grid position: (angle they span in sight, index), and the
     /// longest kept.
     grid_order: Vec<(f64, u32)>,
@@ -436,10 +482,6 @@ impl<'m> Initialiser<'m> {
             .max()
             .unwrap_or(0)
             .max(model.segments.len());
-        // The whole-model search (start-up without a hint) spreads its cells over the cores.
-        let workers = std::thread::available_parallelism()
-            .map_or(1, |n| n.get())
-            .clamp(1, MAX_WORKERS);
         let floors = Floors::new(model);
         Initialiser {
             model,
@@ -454,7 +496,7 @@ impl<'m> Initialiser<'m> {
             pairs: Vec::with_capacity(m * m),
             cells: Vec::with_capacity(table.node_count()),
             plan_cells: Vec::with_capacity((table.header.dims[0] as usize) * (table.header.dims[1] as usize)),
-            scratch: (0..workers).map(|_| CellScratch::new(m, n, max_set)).collect(),
+            scratch: (0..LANES).map(|_| CellScratch::new(m, n, max_set)).collect(),
             pool: Pool::new(),
             corr: Vec::with_capacity(max_set),
             alphas: Vec::with_capacity(max_set),
@@ -467,7 +509,9 @@ impl<'m> Initialiser<'m> {
             at_pose: PoseVisibility::new(model),
             view: ViewMap::new(rig),
             support_pred: Vec::with_capacity(max_set),
-            polish_time: (Duration::ZERO, 0),
+            work: 0,
+            backstop: Instant::now(),
+            backstop_hit: false,
             grid_order: Vec::with_capacity(max_set),
             grid_segs: Vec::with_capacity(max_set),
             vanishing_rot: [UnitQuaternion::identity(); MAX_ROTATIONS],
@@ -518,9 +562,31 @@ impl<'m> Initialiser<'m> {
         out[..n].to_vec()
     }
 
-    /// Changes the search's time budget (a volume, or the whole model).
+    /// Changes the search's budget (a volume, or the whole model), in reference time.
     pub fn set_time_budget(&mut self, budget: Duration) {
         self.opts.time_budget = budget;
+    }
+
+    /// The budget in work units.
+    fn work_limit(&self) -> u64 {
+        u64::try_from(self.opts.time_budget.as_micros()).unwrap_or(u64::MAX)
+    }
+
+    /// Charges `units` of work.
+    pub(super) fn spend(&mut self, units: u64) {
+        self.work = self.work.saturating_add(units);
+    }
+
+    /// Whether the run has spent `limit` work units, or the wall clock's backstop has fallen.
+    pub(super) fn spent(&mut self, limit: u64) -> bool {
+        if self.work >= limit {
+            return true;
+        }
+        if Instant::now() >= self.backstop {
+            self.backstop_hit = true;
+            return true;
+        }
+        false
     }
 
     /// The grid search under the rotations of the vanishing directions, INIT-SEGMENT-EDGE over
@@ -529,8 +595,10 @@ impl<'m> Initialiser<'m> {
     /// found).
     pub fn run(&mut self, edges: &[Edge], volume: &SearchVolume, rng: &mut SmallRng) -> (&[Candidate], InitReport) {
         let started = Instant::now();
-        let deadline = started + self.opts.time_budget;
-        self.polish_time = (Duration::ZERO, 0);
+        let limit = self.work_limit();
+        self.work = 0;
+        self.backstop_hit = false;
+        self.backstop = started + self.opts.time_budget.saturating_mul(BACKSTOP_FACTOR);
         let mut report = InitReport::default();
         self.candidates.clear();
         self.pool.clear();
@@ -567,44 +635,50 @@ impl<'m> Initialiser<'m> {
         }
         // The grid search under the vanishing directions first: on real photographs it finds
         // what the triplets miss, and the triplets then have what is left of the time budget.
-        self.grid_search(edges, volume, deadline);
+        self.grid_search(edges, volume, limit);
         report.grid_elapsed = started.elapsed();
         report.rotations = self.vanishing_count;
-        // The triplets leave twice the time their samples' polish takes at the grid's pace (a
-        // tenth of the budget when the grid polished nothing): a cell's sampling overshoots its
-        // check, and a polish cut short makes the result hang on the clock.
-        let reserve = match self.polish_time {
-            (total, n) if n > 0 => 2 * (total / n * POLISHED as u32),
-            _ => self.opts.time_budget / 10,
-        };
-        let sampling_ends = deadline.checked_sub(reserve).unwrap_or(started);
-        if self.top.len() >= 3 {
+        // The triplets leave twice what polishing their best samples costs: a cell's sampling
+        // overshoots its check.
+        let reserve = 2 * POLISHED as u64 * work::POLISH;
+        let sampling_limit = limit.saturating_sub(reserve);
+        if self.top.len() >= 3 && !self.spent(sampling_limit) {
             // A bounded volume is searched on this thread, nearest cell first, from `rng`. The
-            // whole model (start-up without a hint: over a thousand cells) is dealt out to every
-            // worker in turn; each cell then draws from its own seeded generator, so the result
-            // does not depend on the dealing.
+            // whole model (start-up without a hint: over a thousand cells) is dealt out to
+            // `LANES` lanes in turn, each with an equal share of the work left; each cell then
+            // draws from its own seeded generator, so the result depends neither on the
+            // threads nor on their timing.
             let mut scratch = std::mem::take(&mut self.scratch);
-            let workers = if volume.diameter_m.is_none() { scratch.len() } else { 1 };
+            let lanes = if volume.diameter_m.is_none() { scratch.len() } else { 1 };
+            let lane_limit = (sampling_limit - self.work) / lanes as u64;
+            let backstop = self.backstop;
             let me = &*self;
             let search = |w: &mut CellScratch, first: usize, rng: Option<&mut SmallRng>, base: u64| {
                 let mut own = None;
                 let rng = rng.unwrap_or_else(|| own.insert(SmallRng::seed_from_u64(base)));
                 let mut done = InitReport::default();
                 w.pool.clear();
-                for ci in (first..me.cells.len()).step_by(workers) {
-                    if Instant::now() >= sampling_ends {
+                for ci in (first..me.cells.len()).step_by(lanes) {
+                    if done.work >= lane_limit {
                         done.timed_out = true;
                         break;
                     }
+                    if Instant::now() >= backstop {
+                        done.timed_out = true;
+                        done.backstop = true;
+                        break;
+                    }
                     let node = me.cells[ci].1;
-                    if workers > 1 {
+                    if lanes > 1 {
                         *rng = SmallRng::seed_from_u64(base ^ u64::from(node).wrapping_mul(0x9E37_79B9_7F4A_7C15));
                     }
                     done.cells_searched += 1;
-                    done.triplet_matches += me.score_cell(w, node);
+                    let matches = me.score_cell(w, node);
+                    done.triplet_matches += matches;
                     let (drawn, tilted) = me.sample_cell(w, node, volume, rng);
                     done.samples += drawn;
                     done.tilted += tilted;
+                    done.work += work::CELL + matches / 50 * work::CELL_PER_50_MATCHES + drawn * work::CELL_PER_SAMPLE;
                 }
                 done
             };
@@ -614,22 +688,43 @@ impl<'m> Initialiser<'m> {
                 report.samples += part.samples;
                 report.tilted += part.tilted;
                 report.timed_out |= part.timed_out;
+                report.backstop |= part.backstop;
+                report.work += part.work;
             };
-            if workers > 1 {
-                // Threads only here, at start-up: a bounded search allocates nothing.
+            if lanes > 1 {
+                // Threads only here, at start-up: a bounded search allocates nothing. Thread t
+                // runs lanes t, t + threads, …
                 let base: u64 = rng.random();
-                let (first, rest) = scratch.split_at_mut(1);
+                let threads = std::thread::available_parallelism()
+                    .map_or(1, |n| n.get())
+                    .clamp(1, lanes);
+                let mut parts = [InitReport::default(); LANES];
+                let mut by_thread: Vec<Vec<(usize, &mut CellScratch)>> = (0..threads).map(|_| Vec::new()).collect();
+                for (k, w) in scratch.iter_mut().enumerate() {
+                    by_thread[k % threads].push((k, w));
+                }
                 std::thread::scope(|scope| {
-                    let helpers: Vec<_> = rest
-                        .iter_mut()
-                        .enumerate()
-                        .map(|(k, w)| scope.spawn(move || search(w, k + 1, None, base)))
+                    let handles: Vec<_> = by_thread
+                        .into_iter()
+                        .map(|lanes_of| {
+                            scope.spawn(move || {
+                                lanes_of
+                                    .into_iter()
+                                    .map(|(k, w)| (k, search(w, k, None, base)))
+                                    .collect::<Vec<_>>()
+                            })
+                        })
                         .collect();
-                    add(search(&mut first[0], 0, None, base));
-                    for h in helpers {
-                        add(h.join().unwrap_or_default());
+                    for h in handles {
+                        for (k, part) in h.join().unwrap_or_default() {
+                            parts[k] = part;
+                        }
                     }
                 });
+                // In lane order, so that the sums and the pool do not depend on the threads.
+                for part in parts {
+                    add(part);
+                }
             } else {
                 add(search(&mut scratch[0], 0, Some(rng), 0));
             }
@@ -641,9 +736,10 @@ impl<'m> Initialiser<'m> {
             self.scratch = scratch;
         }
         self.pool.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+        self.spend(report.work);
         let mut polished = 0;
         for pi in 0..self.pool.len() {
-            if polished >= POLISHED || Instant::now() >= deadline {
+            if polished >= POLISHED || self.spent(limit) {
                 report.timed_out |= polished < POLISHED;
                 break;
             }
@@ -655,17 +751,20 @@ impl<'m> Initialiser<'m> {
                 continue;
             }
             polished += 1;
-            if let Some(c) = self.timed_polish(&start, edges) {
+            if let Some(c) = self.polish(&start, edges) {
                 self.offer(c);
             }
         }
         self.candidates.sort_unstable_by(|a, b| b.merit().total_cmp(&a.merit()));
         if let Some(d) = volume.diameter_m {
-            self.vote_translations(edges, &volume.centre, d, deadline);
+            self.vote_translations(edges, &volume.centre, d, limit);
         }
         self.candidates.sort_unstable_by(|a, b| b.merit().total_cmp(&a.merit()));
         self.candidates.truncate(self.opts.candidates);
         report.elapsed = started.elapsed();
+        report.work = self.work;
+        report.backstop |= self.backstop_hit;
+        report.timed_out |= self.work >= limit || report.backstop;
         (&self.candidates, report)
     }
 

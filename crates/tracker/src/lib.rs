@@ -128,6 +128,9 @@ pub struct TrackerStats {
     /// Frames whose solve, far from the prediction, a second opinion replaced (the polished
     /// prediction, or the solve's rotation polished at the predicted position).
     pub second_opinions: u64,
+    /// Searches the wall clock stopped before their work budget did ([`InitReport::backstop`]):
+    /// their answers depend on the machine's load.
+    pub search_backstops: u64,
 }
 
 /// The search's acceptance test: enough inliers, and the pose and the frame explaining each
@@ -433,6 +436,7 @@ impl<'m> Tracker<'m> {
             }
             self.search_attempts += 1;
             self.stats.search_time += report.elapsed;
+            self.stats.search_backstops += u64::from(report.backstop);
             self.stats.first_search.get_or_insert(report.elapsed);
             result.event = Some(TrackerEvent::Searched(report));
             if n == 0 {

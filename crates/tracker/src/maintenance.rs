@@ -189,7 +189,8 @@ impl Tracker<'_> {
         // The heading is near the prediction's: its quarter-turn twins are not searched.
         self.init.set_yaw_twins(false);
         self.init.set_rotation_prior(Some((turned_from, turn_limit)));
-        let (found, _) = self.init.run(edges, &volume, &mut self.rng);
+        let (found, report) = self.init.run(edges, &volume, &mut self.rng);
+        self.stats.search_backstops += u64::from(report.backstop);
         // The search's best few (the tracker asks for three), then, polished, the prediction,
         // the last pose, this frame's solved pose and the starts below: the search may find only
         // a twin of the place (a symmetric corridor seen a quarter turn away), and where a turn

@@ -66,6 +66,7 @@ impl Initialiser<'_> {
     }
 
     pub(super) fn polish_unchecked(&mut self, start: &Pose, edges: &[Edge]) -> Option<Candidate> {
+        self.spend(super::work::POLISH);
         let inlier = self.opts.inlier_alpha_rad;
         let mut pose = *start;
         for gate_rad in [4.0 * inlier, 2.0 * inlier, inlier] {

@@ -4,11 +4,12 @@
 //! positions voted by the vertical edge planes.
 //!
 //! In: the frame's edges, the search volume or a centre and diameter, the rotations to try, a
-//! deadline. Out: polished candidates offered to the initialiser's list.
+//! work budget. Out: polished candidates offered to the initialiser's list.
 
+use super::work;
 use super::{
-    layer_half_height, Candidate, GridBest, Initialiser, SearchVolume, CLIMB, FULL_COVER, GRID_GATE_RAD, GRID_KEEP,
-    GRID_SEGMENTS, GRID_STEP_M, GRID_WORTH, HEIGHT_STEP_M, SAME_POSITION_M, SAME_ROTATION_RAD, VOTED_CANDIDATES,
+    layer_half_height, GridBest, Initialiser, SearchVolume, CLIMB, FULL_COVER, GRID_GATE_RAD, GRID_KEEP, GRID_SEGMENTS,
+    GRID_SHARE, GRID_STEP_M, GRID_WORTH, HEIGHT_STEP_M, SAME_POSITION_M, SAME_ROTATION_RAD, VOTED_CANDIDATES,
     VOTED_ROTATIONS,
 };
 use crate::matching::{best_edge_and_cover, Gate, Predicted};
@@ -17,13 +18,12 @@ use crate::vote::{Grid, PEAKS};
 use nalgebra::{Point3, Translation3, UnitQuaternion, Vector3};
 use omnitrack_core::geometry::Pose;
 use omnitrack_edges::Edge;
-use std::time::Instant;
 
 impl Initialiser<'_> {
     /// Module `vote`: under the rotations of the best candidates so far (and their quarter
     /// turns about the vertical when `yaw_twins`), the translations most edges agree on, each
-    /// polished into a candidate. Within the time budget.
-    pub(super) fn vote_translations(&mut self, edges: &[Edge], centre: &Point3<f64>, diameter: f64, deadline: Instant) {
+    /// polished into a candidate. Within the work budget `limit`.
+    pub(super) fn vote_translations(&mut self, edges: &[Edge], centre: &Point3<f64>, diameter: f64, limit: u64) {
         if self.cells.is_empty() {
             return;
         }
@@ -62,12 +62,13 @@ impl Initialiser<'_> {
         }
         let mut peaks = [(0u16, Pose::identity()); PEAKS];
         for r in &rotations[..n_rot] {
-            if Instant::now() >= deadline {
+            if self.spent(limit) {
                 return;
             }
             let found = self.vote.run(self.model, &self.vote_edges, r, &grid, &mut peaks);
+            self.spend(work::VOTE_PER_EDGE * self.vote_edges.len() as u64);
             for &(_, peak) in &peaks[..found] {
-                if Instant::now() >= deadline {
+                if self.spent(limit) {
                     return;
                 }
                 // The height: the best truncated ξ over a sweep of the layers' span (the polish
@@ -80,12 +81,13 @@ impl Initialiser<'_> {
                     let z = (z_lo + k as f64 * HEIGHT_STEP_M).min(z_hi);
                     start.translation.vector.z = z;
                     let (score, _, _, _) = self.final_score(&start, edges);
+                    self.spend(work::SCORE);
                     if score < best_z.0 {
                         best_z = (score, z);
                     }
                 }
                 start.translation.vector.z = best_z.1;
-                if let Some(c) = self.timed_polish(&start, edges) {
+                if let Some(c) = self.polish(&start, edges) {
                     self.offer(c);
                 }
             }
@@ -97,8 +99,10 @@ impl Initialiser<'_> {
     /// above the floor beneath) scored by [`Self::coarse_merit`] over the [`GRID_SEGMENTS`]
     /// longest segments in sight from each; the best few per rotation (within [`GRID_WORTH`] of
     /// the best of all) climbed and polished into candidates. With the rotation known the
-    /// translation is three numbers, few enough to search outright. Within the time budget.
-    pub(super) fn grid_search(&mut self, edges: &[Edge], volume: &SearchVolume, deadline: Instant) {
+    /// translation is three numbers, few enough to search outright. The scan spends at most
+    /// [`GRID_SHARE`] of the work budget `limit`, the climbs and polishes the rest.
+    pub(super) fn grid_search(&mut self, edges: &[Edge], volume: &SearchVolume, limit: u64) {
+        let scan_limit = (GRID_SHARE * limit as f64) as u64;
         let h = &self.table.header;
         let half = 0.5 * h.spacing_m;
         let half_z = layer_half_height(&h.heights_m);
@@ -121,7 +125,7 @@ impl Initialiser<'_> {
         // searched, whether or not its node is valid: a closet or a hallway narrower than the
         // node spacing often has its node inside a wall, and the rig can still stand there.
         'cells: for ci in 0..self.plan_cells.len() {
-            if Instant::now() >= deadline {
+            if self.spent(scan_limit) {
                 break;
             }
             let centre = self.plan_cells[ci].1;
@@ -175,7 +179,7 @@ impl Initialiser<'_> {
                         }
                     }
                     self.grid_segs = segs;
-                    if Instant::now() >= deadline {
+                    if self.spent(scan_limit) {
                         break 'cells;
                     }
                 }
@@ -200,7 +204,7 @@ impl Initialiser<'_> {
         }
         order[..n].sort_unstable_by(|a, b| b.0.total_cmp(&a.0));
         for &(_, ri, k) in &order[..n] {
-            if Instant::now() >= deadline {
+            if self.spent(limit) {
                 break;
             }
             let (ri, k) = (usize::from(ri), usize::from(k));
@@ -211,19 +215,10 @@ impl Initialiser<'_> {
                 ),
                 min_len,
             );
-            if let Some(c) = self.timed_polish(&start, edges) {
+            if let Some(c) = self.polish(&start, edges) {
                 self.offer(c);
             }
         }
-    }
-
-    /// [`Self::polish`], its time added to `self.polish_time`.
-    pub(super) fn timed_polish(&mut self, start: &Pose, edges: &[Edge]) -> Option<Candidate> {
-        let t = Instant::now();
-        let c = self.polish(start, edges);
-        self.polish_time.0 += t.elapsed();
-        self.polish_time.1 += 1;
-        c
     }
 
     /// Coordinate ascent of the coarse merit ([`Self::coarse_merit`]) from `start` in x, y and
@@ -272,6 +267,7 @@ impl Initialiser<'_> {
     /// `self.grid_segs` ← the `keep` longest (by the angle they span in sight) of the segments
     /// in sight from `at`.
     pub(super) fn longest_in_sight(&mut self, at: &Point3<f64>, keep: usize) {
+        self.spend(work::SIGHT);
         let seen = self.at_pose.at(self.model, self.table, at);
         self.grid_order.clear();
         for s in seen {
@@ -303,6 +299,7 @@ impl Initialiser<'_> {
     /// 64 longest let the grid drop the truth in favour of poses along texture (3 m hint: 20 of
     /// 32 within 10 cm with 64, 24 with all 256).
     pub(super) fn coarse_merit(&mut self, pose: &Pose, segments: &[u32], gate: &Gate, min_len: f64) -> Option<f64> {
+        self.spend(segments.len() as u64 * self.vote_edges.len() as u64 / 100 * work::MERIT_PER_SEGMENT_100_EDGES);
         let (mut explained, mut counted) = (0.0, 0usize);
         self.support_pred.clear();
         for &s in segments {
