@@ -446,6 +446,8 @@ pub struct Initialiser<'m> {
     work: u64,
     backstop: Instant,
     backstop_hit: bool,
+    /// The backstop falls at this many times the budget ([`BACKSTOP_FACTOR`] by default).
+    backstop_factor: u32,
     /// The segments in sight from a grid position: (angle they span in sight, index), and the
     /// longest kept.
     grid_order: Vec<(f64, u32)>,
@@ -512,6 +514,7 @@ impl<'m> Initialiser<'m> {
             work: 0,
             backstop: Instant::now(),
             backstop_hit: false,
+            backstop_factor: BACKSTOP_FACTOR,
             grid_order: Vec::with_capacity(max_set),
             grid_segs: Vec::with_capacity(max_set),
             vanishing_rot: [UnitQuaternion::identity(); MAX_ROTATIONS],
@@ -567,6 +570,12 @@ impl<'m> Initialiser<'m> {
         self.opts.time_budget = budget;
     }
 
+    /// Moves the wall clock's backstop to `factor` times the budget (a test that loads the
+    /// machine on purpose must not meet it).
+    pub fn set_backstop_factor(&mut self, factor: u32) {
+        self.backstop_factor = factor.max(1);
+    }
+
     /// The budget in work units.
     fn work_limit(&self) -> u64 {
         u64::try_from(self.opts.time_budget.as_micros()).unwrap_or(u64::MAX)
@@ -598,7 +607,7 @@ impl<'m> Initialiser<'m> {
         let limit = self.work_limit();
         self.work = 0;
         self.backstop_hit = false;
-        self.backstop = started + self.opts.time_budget.saturating_mul(BACKSTOP_FACTOR);
+        self.backstop = started + self.opts.time_budget.saturating_mul(self.backstop_factor);
         let mut report = InitReport::default();
         self.candidates.clear();
         self.pool.clear();
