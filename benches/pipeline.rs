@@ -50,6 +50,9 @@ mod bench {
         EPOCH.get_or_init(Instant::now).elapsed().as_nanos() as u64
     }
 
+    /// Frames the standing-still run holds frame 0 at most (10 s at 30 Hz) before walking anyway.
+    const MAX_HOLD: usize = 300;
+
     /// The replay, optionally paced at a wall-clock rate, noting when each frame was handed over.
     /// With `hold`, the rig stands still (frame 0 again and again) until the flag is set (by the
     /// sink, once tracking), then walks; frames are re-stamped `n × period` by delivery.
@@ -75,7 +78,9 @@ mod bench {
                     std::thread::sleep(wait);
                 }
             }
-            let holding = self.hold.as_ref().is_some_and(|h| !h.load(Ordering::Relaxed));
+            // At most `MAX_HOLD` frames: a place the tracker cannot commit at from its first
+            // frame alone (a corridor's doorways) would otherwise hold the run forever.
+            let holding = self.hold.as_ref().is_some_and(|h| !h.load(Ordering::Relaxed)) && self.n < MAX_HOLD;
             if holding {
                 self.inner.rewind();
             }
