@@ -29,6 +29,11 @@ fn fixture() -> &'static LabRecording {
 }
 
 /// A 3 m search volume whose centre is 1 m from the first true position (not on it).
+/// Frames without a pose at the start of the 5 Hz replays ([`common::start_frames`]).
+fn start_frames() -> usize {
+    common::start_frames(config().initialisation.time_budget_ms, 200.0)
+}
+
 fn hint(f: &LabRecording) -> SearchVolume {
     let p = f.truth[0].pose.translation.vector + Vector3::new(0.8, -0.6, 0.0);
     SearchVolume {
@@ -49,14 +54,14 @@ fn errors(f: &LabRecording, timestamp_ns: u64, pose: &omnitrack::Pose) -> (f64, 
     )
 }
 
-/// The default configuration with the budgets out of reach: the consensus's 30 ms is a clock
-/// backstop, and these tests run side by side on a loaded machine; the searches' budgets are
-/// work (they repeat under load) and 60 s of it lets every search finish its volume, so these
-/// tests judge the search, not its budget. Time bounds are the benchmarks' business.
+/// The default configuration with the consensus's clock backstop (30 ms) out of reach: these
+/// tests run side by side on a loaded machine. The searches keep the shipped budgets: they are
+/// work, so runs repeat under load, and a search's result is taken up when its budget has passed
+/// on the recording's clock (module `background`), as on the device. Time bounds are the
+/// benchmarks' business.
 fn config() -> TrackerConfig {
     let mut cfg = TrackerConfig::default();
     cfg.maintenance.time_budget_ms = 10_000.0;
-    cfg.initialisation.time_budget_ms = 60_000.0;
     cfg
 }
 
@@ -70,7 +75,9 @@ fn replay(f: &LabRecording) -> (ReplaySource, Rig, TrackerConfig, FrameSet, Edge
     (source, rig, cfg, frame, detector)
 }
 
-/// Tracks `source` with the test configuration from the 3 m hint, each frame to `sink`.
+/// Tracks `source` with the test configuration from the 3 m hint, each frame to `sink` as it is
+/// answered on time (the late results of frames kept during a search are left out: these tests
+/// judge what a live subscriber gets, frame by frame).
 fn run_hinted(
     f: &LabRecording,
     source: &mut dyn FrameSource,
@@ -80,7 +87,14 @@ fn run_hinted(
         hint: Some(hint(f)),
         ..RunOptions::default()
     };
-    track(source, &f.model, &f.table, &config(), &opts, sink).unwrap()
+    track(source, &f.model, &f.table, &config(), &opts, &mut |r, t| {
+        if r.late {
+            Ok(())
+        } else {
+            sink(r, t)
+        }
+    })
+    .unwrap()
 }
 
 /// A recording whose images are uniform grey for a range of frames (in the first `sensors`
@@ -135,7 +149,7 @@ fn initialises_from_a_3m_volume_within_10cm_and_1deg_and_tracks_100_frames_witho
     assert!(dp < 0.10 && dr < 1.0, "first pose {:.1} cm, {dr:.2}°", dp * 100.0);
     assert_eq!(stats.frames, FRAMES as u64);
     assert_eq!(stats.losses, 0, "{stats:?}");
-    assert!(stats.tracked as usize >= FRAMES - 3, "{stats:?}");
+    assert!(stats.tracked as usize >= FRAMES - start_frames(), "{stats:?}");
     let rmse = (sum2 / n as f64).sqrt();
     assert!(
         rmse < 0.05,
@@ -149,8 +163,8 @@ fn initialises_from_a_3m_volume_within_10cm_and_1deg_and_tracks_100_frames_witho
 /// Half the sensors covered for two seconds: every frame explains about half of what the
 /// frames before did, so each is suspect (`maintenance.min_explained_ratio`), but the local
 /// search finds nothing that explains more, so the poses stand and lock is never lost (a frame
-/// or two with too few inliers may go without a pose), and the accuracy is back once the
-/// sensors are uncovered.
+/// or two with too few inliers may go without a pose; a suspect frame's pose comes late, when
+/// its search is taken up), and the accuracy is back once the sensors are uncovered.
 #[test]
 fn a_poorer_view_is_suspected_but_not_lost() {
     let f = fixture();
@@ -163,24 +177,36 @@ fn a_poorer_view_is_suspected_but_not_lost() {
     };
     let mut covered = Vec::new();
     let mut worst = 0.0f64;
-    let mut untracked = 0;
-    let stats = run_hinted(f, &mut source, &mut |r, _| {
+    let mut stamps = Vec::new();
+    let mut posed = std::collections::HashSet::new();
+    let opts = RunOptions {
+        hint: Some(hint(f)),
+        ..RunOptions::default()
+    };
+    let stats = track(&mut source, &f.model, &f.table, &config(), &opts, &mut |r, _| {
+        if let Some(p) = &r.result.pose {
+            posed.insert(r.timestamp_ns);
+            // Three sensors see too little for the usual accuracy: judge after them.
+            if r.timestamp_ns >= f.truth[45].timestamp_ns - 1_000_000 {
+                worst = worst.max(errors(f, r.timestamp_ns, p).0);
+            }
+        }
+        if r.late {
+            return Ok(());
+        }
         if (30..40).contains(&r.sequence) {
             covered.push(r.result.explained);
         }
         if r.sequence >= 10 {
             assert_eq!(r.result.state, TrackerState::Tracking, "frame {}", r.sequence);
-            match &r.result.pose {
-                // Three sensors see too little for the usual accuracy: judge after them.
-                Some(p) if r.sequence >= 45 => worst = worst.max(errors(f, r.timestamp_ns, p).0),
-                Some(_) => {}
-                None => untracked += 1,
-            }
+            stamps.push(r.timestamp_ns);
         }
         Ok(())
-    });
+    })
+    .unwrap();
     assert_eq!(stats.losses, 0, "{stats:?}");
-    assert!(untracked <= 2, "{untracked} frames without a pose");
+    let untracked = stamps.iter().filter(|t| !posed.contains(t)).count();
+    assert!(untracked <= 2, "{untracked} frames without a pose, on time or late");
     // The covered frames did explain less: the check had something to judge.
     let low = covered.iter().filter(|&&e| e < 0.45).count();
     assert!(low >= 5, "explained fractions while covered: {covered:?}");
@@ -243,24 +269,34 @@ fn tracking_and_bounded_searches_allocate_nothing() {
             allocated += n;
             counted += 1;
             tracking_frames += r.pose.is_some() as usize;
-        } else if tracker.stats().frames == 1 {
-            // The first frame searches (and may commit at once).
-            assert!(
-                matches!(
-                    r.event,
-                    Some(TrackerEvent::Searched(_) | TrackerEvent::Committed { .. })
-                ),
-                "{:?}",
-                r.event
-            );
+        } else {
+            // The first frame starts the search (run here, with no worker attached), the next
+            // frames are kept until it is due, and then caught up on.
+            if tracker.stats().frames == 1 {
+                assert!(tracker.searching() && r.event.is_none(), "{:?}", r.event);
+            }
+            // Taken up, the search reports itself, or the commit it made at once, on its own
+            // frame: late.
+            searches += tracker
+                .late()
+                .iter()
+                .filter(|(_, r)| {
+                    matches!(
+                        r.event,
+                        Some(TrackerEvent::Searched(_) | TrackerEvent::Committed { .. })
+                    )
+                })
+                .count();
             search_allocated += n;
-            searches += 1;
         }
     }
     assert!(counted >= 90 && tracking_frames >= 90, "{counted} frames counted");
     assert_eq!(allocated, 0, "allocations while tracking");
     assert_eq!(searches, 1);
-    assert_eq!(search_allocated, 0, "allocations in the hinted search");
+    assert_eq!(
+        search_allocated, 0,
+        "allocations in the hinted search, its wait and its catch-up"
+    );
 }
 
 /// A search frame that shows too little (here: only one of the six sensors' edges) commits
@@ -282,7 +318,7 @@ fn a_frame_that_shows_too_little_commits_nothing_and_the_next_frames_find_the_tr
     let r = tracker.process(&few, frame.timestamp_ns().unwrap());
     assert_eq!(r.state, TrackerState::Initializing, "{:?}", r.event);
     assert!(r.pose.is_none());
-    assert!(matches!(r.event, Some(TrackerEvent::Searched(_))), "{:?}", r.event);
+    assert!(tracker.searching(), "{:?}", r.event);
 
     let mut committed = None;
     while committed.is_none() && source.next_frame(&mut frame).unwrap() {
@@ -314,10 +350,18 @@ fn a_search_commits_no_pose_outside_the_volume_it_searched() {
     for _ in 0..6 {
         assert!(source.next_frame(&mut frame).unwrap());
         let r = tracker.process(detector.detect(&frame), frame.timestamp_ns().unwrap());
-        searched += usize::from(matches!(r.event, Some(TrackerEvent::Searched(_))));
-        if let Some(pose) = r.pose {
-            let off = (pose.translation.vector - p).norm();
-            assert!(off <= 1.1, "committed {off:.2} m from the centre of a 2 m volume");
+        // The search is taken up (and may commit on its own frame) a budget later: its event
+        // and that frame's pose come late.
+        let mut committed = false;
+        for r in tracker.late().iter().map(|(_, r)| r).chain([&r]) {
+            searched += usize::from(matches!(r.event, Some(TrackerEvent::Searched(_))));
+            if let Some(pose) = r.pose {
+                let off = (pose.translation.vector - p).norm();
+                assert!(off <= 1.1, "committed {off:.2} m from the centre of a 2 m volume");
+                committed = true;
+            }
+        }
+        if committed {
             break;
         }
     }
@@ -325,12 +369,16 @@ fn a_search_commits_no_pose_outside_the_volume_it_searched() {
 }
 
 /// The initialiser of the lab fixture's model and table for `rig` and `cfg`.
+/// Its budget is 60 s of work, which lets every search here finish its volume: these tests judge
+/// the search, not its budget (which the test of issue 24 below sets itself).
 fn lab_initialiser<'a>(f: &'a LabRecording, rig: &Rig, cfg: &TrackerConfig) -> omnitrack::tracker::Initialiser<'a> {
+    let mut opts = omnitrack::tracker::InitOptions::from_config(cfg);
+    opts.time_budget = std::time::Duration::from_secs(60);
     omnitrack::tracker::Initialiser::new(
         rig,
         &f.model,
         &f.table,
-        omnitrack::tracker::InitOptions::from_config(cfg),
+        opts,
         cfg.solver_options(),
         rig.sensors.len() * cfg.edges.max_edges_per_sensor as usize,
     )
@@ -538,7 +586,11 @@ fn a_grey_recording_tracks_as_the_colour_one() {
         Ok(())
     });
     assert_eq!(stats.losses, 0, "{stats:?}");
-    assert!(errs.len() >= FRAMES - 3, "{} frames with a pose", errs.len());
+    assert!(
+        errs.len() >= FRAMES - start_frames(),
+        "{} frames with a pose",
+        errs.len()
+    );
     let (dp, dr) = errs[0];
     assert!(dp < 0.10 && dr < 1.0, "first pose {:.1} cm, {dr:.2}°", dp * 100.0);
     let rmse = (errs.iter().map(|e| e.0 * e.0).sum::<f64>() / errs.len() as f64).sqrt();
@@ -648,7 +700,7 @@ fn tracks_recording(f: &LabRecording, rec: &Path, rig: &str, sensors: usize) -> 
     assert_eq!(stats.frames, OTHER_RIG_FRAMES as u64, "{rig}");
     assert_eq!(stats.losses, 0, "{rig}: {stats:?}");
     assert!(
-        errs.len() >= OTHER_RIG_FRAMES - 3,
+        errs.len() >= OTHER_RIG_FRAMES - start_frames(),
         "{rig}: {} frames with a pose",
         errs.len()
     );
@@ -725,4 +777,66 @@ fn the_true_pose_draws_fewer_lines_across_plain_surfaces_than_a_wrong_one() {
     off.initialisation.blank_radius_deg = 0.0;
     let mut init0 = lab_initialiser(f, &rig, &off);
     assert_eq!(init0.blank_share(&turned, &edges), 0.0);
+}
+
+/// Issue 24: the searches run off the frame path. A tracker whose searches go to a worker thread
+/// answers every frame exactly as one that searches inline (the result is taken up at a frame
+/// fixed by the timestamps, and a search stops on its work, never the clock), on time and late;
+/// the frames kept during the first search are caught up on, so the first pose on time is
+/// followed by every later frame's, and the search frame's own pose, given late, is within the
+/// first test's limits.
+#[test]
+fn a_search_on_a_worker_thread_answers_every_frame_as_one_inline() {
+    use omnitrack::tracker::search_link;
+    let f = fixture();
+    let frames: Vec<(u64, Vec<omnitrack::edges::Edge>)> = {
+        let (mut source, _, _, mut frame, mut detector) = replay(f);
+        std::iter::from_fn(|| {
+            source
+                .next_frame(&mut frame)
+                .unwrap()
+                .then(|| (frame.timestamp_ns().unwrap(), detector.detect(&frame).to_vec()))
+        })
+        .take(30)
+        .collect()
+    };
+    let (_, rig, cfg, _, _) = replay(f);
+    type Answers = Vec<(Option<omnitrack::Pose>, Vec<(u64, Option<omnitrack::Pose>)>)>;
+    let answer = |tracker: &mut Tracker| -> Answers {
+        frames
+            .iter()
+            .map(|(t, edges)| {
+                let r = tracker.process(edges, *t);
+                let late = tracker.late().iter().map(|(t, r)| (*t, r.pose)).collect();
+                (r.pose, late)
+            })
+            .collect()
+    };
+    let inline = answer(&mut Tracker::new(&rig, &f.model, &f.table, &cfg, Some(hint(f)), 1));
+    let (link, worker) = search_link();
+    let (threaded, waits) = std::thread::scope(|scope| {
+        scope.spawn(move || worker.run());
+        let mut tracker = Tracker::new(&rig, &f.model, &f.table, &cfg, Some(hint(f)), 1);
+        tracker.attach_search_worker(link);
+        (answer(&mut tracker), tracker.stats().search_waits)
+    });
+    assert_eq!(threaded, inline, "{waits} waits for the worker");
+    let first = inline.iter().position(|(p, _)| p.is_some()).expect("a pose on time");
+    assert!(first <= start_frames() - 3, "first pose on time at frame {first}");
+    assert!(
+        inline[first..].iter().all(|(p, _)| p.is_some()),
+        "every frame after the first"
+    );
+    let late: Vec<_> = inline.iter().flat_map(|(_, l)| l.iter()).collect();
+    let (t0, p0) = late.first().expect("the search frame's pose, late");
+    assert_eq!(*t0, frames[0].0);
+    let (dp, dr) = errors(f, *t0, p0.as_ref().expect("a pose"));
+    assert!(
+        dp < 0.10 && dr < 1.0,
+        "the search frame: {:.1} cm, {dr:.2}°",
+        dp * 100.0
+    );
+    // Every frame before the first on time has its pose late, in time order.
+    let stamps: Vec<u64> = late.iter().filter(|(_, p)| p.is_some()).map(|(t, _)| *t).collect();
+    assert_eq!(stamps, frames[..first].iter().map(|(t, _)| *t).collect::<Vec<_>>());
 }

@@ -130,6 +130,11 @@ pub fn run(a: Args) -> CommandResult {
                 None => Ok(()),
             }
         }
+        /// A late record (a search's frame and those kept during it) carries its events and
+        /// pose like any other.
+        fn late(&mut self, r: &FrameRecord) -> Result<(), SinkError> {
+            self.frame(r)
+        }
         fn finish(&mut self) -> Result<(), SinkError> {
             match &mut self.tum {
                 Some(t) => t.finish(),

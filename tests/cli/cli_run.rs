@@ -89,17 +89,6 @@ fn a_short_replay_writes_a_tum_trajectory_near_the_truth() {
     // A 1.5 m radius around a point 0.8 m from the true start.
     let init = format!("{},{},{},1.5", t0.x + 0.8, t0.y, t0.z);
     let out = dir.path().join("est.tum");
-    // The searches stop at clock deadlines; this test shares the machine with others, so the
-    // shipped config gets deadlines five times as long (what is tested is the command, not the
-    // pace of a loaded machine).
-    let shipped =
-        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/firmware_config/tracker.toml")).unwrap();
-    let patient = shipped
-        .replace("time_budget_ms = 950.0", "time_budget_ms = 4750.0")
-        .replace("relocalise_time_budget_ms = 150.0", "relocalise_time_budget_ms = 750.0");
-    assert_ne!(patient, shipped, "the shipped deadlines moved: update this test");
-    let config = dir.path().join("patient.toml");
-    std::fs::write(&config, patient).unwrap();
     let (code, stdout, stderr) = omnitrack(&[
         "run",
         "--model",
@@ -108,14 +97,14 @@ fn a_short_replay_writes_a_tum_trajectory_near_the_truth() {
         &format!("replay:{}", rec.display()),
         "--init",
         &init,
-        "--config",
-        config.to_str().unwrap(),
         "--trajectory",
         out.to_str().unwrap(),
         "--no-publish",
     ]);
     assert_eq!(code, 0, "{stderr}");
     assert!(stdout.is_empty());
+    // The search's result is taken up a budget later on the recording's clock (frame 5 of 6),
+    // and the frames kept meanwhile are tracked at the end: every frame has its pose.
     let est = load_tum(&out).unwrap();
     assert!(est.len() >= 5, "{} poses: {stderr}", est.len());
     for e in &est {

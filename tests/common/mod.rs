@@ -142,3 +142,18 @@ pub fn lab_recording_with(
         truth,
     }
 }
+
+/// Frames without a pose on time at the start of a replay at `period_ms` a frame, with a first
+/// search of `budget_ms`: its result is taken up once its budget has passed on the recording's
+/// clock, the frames kept meanwhile are then tracked `CATCH_UP_FRAMES` a frame (module
+/// `tracker::background`), and the confirmation may take three frames more.
+pub fn start_frames(budget_ms: f64, period_ms: f64) -> usize {
+    use omnitrack::tracker::CATCH_UP_FRAMES;
+    let due = (budget_ms / period_ms).ceil() as usize;
+    let (mut kept, mut frame) = (due, due);
+    while kept > CATCH_UP_FRAMES {
+        kept = kept - CATCH_UP_FRAMES + 1;
+        frame += 1;
+    }
+    frame + 3
+}

@@ -28,7 +28,8 @@ pub struct InitialisationConfig {
     pub max_samples: u32,
     /// The search's work budget in reference milliseconds (`omnitrack_tracker::init::work`): the
     /// work decides where it stops, never the load of the machine; the wall clock stops it only
-    /// at four times the budget, and says so.
+    /// at four times the budget, and says so. The search runs off the frame path and its result
+    /// is taken up this long after its frame on the frames' clock (`omnitrack_tracker::background`).
     pub time_budget_ms: f64,
     pub simplex_refinement: bool,
     pub confirm_frames: u32,
@@ -79,10 +80,10 @@ pub struct MaintenanceConfig {
     pub max_jump_m: f64,
     pub max_jump_deg: f64,
     pub relocalise_diameter_m: f64,
-    /// The work budget of that search (reference milliseconds, as `initialisation.time_budget_ms`).
-    /// It runs inside one frame, so it is a few frame budgets,
-    /// not the first start's `initialisation.time_budget_ms`: a walking rig is ~1 m on by the
-    /// next frame after a 1-second search, and then needs another.
+    /// The work budget of that search (reference milliseconds, as `initialisation.time_budget_ms`),
+    /// and how long after its frame it is taken up. A few frame budgets, not the first start's
+    /// `initialisation.time_budget_ms`: the frames that come meanwhile are caught up on a few
+    /// at a time, and a walking rig needs its pose again soon.
     pub relocalise_time_budget_ms: f64,
     /// A solved pose must explain (an edge within the inlier angle) at least this fraction of
     /// what recent good frames explained of VIS(T) (their running mean); 0 turns the check off.

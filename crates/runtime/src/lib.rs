@@ -61,6 +61,29 @@ pub struct FrameRecord {
     /// Edges + tracking (capture excluded: replay decodes PNGs, a live source hands buffers).
     pub frame_time: Duration,
     pub result: FrameResult,
+    /// An earlier frame's result, worked out after its time (a frame kept during a search and
+    /// caught up on, `Tracker::late`): its timestamp is that frame's, its sequence the one of the
+    /// frame whose processing worked it out, its counts and times zero. A trajectory wants it; a
+    /// live subscriber, which has had later frames, does not.
+    pub late: bool,
+}
+
+impl FrameRecord {
+    /// The record of the earlier frame stamped `timestamp_ns`, whose `result` was worked out
+    /// while the frame numbered `sequence` was processed.
+    pub fn late(sequence: u64, timestamp_ns: u64, result: FrameResult) -> FrameRecord {
+        FrameRecord {
+            sequence,
+            timestamp_ns,
+            valid_sensors: 0,
+            edges: 0,
+            edge_time: Duration::ZERO,
+            track_time: Duration::ZERO,
+            frame_time: Duration::ZERO,
+            result,
+            late: true,
+        }
+    }
 }
 
 /// A sink's own error (an unwritable trajectory file, a closed socket, …), kept whole: the run
@@ -116,9 +139,18 @@ pub fn track(
             track_time: frame_time - edge_time,
             frame_time,
             result,
+            late: false,
         };
+        for &(t, r) in tracker.late() {
+            sink(&FrameRecord::late(sequence, t, r), &tracker).map_err(RunError::Sink)?;
+        }
         sequence += 1;
         sink(&record, &tracker).map_err(RunError::Sink)?;
+    }
+    // A search still under way, and the frames kept meanwhile, are worked out now.
+    tracker.finish();
+    for &(t, r) in tracker.late() {
+        sink(&FrameRecord::late(sequence, t, r), &tracker).map_err(RunError::Sink)?;
     }
     Ok(*tracker.stats())
 }

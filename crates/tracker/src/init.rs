@@ -135,6 +135,8 @@ use omnitrack_edges::Edge;
 use omnitrack_solver::SolverOptions;
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 mod scoring;
@@ -150,7 +152,10 @@ pub const MAX_EDGES_CONSIDERED: usize = 64;
 /// Samples kept per cell for polishing, and candidates polished per run.
 const KEEP_PER_CELL: usize = 3;
 const POOL: usize = 64;
-const POLISHED: usize = 16;
+pub(crate) const POLISHED: usize = 16;
+
+/// Most candidates a search returns: the polished, the vote's peaks and the grid's kept.
+pub(crate) const MAX_CANDIDATES: usize = POLISHED + VOTED_ROTATIONS * PEAKS + MAX_ROTATIONS * GRID_KEEP;
 /// Two candidates closer than this are the same (m, rad).
 const SAME_POSITION_M: f64 = 0.3;
 const SAME_ROTATION_RAD: f64 = 0.0873;
@@ -448,6 +453,9 @@ pub struct Initialiser<'m> {
     backstop_hit: bool,
     /// The backstop falls at this many times the budget ([`BACKSTOP_FACTOR`] by default).
     backstop_factor: u32,
+    /// Set by the owner to stop a search early (module `background`: a tracker shutting down
+    /// does not wait for a search nobody will read).
+    cancel: Option<Arc<AtomicBool>>,
     /// The segments in sight from a grid position: (angle they span in sight, index), and the
     /// longest kept.
     grid_order: Vec<(f64, u32)>,
@@ -502,7 +510,7 @@ impl<'m> Initialiser<'m> {
             pool: Pool::new(),
             corr: Vec::with_capacity(max_set),
             alphas: Vec::with_capacity(max_set),
-            candidates: Vec::with_capacity(POLISHED + VOTED_ROTATIONS * PEAKS + MAX_ROTATIONS * GRID_KEEP),
+            candidates: Vec::with_capacity(MAX_CANDIDATES),
             vote: TranslationVote::new(model.segments.len()),
             vote_edges: heapless::Vec::new(),
             vanishing: VanishingDirections::new(model, max_edges),
@@ -515,6 +523,7 @@ impl<'m> Initialiser<'m> {
             backstop: Instant::now(),
             backstop_hit: false,
             backstop_factor: BACKSTOP_FACTOR,
+            cancel: None,
             grid_order: Vec::with_capacity(max_set),
             grid_segs: Vec::with_capacity(max_set),
             vanishing_rot: [UnitQuaternion::identity(); MAX_ROTATIONS],
@@ -576,6 +585,16 @@ impl<'m> Initialiser<'m> {
         self.backstop_factor = factor.max(1);
     }
 
+    /// A flag that, once set, stops this initialiser's searches at their next check (reported
+    /// as a backstop).
+    pub fn set_cancel(&mut self, flag: Arc<AtomicBool>) {
+        self.cancel = Some(flag);
+    }
+
+    fn cancelled(&self) -> bool {
+        self.cancel.as_ref().is_some_and(|c| c.load(Ordering::Relaxed))
+    }
+
     /// The budget in work units.
     fn work_limit(&self) -> u64 {
         u64::try_from(self.opts.time_budget.as_micros()).unwrap_or(u64::MAX)
@@ -591,7 +610,7 @@ impl<'m> Initialiser<'m> {
         if self.work >= limit {
             return true;
         }
-        if Instant::now() >= self.backstop {
+        if Instant::now() >= self.backstop || self.cancelled() {
             self.backstop_hit = true;
             return true;
         }
@@ -672,7 +691,7 @@ impl<'m> Initialiser<'m> {
                         done.timed_out = true;
                         break;
                     }
-                    if Instant::now() >= backstop {
+                    if Instant::now() >= backstop || me.cancelled() {
                         done.timed_out = true;
                         done.backstop = true;
                         break;

@@ -15,6 +15,10 @@
 //!   dropped; with none left, the next frame searches afresh.
 //! - **Tracking**: `maintenance` per Figure 7.
 //!
+//! The searches (initialisation, re-initialisation, relocalisation) run off the frame path and
+//! are taken up a budget later on the frames' clock, the frames in between kept and caught up
+//! on (module `background`); the earlier frames' poses come out through [`Tracker::late`].
+//!
 //! A frame is "bad" when the solve fails, leaves fewer than `min_inliers` accepted inliers, or
 //! jumps more than `max_jump_m` / `max_jump_deg` from the motion prior; `lost_after_frames`
 //! consecutive bad frames lose lock.
@@ -22,6 +26,7 @@
 //! Memory: everything is sized in [`Tracker::new`]; [`Tracker::process`] allocates nothing in
 //! the tracking state (counted by a test). The initialisation's tables are also preallocated.
 
+pub mod background;
 pub mod correspondence;
 mod floor;
 pub mod init;
@@ -31,12 +36,14 @@ mod vanishing;
 pub mod visibility;
 mod vote;
 
+use background::Backlog;
+pub use background::{search_link, search_worker, SearchJob, SearchLink, SearchWorker};
 pub use correspondence::{CorrespondenceState, CorrespondenceTable, HeldEdge, Track};
 pub use init::{Candidate, InitOptions, InitReport, Initialiser, SearchVolume};
 
 use crate::visibility::VisibilityTable;
 use matching::{best_edge, Gate, Predicted};
-use nalgebra::{Matrix6, Point3};
+use nalgebra::{Matrix6, Point3, UnitQuaternion};
 use omnitrack_config::TrackerConfig;
 use omnitrack_core::geometry::{Correspondence, Pose};
 use omnitrack_core::model::Model;
@@ -44,7 +51,9 @@ use omnitrack_core::rig::Rig;
 use omnitrack_edges::Edge;
 use omnitrack_solver::{ConsensusSampler, SolverOptions};
 use rand::rngs::SmallRng;
-use rand::SeedableRng;
+use rand::{Rng, SeedableRng};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 /// Where the tracker is (the `status` of the pose message).
@@ -131,6 +140,29 @@ pub struct TrackerStats {
     /// Searches the wall clock stopped before their work budget did ([`InitReport::backstop`]):
     /// their answers depend on the machine's load.
     pub search_backstops: u64,
+    /// Adoption frames that had to wait for the search worker (module `background`), and how
+    /// long in all: the machine was slower than the reference, or loaded.
+    pub search_waits: u64,
+    pub search_wait_time: Duration,
+    /// Frames kept during a search and tracked afterwards (module `background`), and frames
+    /// the backlog dropped (thinned during a long search, or passed over by a fresh search).
+    pub caught_up: u64,
+    pub backlog_dropped: u64,
+    /// Poses of kept frames, handed out late through [`Tracker::late`] (not in `tracked`).
+    pub late_poses: u64,
+}
+
+/// A search under way off the frame path: when its result is due (the search frame's timestamp
+/// plus its budget, ns) and what its acceptance needs from the search frame.
+#[derive(Debug, Clone, Copy)]
+struct PendingSearch {
+    started_ns: u64,
+    due_ns: u64,
+    volume: SearchVolume,
+    turn_limit: Option<(UnitQuaternion<f64>, f64)>,
+    floor: f64,
+    /// Set for a relocalisation (module `maintenance`): what its frame concludes either way.
+    relocalisation: Option<maintenance::Relocalisation>,
 }
 
 /// The search's acceptance test: enough inliers, and the pose and the frame explaining each
@@ -156,6 +188,16 @@ const NARROW_VIEW_SHARE: f64 = 0.5;
 /// A committed pose may lie this far outside the search volume (m): the truth at the volume's
 /// edge polishes a few centimetres either way.
 const VOLUME_SLACK_M: f64 = 0.1;
+
+/// Frames kept while a search runs (module `background`): a 950 ms search at 30 Hz keeps all
+/// of its 29; a longer one (the whole model) keeps every other, every fourth… A frame of the
+/// shipped rig's 1,536 edges takes about 0.2 MB.
+const BACKLOG_FRAMES: usize = 32;
+
+/// Kept frames tracked per arriving frame once a search is taken up: one more than arrive, so the
+/// backlog shrinks by two a frame, and each frame's time stays bounded by a few maintenance
+/// steps (a few milliseconds each) rather than the search's hundreds.
+pub const CATCH_UP_FRAMES: usize = 3;
 
 /// Whether `pose` lies in `volume` (within [`VOLUME_SLACK_M`] of it).
 fn within(volume: &SearchVolume, pose: &Pose) -> bool {
@@ -220,6 +262,26 @@ pub struct Tracker<'m> {
     /// commit): a pose explaining much less is suspect (`maintenance.min_explained_ratio`).
     explained_ref: f64,
     stats: TrackerStats,
+    /// The search job while it is at home (module `background`), the worker it goes to, and
+    /// the search under way.
+    job: Option<Box<SearchJob<'m>>>,
+    link: Option<SearchLink<'m>>,
+    pending: Option<PendingSearch>,
+    /// The frames that arrive during a search, and the buffer a kept frame is tracked from.
+    backlog: Backlog,
+    scratch: Vec<Edge>,
+    /// Results of earlier frames worked out on this call (see [`Tracker::late`]).
+    late: Vec<(u64, FrameResult)>,
+    /// Stops a search on the worker when the tracker goes (no one will read it).
+    cancel: Arc<AtomicBool>,
+}
+
+impl Drop for Tracker<'_> {
+    /// A search still running on the worker stops at its next check: the worker's thread then
+    /// ends promptly with the tracker's side of the link.
+    fn drop(&mut self) {
+        self.cancel.store(true, Ordering::Relaxed);
+    }
 }
 
 impl<'m> Tracker<'m> {
@@ -237,7 +299,11 @@ impl<'m> Tracker<'m> {
         let max_edges = rig.sensors.len() * cfg.edges.max_edges_per_sensor as usize;
         let m = &cfg.maintenance;
         let opts = InitOptions::from_config(cfg);
-        let init = Initialiser::new(rig, model, table, opts, solver.clone(), max_edges);
+        let init = Initialiser::new(rig, model, table, opts.clone(), solver.clone(), max_edges);
+        let cancel = Arc::new(AtomicBool::new(false));
+        let mut searcher = Initialiser::new(rig, model, table, opts, solver.clone(), max_edges);
+        searcher.set_cancel(cancel.clone());
+        let job = Box::new(SearchJob::new(searcher, max_edges));
         let narrow = init.view_share() < NARROW_VIEW_SHARE;
         let max_set = (0..table.node_count() as u32)
             .map(|n| table.node_set(n).segments.len())
@@ -284,7 +350,121 @@ impl<'m> Tracker<'m> {
             agreed: None,
             explained_ref: f64::NAN,
             stats: TrackerStats::default(),
+            job: Some(job),
+            link: None,
+            pending: None,
+            backlog: Backlog::new(BACKLOG_FRAMES, max_edges),
+            scratch: Vec::with_capacity(max_edges),
+            late: Vec::with_capacity(BACKLOG_FRAMES + 1),
+            cancel,
         }
+    }
+
+    /// Runs the searches on a worker from now on (module `background`): `link` sends jobs to a
+    /// thread running [`search_worker`] and takes them back. Without one, a search runs on the
+    /// frame that starts it; its result is taken up on the same later frame either way.
+    pub fn attach_search_worker(&mut self, link: SearchLink<'m>) {
+        self.link = Some(link);
+    }
+
+    /// Whether a search is under way.
+    pub fn searching(&self) -> bool {
+        self.pending.is_some()
+    }
+
+    /// Starts a search of the current state's volume on this frame's `edges` (module
+    /// `background`).
+    fn start_search(&mut self, edges: &[Edge], timestamp_ns: u64) {
+        let Some(mut job) = self.job.take() else {
+            return;
+        };
+        let volume = self.search_volume();
+        let budget_ms = if volume.diameter_m.is_none() {
+            self.cfg.initialisation.whole_model_time_budget_ms
+        } else {
+            self.cfg.initialisation.time_budget_ms
+        };
+        let budget = Duration::from_secs_f64(budget_ms.max(0.0) / 1e3);
+        let i = &self.cfg.initialisation;
+        let breadth = if self.widen {
+            (
+                i.wide_edges_considered as usize,
+                i.wide_segments_considered as usize,
+                i.wide_samples_per_cell as usize,
+            )
+        } else {
+            (
+                i.edges_considered as usize,
+                i.segments_considered as usize,
+                i.samples_per_cell as usize,
+            )
+        };
+        // After a loss the rig cannot have turned further than its turn rate allows since
+        // the last good frame: the mirror twin of a symmetric room is refused.
+        let turn_limit = match (self.state, self.last_good) {
+            (TrackerState::Lost, Some(p)) => Some((p.rotation, self.max_turn_rad(timestamp_ns))),
+            _ => None,
+        };
+        // After a loss, a candidate must also explain about as much as the frames before
+        // it did; the requirement relaxes with every failed attempt, since the rig may
+        // have walked somewhere that is seen less well.
+        let floor = match self.state {
+            TrackerState::Lost => self.explained_floor(self.search_attempts),
+            _ => 0.0,
+        };
+        // Quarter-turn twins are worth searching only where any heading is plausible.
+        let yaw_twins = turn_limit.is_none_or(|(_, limit)| limit >= std::f64::consts::PI);
+        let rng = SmallRng::seed_from_u64(self.rng.random());
+        job.prepare(edges, volume, budget, breadth, yaw_twins, turn_limit, rng);
+        let pending = PendingSearch {
+            started_ns: timestamp_ns,
+            due_ns: timestamp_ns.saturating_add(u64::try_from(budget.as_nanos()).unwrap_or(u64::MAX)),
+            volume,
+            turn_limit,
+            floor,
+            relocalisation: None,
+        };
+        self.launch(job, pending);
+    }
+
+    /// Sends a prepared job to the worker (or runs it here without one) and marks it under way.
+    fn launch(&mut self, mut job: Box<SearchJob<'m>>, pending: PendingSearch) {
+        self.pending = Some(pending);
+        match &self.link {
+            Some(link) => {
+                if let Err(e) = link.jobs.send(job) {
+                    // The worker is gone: search here.
+                    self.link = None;
+                    let mut job = e.into_inner();
+                    job.run();
+                    self.job = Some(job);
+                }
+            }
+            None => {
+                job.run();
+                self.job = Some(job);
+            }
+        }
+    }
+
+    /// The finished job of the search under way: at home already, or back from the worker
+    /// (waiting for it, counted, if it is not done).
+    fn collect_search(&mut self) -> Option<Box<SearchJob<'m>>> {
+        if let Some(job) = self.job.take() {
+            return Some(job);
+        }
+        let link = self.link.as_ref()?;
+        if let Ok(job) = link.done.try_recv() {
+            return Some(job);
+        }
+        let waited = Instant::now();
+        let job = link.done.recv().ok();
+        self.stats.search_waits += 1;
+        self.stats.search_wait_time += waited.elapsed();
+        if job.is_none() {
+            self.link = None;
+        }
+        job
     }
 
     pub fn state(&self) -> TrackerState {
@@ -327,143 +507,246 @@ impl<'m> Tracker<'m> {
         &self.pose
     }
 
-    /// One frame: initialisation or maintenance depending on the state.
+    /// One frame: initialisation or maintenance depending on the state; while a search is under
+    /// way, the frame is kept and, once the search is taken up, caught up on (module
+    /// `background`).
     pub fn process(&mut self, edges: &[Edge], timestamp_ns: u64) -> FrameResult {
         self.stats.frames += 1;
-        let result = match self.state {
-            TrackerState::Tracking => self.maintain(edges, timestamp_ns),
-            TrackerState::Initializing | TrackerState::Lost => self.initialise(edges, timestamp_ns),
+        self.late.clear();
+        let result = if self.pending.is_none() && self.backlog.is_empty() {
+            self.step(edges, timestamp_ns)
+        } else {
+            self.behind(edges, timestamp_ns)
         };
         if result.pose.is_some() {
             self.stats.tracked += 1;
         }
+        result
+    }
+
+    /// One frame's work in the current state.
+    fn step(&mut self, edges: &[Edge], timestamp_ns: u64) -> FrameResult {
+        let result = match self.state {
+            TrackerState::Tracking => self.maintain(edges, timestamp_ns),
+            TrackerState::Initializing | TrackerState::Lost => self.initialise(edges, timestamp_ns),
+        };
         self.last_time = timestamp_ns;
         result
     }
 
-    /// Figure 5 plus the confirmation of candidates over the next frames.
+    /// A frame that arrives while a search is under way, or while frames kept during one wait:
+    /// it joins the backlog; a search that is due is taken up on its own frame; then up to
+    /// [`CATCH_UP_FRAMES`] kept frames are tracked, oldest first. The frame gets a pose once
+    /// the backlog has been worked off up to it.
+    fn behind(&mut self, edges: &[Edge], timestamp_ns: u64) -> FrameResult {
+        let started = Instant::now();
+        self.backlog.push(edges, timestamp_ns);
+        if let Some(pending) = self.pending {
+            if timestamp_ns < pending.due_ns {
+                let mut result = FrameResult::empty(self.state);
+                result.match_time = started.elapsed();
+                return result;
+            }
+            self.pending = None;
+            let r = self.take_up(pending);
+            self.note_late(pending.started_ns, r);
+        }
+        let mut result = None;
+        for _ in 0..CATCH_UP_FRAMES {
+            if self.pending.is_some() || self.backlog.is_empty() {
+                break;
+            }
+            match self.catch_up_one() {
+                Some((_, r)) if self.backlog.is_empty() => result = Some(r),
+                Some((t, r)) => self.note_late(t, r),
+                None => break,
+            }
+        }
+        let mut result = result.unwrap_or_else(|| FrameResult::empty(self.state));
+        result.match_time = started.elapsed();
+        result
+    }
+
+    /// Tracks the oldest kept frame; a fresh search starts from the newest instead (the older
+    /// ones can only delay it).
+    fn catch_up_one(&mut self) -> Option<(u64, FrameResult)> {
+        if self.state != TrackerState::Tracking && self.confirm_count == 0 {
+            let before = self.backlog.dropped;
+            self.backlog.keep_newest();
+            self.stats.backlog_dropped += self.backlog.dropped - before;
+        }
+        let mut buf = std::mem::take(&mut self.scratch);
+        let t = self.backlog.pop_into(&mut buf);
+        let r = t.map(|t| (t, self.step(&buf, t)));
+        self.scratch = buf;
+        self.stats.caught_up += u64::from(r.is_some());
+        r
+    }
+
+    /// Keeps an earlier frame's result for [`Tracker::late`] when it has a pose or an event.
+    fn note_late(&mut self, timestamp_ns: u64, r: FrameResult) {
+        if (r.pose.is_some() || r.event.is_some()) && self.late.len() < self.late.capacity() {
+            self.stats.late_poses += u64::from(r.pose.is_some());
+            self.late.push((timestamp_ns, r));
+        }
+    }
+
+    /// The results of earlier frames worked out on the last call of [`Tracker::process`] or
+    /// [`Tracker::finish`], oldest first, with their timestamps: the search frame's once its search
+    /// is taken up, and the kept frames' as they are caught up on (only those with a pose or an
+    /// event). They are older than the frames already answered, so a live subscriber does not
+    /// want them; a trajectory does.
+    pub fn late(&self) -> &[(u64, FrameResult)] {
+        &self.late
+    }
+
+    /// The frames have ended: a search under way is taken up now (waiting for it) and every kept
+    /// frame is tracked, their results in [`Tracker::late`], so that a recording's last second
+    /// is not lost. Kept frames that would need a fresh search are dropped (counted).
+    pub fn finish(&mut self) {
+        self.late.clear();
+        if let Some(pending) = self.pending.take() {
+            let r = self.take_up(pending);
+            self.note_late(pending.started_ns, r);
+        }
+        while !self.backlog.is_empty() {
+            if self.state != TrackerState::Tracking && self.confirm_count == 0 {
+                break;
+            }
+            match self.catch_up_one() {
+                Some((t, r)) => self.note_late(t, r),
+                None => break,
+            }
+        }
+        let before = self.backlog.dropped;
+        while self.backlog.pop_into(&mut self.scratch).is_some() {
+            self.backlog.dropped += 1;
+        }
+        self.stats.backlog_dropped += self.backlog.dropped - before;
+    }
+
+    /// Figure 5 (started here, run off the frame path and taken up by [`Tracker::adopt`]) plus
+    /// the confirmation of candidates over the next frames.
     fn initialise(&mut self, edges: &[Edge], timestamp_ns: u64) -> FrameResult {
         let started = Instant::now();
         let mut result = FrameResult::empty(self.state);
         if self.confirm_count == 0 {
-            let volume = self.search_volume();
-            let budget = if volume.diameter_m.is_none() {
-                self.cfg.initialisation.whole_model_time_budget_ms
-            } else {
-                self.cfg.initialisation.time_budget_ms
-            };
-            self.init.set_time_budget(Duration::from_secs_f64(budget / 1e3));
-            let i = &self.cfg.initialisation;
-            if self.widen {
-                self.init.set_breadth(
-                    i.wide_edges_considered as usize,
-                    i.wide_segments_considered as usize,
-                    i.wide_samples_per_cell as usize,
-                );
-            } else {
-                self.init.set_breadth(
-                    i.edges_considered as usize,
-                    i.segments_considered as usize,
-                    i.samples_per_cell as usize,
-                );
+            self.start_search(edges, timestamp_ns);
+            result.match_time = started.elapsed();
+            return result;
+        }
+        // Each confirmation frame applies the search's acceptance test again: a candidate that
+        // explains less than `accept_explained_fraction` of what it predicts here is dropped,
+        // and when none is left the next frame searches afresh. (The wrong commits in `lab`'s
+        // initialisation trials were candidates that barely passed on the search frame and
+        // failed it on the next while the truth was never found.)
+        for k in 0..self.confirm_count {
+            if !self.confirming[k].alive {
+                continue;
             }
-            // After a loss the rig cannot have turned further than its turn rate allows since
-            // the last good frame: the mirror twin of a symmetric room is refused.
-            let turn_limit = match (self.state, self.last_good) {
-                (TrackerState::Lost, Some(p)) => Some((p.rotation, self.max_turn_rad(timestamp_ns))),
-                _ => None,
-            };
-            // After a loss, a candidate must also explain about as much as the frames before
-            // it did; the requirement relaxes with every failed attempt, since the rig may
-            // have walked somewhere that is seen less well.
-            let floor = match self.state {
-                TrackerState::Lost => self.explained_floor(self.search_attempts),
-                _ => 0.0,
-            };
-            // Quarter-turn twins are worth searching only where any heading is plausible.
-            self.init
-                .set_yaw_twins(turn_limit.is_none_or(|(_, limit)| limit >= std::f64::consts::PI));
-            self.init.set_rotation_prior(turn_limit);
-            // A candidate must explain at least `accept_explained_fraction` of the segments it
-            // predicts and `accept_support_fraction` of the frame's longest edges; when none
-            // does, the next frame searches more broadly.
-            let (candidates, report) = self.init.run(edges, &volume, &mut self.rng);
-            // A volume without a valid node was searched out to the nearest ones.
-            let volume = SearchVolume {
-                diameter_m: report.widened_to_m.or(volume.diameter_m),
-                ..volume
-            };
-            let plausible = |c: &Candidate| turn_limit.is_none_or(|(r, limit)| c.pose.rotation.angle_to(&r) <= limit);
-            // And it must be a clear winner: every other candidate of the search that is not in
-            // its basin (the same place turned, or a step away) explains at most
-            // `clear_winner_ratio` of what it explains. Repeated structure (the twin turned a
-            // half or quarter round, the next door along) is refused by evidence; "no pose yet"
-            // is better than a wrong one.
-            let ratio = self.cfg.initialisation.clear_winner_ratio;
-            let clear = |c: &Candidate| {
-                candidates
-                    .iter()
-                    .filter(|o| !init::same_pose(&o.pose, &c.pose, BASIN_M, BASIN_RAD))
-                    .all(|o| o.merit() <= ratio * c.merit())
-            };
-            // And it must lie in the volume searched (the polish may carry a start beyond it): a
-            // hint says where the rig is. Candidates outside still count as rivals above.
-            let inside = |c: &Candidate| within(&volume, &c.pose);
-            let accepted = |c: &&Candidate| {
-                acceptable(&self.cfg, c) && plausible(c) && c.explained >= floor && inside(c) && clear(c)
-            };
-            // A failed search is repeated once more broadly on the same volume; if that fails
-            // too, the volume doubles and the breadth is normal again (widening a large volume
-            // only lets the time budget cover fewer cells).
-            let failed = !candidates.iter().any(|c| accepted(&c));
-            if failed && self.widen {
-                self.volume_level += 1;
-            }
-            self.widen = failed && !self.widen;
-            let mut n = 0;
-            for c in candidates.iter().filter(accepted).take(self.confirming.len()) {
-                self.confirming[n] = Confirming {
-                    pose: c.pose,
-                    merit_sum: c.merit(),
-                    frames: 1,
-                    alive: true,
-                };
-                n += 1;
-            }
-            self.confirm_count = n;
-            if self.search_attempts > 0 || self.stats.first_search.is_some() {
-                self.stats.reinitialisations += 1;
-            }
-            self.search_attempts += 1;
-            self.stats.search_time += report.elapsed;
-            self.stats.search_backstops += u64::from(report.backstop);
-            self.stats.first_search.get_or_insert(report.elapsed);
-            result.event = Some(TrackerEvent::Searched(report));
-            if n == 0 {
-                result.match_time = started.elapsed();
-                return result;
-            }
-        } else {
-            // Each confirmation frame applies the search's acceptance test again: a candidate
-            // that explains less than `accept_explained_fraction` of what it predicts here is
-            // dropped, and when none is left the next frame searches afresh. (The wrong
-            // commits in `lab`'s initialisation trials were candidates that barely passed on
-            // the search frame and failed it on the next while the truth was never found.)
-            for k in 0..self.confirm_count {
-                if !self.confirming[k].alive {
-                    continue;
+            match self.init.polish(&self.confirming[k].pose, edges) {
+                Some(c) if acceptable(&self.cfg, &c) => {
+                    let slot = &mut self.confirming[k];
+                    slot.pose = c.pose;
+                    slot.merit_sum += c.merit();
+                    slot.frames += 1;
                 }
-                match self.init.polish(&self.confirming[k].pose, edges) {
-                    Some(c) if acceptable(&self.cfg, &c) => {
-                        let slot = &mut self.confirming[k];
-                        slot.pose = c.pose;
-                        slot.merit_sum += c.merit();
-                        slot.frames += 1;
-                    }
-                    _ => self.confirming[k].alive = false,
-                }
+                _ => self.confirming[k].alive = false,
             }
         }
+        let mut result = self.decide(edges, timestamp_ns, result);
+        result.match_time = started.elapsed();
+        result
+    }
+
+    /// Takes up a finished search on its own frame: an initialisation's or a relocalisation's.
+    fn take_up(&mut self, pending: PendingSearch) -> FrameResult {
+        let result = match pending.relocalisation {
+            Some(r) => self.conclude_relocalisation(r, pending.started_ns),
+            None => self.adopt(pending),
+        };
+        self.last_time = pending.started_ns;
+        result
+    }
+
+    /// Takes up a finished initialisation search on its own frame (the job holds that frame's edges): its
+    /// acceptable candidates go to confirmation, and a clear decision commits there and then.
+    fn adopt(&mut self, pending: PendingSearch) -> FrameResult {
+        let mut result = FrameResult::empty(self.state);
+        let Some(job) = self.collect_search() else {
+            return result;
+        };
+        let PendingSearch {
+            volume,
+            turn_limit,
+            floor,
+            started_ns,
+            ..
+        } = pending;
+        let (candidates, report) = job.result();
+        let report = *report;
+        // A volume without a valid node was searched out to the nearest ones.
+        let volume = SearchVolume {
+            diameter_m: report.widened_to_m.or(volume.diameter_m),
+            ..volume
+        };
+        let plausible = |c: &Candidate| turn_limit.is_none_or(|(r, limit)| c.pose.rotation.angle_to(&r) <= limit);
+        // And it must be a clear winner: every other candidate of the search that is not in
+        // its basin (the same place turned, or a step away) explains at most
+        // `clear_winner_ratio` of what it explains. Repeated structure (the twin turned a
+        // half or quarter round, the next door along) is refused by evidence; "no pose yet"
+        // is better than a wrong one.
+        let ratio = self.cfg.initialisation.clear_winner_ratio;
+        let clear = |c: &Candidate| {
+            candidates
+                .iter()
+                .filter(|o| !init::same_pose(&o.pose, &c.pose, BASIN_M, BASIN_RAD))
+                .all(|o| o.merit() <= ratio * c.merit())
+        };
+        // And it must lie in the volume searched (the polish may carry a start beyond it): a
+        // hint says where the rig is. Candidates outside still count as rivals above.
+        let inside = |c: &Candidate| within(&volume, &c.pose);
+        let accepted =
+            |c: &&Candidate| acceptable(&self.cfg, c) && plausible(c) && c.explained >= floor && inside(c) && clear(c);
+        // A failed search is repeated once more broadly on the same volume; if that fails
+        // too, the volume doubles and the breadth is normal again (widening a large volume
+        // only lets the time budget cover fewer cells).
+        let failed = !candidates.iter().any(|c| accepted(&c));
+        if failed && self.widen {
+            self.volume_level += 1;
+        }
+        self.widen = failed && !self.widen;
+        let mut n = 0;
+        for c in candidates.iter().filter(accepted).take(self.confirming.len()) {
+            self.confirming[n] = Confirming {
+                pose: c.pose,
+                merit_sum: c.merit(),
+                frames: 1,
+                alive: true,
+            };
+            n += 1;
+        }
+        self.confirm_count = n;
+        if self.search_attempts > 0 || self.stats.first_search.is_some() {
+            self.stats.reinitialisations += 1;
+        }
+        self.search_attempts += 1;
+        self.stats.search_time += report.elapsed;
+        self.stats.search_backstops += u64::from(report.backstop);
+        self.stats.first_search.get_or_insert(report.elapsed);
+        result.event = Some(TrackerEvent::Searched(report));
+        if n > 0 {
+            result = self.decide(job.edges(), started_ns, result);
+        }
+        self.job = Some(job);
+        self.last_time = started_ns;
+        result
+    }
+
+    /// Whether the candidates under confirmation are told apart (and, for a narrow rig, agreed
+    /// on): the winner is committed on this frame, or, when they cannot be told apart, the next
+    /// frame searches afresh. `result` is this frame's answer so far.
+    fn decide(&mut self, edges: &[Edge], timestamp_ns: u64, mut result: FrameResult) -> FrameResult {
         let alive = self.confirming[..self.confirm_count].iter().filter(|c| c.alive).count();
         let frames = self.confirming[..self.confirm_count]
             .iter()
@@ -511,7 +794,6 @@ impl<'m> Tracker<'m> {
                 changed_mind,
             });
         }
-        result.match_time = started.elapsed();
         result
     }
 

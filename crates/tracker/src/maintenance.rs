@@ -34,9 +34,12 @@
 //!
 //! Nothing here allocates: all buffers belong to the [`Tracker`].
 
+use super::background::STARTS;
 use super::matching::{best_edge, Gate, Predicted};
 use super::Tracker;
-use super::{Candidate, CorrespondenceState, FrameResult, HeldEdge, SearchVolume, TrackerEvent, TrackerState};
+use super::{
+    Candidate, CorrespondenceState, FrameResult, HeldEdge, PendingSearch, SearchVolume, TrackerEvent, TrackerState,
+};
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion};
 use omnitrack_config::SolverMethod;
 use omnitrack_core::geometry::{xi, Correspondence, Pose};
@@ -44,6 +47,8 @@ use omnitrack_edges::Edge;
 use omnitrack_solver::{
     covariance, minimise_xi, r_and_t_refine, refine_upright, sample_count, SamplingBudget, SimplexOptions,
 };
+use rand::rngs::SmallRng;
+use rand::{Rng, SeedableRng};
 use std::time::{Duration, Instant};
 
 /// A relocalised pose replaces a suspect maintenance pose only when it explains this many times
@@ -57,6 +62,32 @@ const SMALLEST_SAMPLE: usize = 4;
 /// beyond what smooth motion leaves between them, is checked against the polished prediction.
 const SECOND_OPINION_M: f64 = 0.05;
 const SECOND_OPINION_RAD: f64 = 0.035;
+
+/// A relocalisation under way (module `background`): what its candidates are judged by, and
+/// what its frame concludes when none wins.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Relocalisation {
+    predicted: Pose,
+    /// The last good rotation and the turn the rig can have made since.
+    turned_from: UnitQuaternion<f64>,
+    turn_limit: f64,
+    /// The least share of VIS(T) a candidate must explain (0 on a bad frame).
+    floor: f64,
+    diameter_m: f64,
+    /// The tracker's `last_time` when the frame came (the previous frame's).
+    last_time: u64,
+    tail: Tail,
+}
+
+/// A maintenance frame's result so far and what it concludes without a relocalisation.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Tail {
+    result: FrameResult,
+    pose: Option<Pose>,
+    good: bool,
+    predicted: Pose,
+    timestamp_ns: u64,
+}
 
 /// Where a relocalisation candidate stands: `plausible` (enough inliers, within reach of the
 /// prediction and of the turns the rig can have made), `acceptable` (plausible and explaining
@@ -164,98 +195,152 @@ impl Tracker<'_> {
     /// not stop the tracker from finding its place again. The search keeps to the turns the rig
     /// can have made since the last good frame; the prediction, the last pose, the frame's
     /// `solved` pose, its rotation at the predicted position and the prediction turned by ± one
-    /// gate width, each polished, compete with its candidates, and [`choose`] decides.
-    fn relocalise(
+    /// gate width, each polished, compete with its candidates, and [`choose`] decides
+    /// ([`Tracker::conclude_relocalisation`]).
+    ///
+    /// The search and the polishes run off the frame path (module `background`), and are taken
+    /// up `relocalise_time_budget_ms` later on the frames' clock; `tail` is what the frame
+    /// concludes when no candidate wins. Returns false when relocalisation is off.
+    fn start_relocalise(
         &mut self,
         edges: &[Edge],
         predicted: &Pose,
         solved: Option<&Pose>,
         timestamp_ns: u64,
         min_explained: f64,
-    ) -> Option<FrameResult> {
+        tail: Tail,
+    ) -> bool {
         let d = self.cfg.maintenance.relocalise_diameter_m;
         if d <= 0.0 {
-            return None;
+            return false;
         }
+        let Some(mut job) = self.job.take() else {
+            return false;
+        };
         let volume = SearchVolume {
             centre: Point3::from(predicted.translation.vector),
             diameter_m: Some(d),
         };
-        let budget = Duration::from_secs_f64(self.cfg.maintenance.relocalise_time_budget_ms / 1e3);
-        self.init.set_time_budget(budget);
+        let budget = Duration::from_secs_f64(self.cfg.maintenance.relocalise_time_budget_ms.max(0.0) / 1e3);
         let turn_limit = self.max_turn_rad(timestamp_ns);
         let turned_from = self.last_good.map_or(predicted.rotation, |p| p.rotation);
-        let floor = min_explained;
+        let i = &self.cfg.initialisation;
+        let breadth = (
+            i.edges_considered as usize,
+            i.segments_considered as usize,
+            i.samples_per_cell as usize,
+        );
         // The heading is near the prediction's: its quarter-turn twins are not searched.
-        self.init.set_yaw_twins(false);
-        self.init.set_rotation_prior(Some((turned_from, turn_limit)));
-        let (found, report) = self.init.run(edges, &volume, &mut self.rng);
+        let rng = SmallRng::seed_from_u64(self.rng.random());
+        job.prepare(
+            edges,
+            volume,
+            budget,
+            breadth,
+            false,
+            Some((turned_from, turn_limit)),
+            rng,
+        );
+        // Besides the search's best few (the tracker asks for three), polished: the prediction,
+        // the last pose, this frame's solved pose and the starts below. The search may find
+        // only a twin of the place (a symmetric corridor seen a quarter turn away), and where a
+        // turn stopped short the prediction overshoots into a local minimum a few degrees off
+        // that the last pose does not fall into.
+        // Lines fix the rotation by their directions alone (R_then_T), while a repeated
+        // structure leaves the translation along it free: a solve that slid to a neighbouring
+        // doorway often has the turn right, so its rotation is also tried at the predicted
+        // position.
+        let reseated = solved.map(|s| Pose::from_parts(predicted.translation, s.rotation));
+        // A turn faster than the motion model expects leaves the prediction a gate width or
+        // more off, where polishing stays in a local minimum: the prediction turned by ± one
+        // gate width is polished too.
+        let gate = self.cfg.maintenance.angular_gate_deg.to_radians();
+        job.set_starts([
+            Some(*predicted),
+            Some(self.pose),
+            solved.copied(),
+            reseated,
+            Some(turned(predicted, gate)),
+            Some(turned(predicted, -gate)),
+        ]);
+        let pending = PendingSearch {
+            started_ns: timestamp_ns,
+            due_ns: timestamp_ns.saturating_add(u64::try_from(budget.as_nanos()).unwrap_or(u64::MAX)),
+            volume,
+            turn_limit: Some((turned_from, turn_limit)),
+            floor: min_explained,
+            relocalisation: Some(Relocalisation {
+                predicted: *predicted,
+                turned_from,
+                turn_limit,
+                floor: min_explained,
+                diameter_m: d,
+                last_time: self.last_time,
+                tail,
+            }),
+        };
+        self.launch(job, pending);
+        true
+    }
+
+    /// Takes up a relocalisation on its own frame (stamped `timestamp_ns`): the candidate
+    /// [`choose`] picks is committed there, or the frame concludes as it would have without one.
+    pub(super) fn conclude_relocalisation(&mut self, reloc: Relocalisation, timestamp_ns: u64) -> FrameResult {
+        // The frame's own view of time, as when the search was started.
+        self.last_time = reloc.last_time;
+        let Some(job) = self.collect_search() else {
+            return self.conclude(reloc.tail);
+        };
+        let (found, report) = job.result();
         self.stats.search_backstops += u64::from(report.backstop);
-        // The search's best few (the tracker asks for three), then, polished, the prediction,
-        // the last pose, this frame's solved pose and the starts below: the search may find only
-        // a twin of the place (a symmetric corridor seen a quarter turn away), and where a turn
-        // stopped short the prediction overshoots into a local minimum a few degrees off that the
-        // last pose does not fall into.
-        let mut candidates = [None; 9];
+        let mut candidates = [None; 3 + STARTS];
         for (slot, c) in candidates[..3].iter_mut().zip(found) {
             *slot = Some(*c);
         }
-        let last = self.pose;
-        // Lines fix the rotation by their directions alone (R_then_T), while a repeated structure
-        // leaves the translation along it free: a solve that slid to a neighbouring doorway often
-        // has the turn right, so its rotation is also tried at the predicted position.
-        let reseated = solved.map(|s| Pose::from_parts(predicted.translation, s.rotation));
-        // A turn faster than the motion model expects leaves the prediction a gate width or more
-        // off, where polishing stays in a local minimum: the prediction turned by ± one gate width
-        // is polished too.
-        let gate = self.cfg.maintenance.angular_gate_deg.to_radians();
-        let (left, right) = (turned(predicted, gate), turned(predicted, -gate));
-        let starts = [
-            Some(predicted),
-            Some(&last),
-            solved,
-            reseated.as_ref(),
-            Some(&left),
-            Some(&right),
-        ];
-        for (slot, start) in candidates[3..].iter_mut().zip(starts) {
-            if let Some(start) = start {
-                *slot = self.init.polish(start, edges);
-            }
-        }
+        candidates[3..].copy_from_slice(job.polished());
         let m = &self.cfg.maintenance;
-        let reach = 0.5 * d + m.max_jump_m;
+        let predicted = &reloc.predicted;
+        let reach = 0.5 * reloc.diameter_m + m.max_jump_m;
         let jump_rad = m.max_jump_deg.to_radians();
         let standings = candidates.map(|c| {
             c.map(|c| {
                 let plausible = c.inliers >= m.min_inliers as usize
                     && (c.pose.translation.vector - predicted.translation.vector).norm() <= reach
-                    && c.pose.rotation.angle_to(&turned_from) <= turn_limit;
+                    && c.pose.rotation.angle_to(&reloc.turned_from) <= reloc.turn_limit;
                 let standing = Standing {
                     plausible,
-                    acceptable: plausible && c.explained >= floor,
+                    acceptable: plausible && c.explained >= reloc.floor,
                     jumps: c.pose.rotation.angle_to(&predicted.rotation) > jump_rad,
                 };
                 (c, standing)
             })
         });
-        let best = choose(&standings, self.cfg.initialisation.clear_winner_ratio)?;
-        self.stats.relocalisations += 1;
-        // The rig moves on through a relocalisation: the last interval's motion (rig frame)
-        // carries over, so that the next frame is predicted where the rig will be, not where it
-        // was (at 5 Hz a walking rig is 20 cm on, and the gates matched the wrong edges there).
-        let motion = match self.previous {
-            Some((prev, prev_t)) if prev_t < self.last_time => {
-                Some((prev.inverse() * self.pose, self.last_time - prev_t))
-            }
-            _ => None,
+        let Some(best) = choose(&standings, self.cfg.initialisation.clear_winner_ratio) else {
+            self.job = Some(job);
+            return self.conclude(reloc.tail);
         };
-        let mut r = self.commit(&best.pose, edges, timestamp_ns);
-        if let Some((delta, dt)) = motion {
-            self.previous = Some((best.pose * delta.inverse(), timestamp_ns.saturating_sub(dt)));
+        self.stats.relocalisations += 1;
+        // The rig moves on through a relocalisation: the motion from the last good pose to the
+        // found one continues, so that the next frame is predicted where the rig will be, not
+        // where it was (at 5 Hz a walking rig is 20 cm on, and the gates matched the wrong
+        // edges there). Carrying over the interval before instead, as this did until
+        // 2026-11-27, keeps a rig that turned back (or stopped) predicted the old way: every
+        // following frame failed and relocalised in turn (`tests/pipeline`, a recording played
+        // back and forth).
+        let since = self
+            .last_good
+            .map(|p| (p, self.last_good_time))
+            .filter(|(_, t)| *t < timestamp_ns);
+        let mut r = self.commit(&best.pose, job.edges(), timestamp_ns);
+        self.job = Some(job);
+        if since.is_some() {
+            self.previous = since;
         }
         r.event = Some(TrackerEvent::Relocalised);
-        Some(r)
+        r.match_time += reloc.tail.result.match_time;
+        r.solve_time = reloc.tail.result.solve_time;
+        r.samples += reloc.tail.result.samples;
+        r
     }
 
     /// Fig. 7 lines 3–10 from the prediction `predicted`: the correspondence update (angular and
@@ -560,18 +645,49 @@ impl Tracker<'_> {
                 (Some(p), true) => SUSPECT_MARGIN * self.init.explained(p, edges),
                 _ => 0.0,
             };
-            if let Some(r) = self.relocalise(edges, &predicted, pose.as_ref(), timestamp_ns, own) {
-                let mut r = r;
-                r.match_time += match_time;
-                r.solve_time = solve_started.elapsed().saturating_sub(match_time);
-                r.samples += samples;
+            result.solve_time = solve_started.elapsed().saturating_sub(match_time);
+            result.match_time = match_time;
+            // What the frame is when no better pose is found nearby: a suspect frame stands.
+            let tail = Tail {
+                result,
+                pose,
+                good: suspect,
+                predicted,
+                timestamp_ns,
+            };
+            if self.start_relocalise(edges, &predicted, pose.as_ref(), timestamp_ns, own, tail) {
+                // Under way: this frame is answered when it is taken up (module `background`).
+                let mut r = FrameResult::empty(TrackerState::Tracking);
+                r.match_time = match_time;
+                r.solve_time = result.solve_time;
+                r.samples = samples;
                 return r;
             }
-            // No better pose nearby: a suspect frame stands.
             good = suspect;
         }
         result.solve_time = solve_started.elapsed().saturating_sub(match_time);
         result.match_time = match_time;
+        self.conclude(Tail {
+            result,
+            pose,
+            good,
+            predicted,
+            timestamp_ns,
+        })
+    }
+
+    /// Fig. 7's end for a frame whose pose is `good` or not: S_{t+1}, the pose and its
+    /// covariance, or a bad frame coasting on the prediction (and, after `lost_after_frames`
+    /// of them, the loss).
+    fn conclude(&mut self, tail: Tail) -> FrameResult {
+        let Tail {
+            mut result,
+            pose,
+            good,
+            predicted,
+            timestamp_ns,
+        } = tail;
+        let lost_after_frames = self.cfg.maintenance.lost_after_frames;
         result.states = self.state_counts();
         if good {
             let p = pose.expect("a good frame has a pose");
@@ -595,7 +711,7 @@ impl Tracker<'_> {
             // Coast on the prediction so that the gate follows the motion.
             self.previous = Some((self.pose, self.last_time));
             self.pose = predicted;
-            if self.bad_frames >= mcfg.lost_after_frames {
+            if self.bad_frames >= lost_after_frames {
                 self.state = TrackerState::Lost;
                 self.stats.losses += 1;
                 self.search_attempts = 0;

@@ -53,6 +53,9 @@ pub enum PipelineThread {
     Assembly,
     /// Edges, tracker and publishers. (The edge detector's workers are its own threads.)
     Process,
+    /// The tracker's search worker: initialisation and re-initialisation searches off the frame
+    /// path (`omnitrack_tracker::background`).
+    Search,
     /// The caller's thread, about to run the sink.
     Sink,
 }

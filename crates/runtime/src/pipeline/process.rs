@@ -22,7 +22,7 @@ use omnitrack_io::publish::{
     PosePublisher, PoseSample, PoseStatus, SearchState, StatusPublisher, StatusSample, STATUS_MAX_SENSORS,
 };
 use omnitrack_tracker::visibility::VisibilityTable;
-use omnitrack_tracker::{FrameResult, Tracker, TrackerEvent, TrackerState, TrackerStats};
+use omnitrack_tracker::{search_link, FrameResult, InitReport, Tracker, TrackerEvent, TrackerState, TrackerStats};
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
@@ -66,6 +66,8 @@ struct Processor<'a, 'o, 'm> {
     max_frames: Option<u64>,
     processed: u64,
     last_ts: u64,
+    /// The sequence number of the last frame processed.
+    last_sequence: u64,
     last_pose: Pose,
     last_state: PoseStatus,
     first_frame: Option<Instant>,
@@ -114,6 +116,12 @@ impl Processor<'_, '_, '_> {
                 }
             }
         };
+        // The frames have ended: a search under way and the frames kept meanwhile are worked
+        // out for the sink (a stop does not wait for them).
+        if matches!(reason, RunEnd::EndOfStream | RunEnd::MaxFrames) {
+            self.tracker.finish();
+            self.hand_over_late(self.last_sequence);
+        }
         self.shared.halt.store(true, Ordering::Relaxed);
         // A frame still waiting for the tracker is dropped like any replaced one.
         while let Ok(h) = self.ready.try_recv() {
@@ -168,21 +176,18 @@ impl Processor<'_, '_, '_> {
                 track_time: frame_time - edge_time,
                 frame_time,
                 result,
+                late: false,
             };
             (record, slot.arrived)
         };
         self.pool.release(h);
         self.last_ts = record.timestamp_ns;
         self.processed += 1;
+        self.last_sequence = record.sequence;
+        self.hand_over_late(record.sequence);
         let r = &record.result;
         match (&r.event, r.pose.is_some()) {
-            (Some(TrackerEvent::Searched(rep)), _) => {
-                (self.search, self.search_widened_to_m) = match rep.widened_to_m {
-                    _ if rep.cells_in_volume == 0 => (SearchState::NoCells, 0.0),
-                    Some(d) => (SearchState::Widened, d as f32),
-                    None => (SearchState::AsGiven, 0.0),
-                }
-            }
+            (Some(TrackerEvent::Searched(rep)), _) => (self.search, self.search_widened_to_m) = search_state(rep),
             (_, true) => (self.search, self.search_widened_to_m) = (SearchState::None, 0.0),
             _ => {}
         }
@@ -205,6 +210,18 @@ impl Processor<'_, '_, '_> {
         c[Stage::Frame.index()].record(done - arrived);
         // The sink drains until this channel closes: a full buffer only makes the tracker wait.
         let _ = self.records.send(record);
+    }
+
+    /// Hands the sink the earlier frames' results the tracker worked out on this call (frames
+    /// kept during a search: `Tracker::late`), before the frame's own. They are not published:
+    /// subscribers have had later frames. The search they report sets the status's search state.
+    fn hand_over_late(&mut self, sequence: u64) {
+        for &(t, r) in self.tracker.late() {
+            if let Some(TrackerEvent::Searched(rep)) = &r.event {
+                (self.search, self.search_widened_to_m) = search_state(rep);
+            }
+            let _ = self.records.send(FrameRecord::late(sequence, t, r));
+        }
     }
 
     /// Publishes the frame's pose sample; returns the time it took.
@@ -304,6 +321,15 @@ impl Processor<'_, '_, '_> {
     }
 }
 
+/// What a search made of its volume, and the widened diameter (m), for the status.
+fn search_state(rep: &InitReport) -> (SearchState, f32) {
+    match rep.widened_to_m {
+        _ if rep.cells_in_volume == 0 => (SearchState::NoCells, 0.0),
+        Some(d) => (SearchState::Widened, d as f32),
+        None => (SearchState::AsGiven, 0.0),
+    }
+}
+
 /// The process thread's body. The publishers, the edge detector and the tracker are made here,
 /// on this thread: the detector allocates nothing per frame only on the thread that built it.
 #[allow(clippy::too_many_arguments)]
@@ -329,7 +355,7 @@ pub(super) fn run_process(
         .iter()
         .map(|s| StageClock::new(stage_budget(*s, &cfg.budgets)))
         .collect();
-    let processor = Processor {
+    let mut processor = Processor {
         shared,
         pool,
         ready: ready_rx,
@@ -342,6 +368,7 @@ pub(super) fn run_process(
         budgets: cfg.budgets.clone(),
         max_frames: opts.run.max_frames,
         processed: 0,
+        last_sequence: 0,
         last_ts: 0,
         last_pose: Pose::identity(),
         last_state: PoseStatus::Initializing,
@@ -357,7 +384,24 @@ pub(super) fn run_process(
         search: SearchState::None,
         search_widened_to_m: 0.0,
     };
-    let mut outcome = processor.run();
+    // The searches run on their own thread while the frames go on (`omnitrack_tracker::background`);
+    // it ends when the tracker, holding its job channel, is dropped with the processor.
+    let (link, worker) = search_link();
+    let mut outcome = std::thread::scope(|scope| {
+        let worker = std::thread::Builder::new()
+            .name("omnitrack-search".into())
+            .spawn_scoped(scope, move || {
+                shared.thread_started(PipelineThread::Search);
+                worker.run();
+            });
+        // Without the thread the searches run on the frame path (and the link is dropped:
+        // nothing would ever answer it).
+        match worker {
+            Ok(_) => processor.tracker.attach_search_worker(link),
+            Err(e) => tracing::warn!("cannot start the search thread ({e}); searches run on the frame path"),
+        }
+        processor.run()
+    });
     outcome.publisher_error = publisher_error;
     outcome
 }

@@ -18,6 +18,12 @@ use std::sync::atomic::Ordering;
 pub trait FrameSink {
     /// One processed frame. An error stops the pipeline (the frames already handed over stay).
     fn frame(&mut self, record: &FrameRecord) -> Result<(), SinkError>;
+    /// An earlier frame's result, worked out after later frames were handed over
+    /// ([`FrameRecord::late`]: frames kept during a search). Ignored unless a sink wants it.
+    fn late(&mut self, record: &FrameRecord) -> Result<(), SinkError> {
+        let _ = record;
+        Ok(())
+    }
     /// Called once after the last frame (also after a stop or an error): flush here.
     fn finish(&mut self) -> Result<(), SinkError> {
         Ok(())
@@ -154,6 +160,12 @@ impl FrameSink for TumSink {
         Ok(())
     }
 
+    /// A late pose belongs in the trajectory as any other: it is newer than every pose written
+    /// before it (the frames it was kept with had none).
+    fn late(&mut self, r: &FrameRecord) -> Result<(), SinkError> {
+        self.frame(r)
+    }
+
     fn finish(&mut self) -> Result<(), SinkError> {
         if self.failed {
             return Ok(());
@@ -184,7 +196,12 @@ pub(super) fn drain(sink: &mut dyn FrameSink, records: &Receiver<FrameRecord>, s
     let mut sink_error: Option<SinkError> = None;
     for record in records.iter() {
         if sink_error.is_none() {
-            if let Err(e) = sink.frame(&record) {
+            let handed = if record.late {
+                sink.late(&record)
+            } else {
+                sink.frame(&record)
+            };
+            if let Err(e) = handed {
                 tracing::debug!("sink failed: {e}");
                 sink_error = Some(e);
                 shared.halt.store(true, Ordering::Relaxed);
@@ -215,6 +232,7 @@ mod tests {
             edge_time: Duration::ZERO,
             track_time: Duration::ZERO,
             frame_time: Duration::ZERO,
+            late: false,
             result: FrameResult {
                 state: TrackerState::Tracking,
                 pose: Some(Pose::translation(timestamp_ns as f64, 0.0, 1.5)),
