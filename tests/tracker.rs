@@ -803,24 +803,50 @@ fn a_search_on_a_worker_thread_answers_every_frame_as_one_inline() {
     let (_, rig, cfg, _, _) = replay(f);
     type Answers = Vec<(Option<omnitrack::Pose>, Vec<(u64, Option<omnitrack::Pose>)>)>;
     let answer = |tracker: &mut Tracker| -> Answers {
-        frames
+        let mut answers: Answers = frames
             .iter()
             .map(|(t, edges)| {
                 let r = tracker.process(edges, *t);
                 let late = tracker.late().iter().map(|(t, r)| (*t, r.pose)).collect();
                 (r.pose, late)
             })
-            .collect()
+            .collect();
+        tracker.finish();
+        let rest = tracker.late().iter().map(|(t, r)| (*t, r.pose));
+        answers.last_mut().expect("frames").1.extend(rest);
+        answers
+    };
+    // Every pose, on time or late, by timestamp.
+    let trajectory = |a: &Answers| -> std::collections::BTreeMap<u64, omnitrack::Pose> {
+        let on_time = a.iter().zip(&frames).filter_map(|((p, _), (t, _))| p.map(|p| (*t, p)));
+        let late = a
+            .iter()
+            .flat_map(|(_, l)| l.iter())
+            .filter_map(|(t, p)| p.map(|p| (*t, p)));
+        on_time.chain(late).collect()
     };
     let inline = answer(&mut Tracker::new(&rig, &f.model, &f.table, &cfg, Some(hint(f)), 1));
-    let (link, worker) = search_link();
-    let (threaded, waits) = std::thread::scope(|scope| {
-        scope.spawn(move || worker.run());
-        let mut tracker = Tracker::new(&rig, &f.model, &f.table, &cfg, Some(hint(f)), 1);
-        tracker.attach_search_worker(link);
-        (answer(&mut tracker), tracker.stats().search_waits)
-    });
-    assert_eq!(threaded, inline, "{waits} waits for the worker");
+    let threaded = |defer: bool| {
+        let (link, worker) = search_link();
+        std::thread::scope(|scope| {
+            scope.spawn(move || worker.run());
+            let mut tracker = Tracker::new(&rig, &f.model, &f.table, &cfg, Some(hint(f)), 1);
+            tracker.attach_search_worker(link);
+            tracker.defer_late_searches(defer);
+            (answer(&mut tracker), *tracker.stats())
+        })
+    };
+    // Waiting for the worker when it is late (a lossless replay): every frame as inline.
+    let (waiting, stats) = threaded(false);
+    assert_eq!(waiting, inline, "{stats:?}");
+    assert_eq!(stats.search_deferrals, 0);
+    // Not waiting (a live source): a worker that fell behind (a loaded machine) leaves some
+    // frames answered late, with the same poses.
+    let (deferring, stats) = threaded(true);
+    if stats.search_deferrals == 0 {
+        assert_eq!(deferring, inline, "{stats:?}");
+    }
+    assert_eq!(trajectory(&deferring), trajectory(&inline), "{stats:?}");
     let first = inline.iter().position(|(p, _)| p.is_some()).expect("a pose on time");
     assert!(first <= start_frames() - 3, "first pose on time at frame {first}");
     assert!(

@@ -10,12 +10,14 @@
 //!
 //! **When the result is taken up.** A search started on a frame stamped t is taken up on the
 //! first frame stamped at or after t + its budget (`time_budget_ms`, `relocalise_time_budget_ms`:
-//! the work it may do, in reference time). The frame waits for the worker only if it is not done
-//! yet (a machine slower than the reference, or loaded): a backstop, counted in
-//! [`TrackerStats::search_waits`](crate::TrackerStats). Since a search stops on its work, never
-//! the clock (module `init`), and the frame that takes it up is fixed by the timestamps, a
-//! recording gives the same poses whether the search ran on a worker or inline, on an idle or a
-//! loaded machine (a test in `tests/tracker.rs` checks it frame by frame).
+//! the work it may do, in reference time), or, when the worker is not done by then (a machine
+//! slower than the reference, or loaded), on the first later frame that finds it done, counted
+//! in [`TrackerStats::search_deferrals`](crate::TrackerStats); a frame waits for the worker only
+//! when the backlog is full ([`TrackerStats::search_waits`](crate::TrackerStats)). A search stops
+//! on its work, never the clock (module `init`), it is judged on its own frame, the kept frames
+//! are the same, and a fresh search starts from the frame fixed by the timestamps: so a recording
+//! gives the same poses whether the search ran on a worker or inline, on an idle or a loaded
+//! machine; only which of them come late can differ (a test in `tests/tracker.rs` checks it).
 //!
 //! **The frames in between.** They are kept in a `Backlog` (answered meanwhile with no pose).
 //! The search is judged on its own frame's edges, which the job holds, exactly as if it had run
@@ -25,7 +27,8 @@
 //! poses come out late ([`Tracker::late`](crate::Tracker::late)), for a trajectory, never for a
 //! live subscriber that has had later frames. At the end of a recording
 //! [`Tracker::finish`](crate::Tracker::finish) takes up a search under way and works off the rest.
-//! A fresh search always starts from the newest frame: the kept ones are dropped (counted).
+//! A fresh search starts from the first kept frame at or after the due time of the search taken
+//! up last (the frame it was due on): the older kept frames are dropped (counted).
 //!
 //! Memory: the job (its own [`Initialiser`], an edge buffer for the largest frame) and the
 //! backlog's slots are made once in [`Tracker::new`](crate::Tracker::new); the job travels by
@@ -219,6 +222,10 @@ impl Backlog {
         self.len == 0
     }
 
+    pub(crate) fn is_full(&self) -> bool {
+        self.len == self.slots.len()
+    }
+
     fn at(&self, k: usize) -> usize {
         (self.head + k) % self.slots.len()
     }
@@ -262,12 +269,13 @@ impl Backlog {
         Some(t)
     }
 
-    /// Drops all but the newest frame (a fresh search starts from the newest).
-    pub(crate) fn keep_newest(&mut self) {
-        if self.len > 1 {
-            self.dropped += (self.len - 1) as u64;
-            self.head = self.at(self.len - 1);
-            self.len = 1;
+    /// Drops the frames stamped before `timestamp_ns`, but never the newest (a fresh search
+    /// starts from the first frame left).
+    pub(crate) fn drop_older_than(&mut self, timestamp_ns: u64) {
+        while self.len > 1 && self.slots[self.head].0 < timestamp_ns {
+            self.head = self.at(1);
+            self.len -= 1;
+            self.dropped += 1;
         }
     }
 }
@@ -298,13 +306,19 @@ mod tests {
     }
 
     #[test]
-    fn a_fresh_search_keeps_only_the_newest_frame() {
+    fn a_fresh_search_drops_the_frames_before_its_start_but_never_the_newest() {
         let mut b = Backlog::new(8, 4);
         for t in 1..=5 {
             b.push(&[], t);
         }
-        b.keep_newest();
-        assert_eq!(stamps(&mut b), [5]);
+        b.drop_older_than(3);
+        assert_eq!(b.dropped, 2);
+        assert_eq!(stamps(&mut b), [3, 4, 5]);
+        for t in 6..=7 {
+            b.push(&[], t);
+        }
+        b.drop_older_than(100);
+        assert_eq!(stamps(&mut b), [7]);
         assert!(b.is_empty());
     }
 }

@@ -147,6 +147,8 @@ pub struct TrackerStats {
     /// Frames kept during a search and tracked afterwards (module `background`), and frames
     /// the backlog dropped (thinned during a long search, or passed over by a fresh search).
     pub caught_up: u64,
+    /// Due frames on which the worker was not done: the search was taken up on a later frame.
+    pub search_deferrals: u64,
     pub backlog_dropped: u64,
     /// Poses of kept frames, handed out late through [`Tracker::late`] (not in `tracked`).
     pub late_poses: u64,
@@ -270,6 +272,11 @@ pub struct Tracker<'m> {
     /// The frames that arrive during a search, and the buffer a kept frame is tracked from.
     backlog: Backlog,
     scratch: Vec<Edge>,
+    /// A fresh search starts from the first kept frame stamped at or after this (ns).
+    fresh_from_ns: u64,
+    /// A due search whose worker is not done is taken up on a later frame rather than waited
+    /// for ([`Tracker::defer_late_searches`]).
+    defer: bool,
     /// Results of earlier frames worked out on this call (see [`Tracker::late`]).
     late: Vec<(u64, FrameResult)>,
     /// Stops a search on the worker when the tracker goes (no one will read it).
@@ -356,6 +363,8 @@ impl<'m> Tracker<'m> {
             backlog: Backlog::new(BACKLOG_FRAMES, max_edges),
             scratch: Vec::with_capacity(max_edges),
             late: Vec::with_capacity(BACKLOG_FRAMES + 1),
+            fresh_from_ns: 0,
+            defer: false,
             cancel,
         }
     }
@@ -365,6 +374,15 @@ impl<'m> Tracker<'m> {
     /// frame that starts it; its result is taken up on the same later frame either way.
     pub fn attach_search_worker(&mut self, link: SearchLink<'m>) {
         self.link = Some(link);
+    }
+
+    /// With `on`, a frame on which a search is due but the worker is not done does not wait
+    /// for it: the search is taken up on a later frame (counted in
+    /// [`TrackerStats::search_deferrals`]), and the frames meanwhile come out late, with the same
+    /// poses. For a live source, where waiting costs dropped frames; a lossless replay (the
+    /// default, off) waits, and every frame is answered exactly as with the search inline.
+    pub fn defer_late_searches(&mut self, on: bool) {
+        self.defer = on;
     }
 
     /// Whether a search is under way.
@@ -444,6 +462,25 @@ impl<'m> Tracker<'m> {
                 job.run();
                 self.job = Some(job);
             }
+        }
+    }
+
+    /// Whether the search under way is done (its job at home, or back from the worker now).
+    fn search_done(&mut self) -> bool {
+        if self.job.is_some() {
+            return true;
+        }
+        let Some(link) = self.link.as_ref() else {
+            return true;
+        };
+        match link.done.try_recv() {
+            Ok(job) => {
+                self.job = Some(job);
+                true
+            }
+            Err(crossbeam::channel::TryRecvError::Empty) => false,
+            // The worker is gone: `collect_search` says so.
+            Err(crossbeam::channel::TryRecvError::Disconnected) => true,
         }
     }
 
@@ -542,12 +579,20 @@ impl<'m> Tracker<'m> {
         let started = Instant::now();
         self.backlog.push(edges, timestamp_ns);
         if let Some(pending) = self.pending {
-            if timestamp_ns < pending.due_ns {
+            // Not due yet; or due, but the worker is not done (a machine slower than the
+            // reference, or loaded): the frame waits for it only when the backlog is full.
+            // Taking a search up later changes no pose (the same search, judged on its own
+            // frame, then the same kept frames), only which of them are answered late.
+            let deferred =
+                self.defer && timestamp_ns >= pending.due_ns && !self.backlog.is_full() && !self.search_done();
+            if timestamp_ns < pending.due_ns || deferred {
+                self.stats.search_deferrals += u64::from(deferred);
                 let mut result = FrameResult::empty(self.state);
                 result.match_time = started.elapsed();
                 return result;
             }
             self.pending = None;
+            self.fresh_from_ns = pending.due_ns;
             let r = self.take_up(pending);
             self.note_late(pending.started_ns, r);
         }
@@ -567,12 +612,14 @@ impl<'m> Tracker<'m> {
         result
     }
 
-    /// Tracks the oldest kept frame; a fresh search starts from the newest instead (the older
-    /// ones can only delay it).
+    /// Tracks the oldest kept frame. A fresh search starts from the first kept frame at or after
+    /// the due time of the search taken up last (the frame it was taken up on when the worker kept
+    /// pace): the older ones can only delay it, and a frame fixed by the timestamps keeps the
+    /// answers the same however late the search was taken up.
     fn catch_up_one(&mut self) -> Option<(u64, FrameResult)> {
         if self.state != TrackerState::Tracking && self.confirm_count == 0 {
             let before = self.backlog.dropped;
-            self.backlog.keep_newest();
+            self.backlog.drop_older_than(self.fresh_from_ns);
             self.stats.backlog_dropped += self.backlog.dropped - before;
         }
         let mut buf = std::mem::take(&mut self.scratch);
@@ -606,6 +653,7 @@ impl<'m> Tracker<'m> {
     pub fn finish(&mut self) {
         self.late.clear();
         if let Some(pending) = self.pending.take() {
+            self.fresh_from_ns = pending.due_ns;
             let r = self.take_up(pending);
             self.note_late(pending.started_ns, r);
         }

@@ -397,7 +397,13 @@ pub(super) fn run_process(
         // Without the thread the searches run on the frame path (and the link is dropped:
         // nothing would ever answer it).
         match worker {
-            Ok(_) => processor.tracker.attach_search_worker(link),
+            Ok(_) => {
+                processor.tracker.attach_search_worker(link);
+                // A live source (latest frame wins) does not wait for a search that is late: it
+                // would drop the frames meanwhile. A lossless run waits, and answers every frame
+                // as it would with the search inline.
+                processor.tracker.defer_late_searches(!opts.lossless);
+            }
             Err(e) => tracing::warn!("cannot start the search thread ({e}); searches run on the frame path"),
         }
         processor.run()
