@@ -11,13 +11,16 @@
 //! **When the result is taken up.** A search started on a frame stamped t is taken up on the
 //! first frame stamped at or after t + its budget (`time_budget_ms`, `relocalise_time_budget_ms`:
 //! the work it may do, in reference time), or, when the worker is not done by then (a machine
-//! slower than the reference, or loaded), on the first later frame that finds it done, counted
-//! in [`TrackerStats::search_deferrals`](crate::TrackerStats); a frame waits for the worker only
-//! when the backlog is full ([`TrackerStats::search_waits`](crate::TrackerStats)). A search stops
-//! on its work, never the clock (module `init`), it is judged on its own frame, the kept frames
-//! are the same, and a fresh search starts from the frame fixed by the timestamps: so a recording
-//! gives the same poses whether the search ran on a worker or inline, on an idle or a loaded
-//! machine; only which of them come late can differ (a test in `tests/tracker.rs` checks it).
+//! slower than the reference, or loaded): a lossless replay waits for it (counted in
+//! [`TrackerStats::search_waits`](crate::TrackerStats)); a live source
+//! ([`Tracker::defer_late_searches`](crate::Tracker::defer_late_searches)) takes it up on the first
+//! later frame that finds it done (counted in `search_deferrals`). A search stops on its work,
+//! never the clock (module `init`), it is judged on its own frame, the kept frames are the same,
+//! and a fresh search starts from the oldest kept frame: so a recording gives the
+//! same poses whether the search ran on a worker or inline, on an idle or a loaded machine; only
+//! which of them come late can differ (a test in `tests/tracker.rs` checks it). The exception, a
+//! backstop: a live source whose backlog fills while it does not wait thins it (counted in
+//! `backlog_dropped`), and the kept frames then depend on the load.
 //!
 //! **The frames in between.** They are kept in a `Backlog` (answered meanwhile with no pose).
 //! The search is judged on its own frame's edges, which the job holds, exactly as if it had run
@@ -27,8 +30,8 @@
 //! poses come out late ([`Tracker::late`](crate::Tracker::late)), for a trajectory, never for a
 //! live subscriber that has had later frames. At the end of a recording
 //! [`Tracker::finish`](crate::Tracker::finish) takes up a search under way and works off the rest.
-//! A fresh search starts from the first kept frame at or after the due time of the search taken
-//! up last (the frame it was due on): the older kept frames are dropped (counted).
+//! A search that fails is followed by one on the oldest kept frame (the next after its own), as
+//! inline: the searches after a start stay near the hint's time.
 //!
 //! Memory: the job (its own [`Initialiser`], an edge buffer for the largest frame) and the
 //! backlog's slots are made once in [`Tracker::new`](crate::Tracker::new); the job travels by
@@ -203,7 +206,7 @@ pub(crate) struct Backlog {
     slots: Vec<(u64, Vec<Edge>)>,
     head: usize,
     len: usize,
-    /// Frames dropped by thinning or by a fresh search, since start.
+    /// Frames dropped by thinning, since start.
     pub(crate) dropped: u64,
 }
 
@@ -222,7 +225,7 @@ impl Backlog {
         self.len == 0
     }
 
-    pub(crate) fn is_full(&self) -> bool {
+    fn is_full(&self) -> bool {
         self.len == self.slots.len()
     }
 
@@ -232,7 +235,7 @@ impl Backlog {
 
     /// Keeps a copy of the frame stamped `timestamp_ns` (its edges up to a slot's capacity).
     pub(crate) fn push(&mut self, edges: &[Edge], timestamp_ns: u64) {
-        if self.len == self.slots.len() {
+        if self.is_full() {
             self.thin();
         }
         let i = self.at(self.len);
@@ -268,16 +271,6 @@ impl Backlog {
         self.len -= 1;
         Some(t)
     }
-
-    /// Drops the frames stamped before `timestamp_ns`, but never the newest (a fresh search
-    /// starts from the first frame left).
-    pub(crate) fn drop_older_than(&mut self, timestamp_ns: u64) {
-        while self.len > 1 && self.slots[self.head].0 < timestamp_ns {
-            self.head = self.at(1);
-            self.len -= 1;
-            self.dropped += 1;
-        }
-    }
 }
 
 #[cfg(test)]
@@ -303,22 +296,5 @@ mod tests {
             b.push(&[], t);
         }
         assert_eq!(stamps(&mut b), [10, 14, 16]);
-    }
-
-    #[test]
-    fn a_fresh_search_drops_the_frames_before_its_start_but_never_the_newest() {
-        let mut b = Backlog::new(8, 4);
-        for t in 1..=5 {
-            b.push(&[], t);
-        }
-        b.drop_older_than(3);
-        assert_eq!(b.dropped, 2);
-        assert_eq!(stamps(&mut b), [3, 4, 5]);
-        for t in 6..=7 {
-            b.push(&[], t);
-        }
-        b.drop_older_than(100);
-        assert_eq!(stamps(&mut b), [7]);
-        assert!(b.is_empty());
     }
 }

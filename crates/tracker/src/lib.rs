@@ -145,7 +145,7 @@ pub struct TrackerStats {
     pub search_waits: u64,
     pub search_wait_time: Duration,
     /// Frames kept during a search and tracked afterwards (module `background`), and frames
-    /// the backlog dropped (thinned during a long search, or passed over by a fresh search).
+    /// the backlog dropped (thinned during a long search, or left at the end, [`Tracker::finish`]).
     pub caught_up: u64,
     /// Due frames on which the worker was not done: the search was taken up on a later frame.
     pub search_deferrals: u64,
@@ -272,8 +272,6 @@ pub struct Tracker<'m> {
     /// The frames that arrive during a search, and the buffer a kept frame is tracked from.
     backlog: Backlog,
     scratch: Vec<Edge>,
-    /// A fresh search starts from the first kept frame stamped at or after this (ns).
-    fresh_from_ns: u64,
     /// A due search whose worker is not done is taken up on a later frame rather than waited
     /// for ([`Tracker::defer_late_searches`]).
     defer: bool,
@@ -363,7 +361,6 @@ impl<'m> Tracker<'m> {
             backlog: Backlog::new(BACKLOG_FRAMES, max_edges),
             scratch: Vec::with_capacity(max_edges),
             late: Vec::with_capacity(BACKLOG_FRAMES + 1),
-            fresh_from_ns: 0,
             defer: false,
             cancel,
         }
@@ -379,8 +376,10 @@ impl<'m> Tracker<'m> {
     /// With `on`, a frame on which a search is due but the worker is not done does not wait
     /// for it: the search is taken up on a later frame (counted in
     /// [`TrackerStats::search_deferrals`]), and the frames meanwhile come out late, with the same
-    /// poses. For a live source, where waiting costs dropped frames; a lossless replay (the
-    /// default, off) waits, and every frame is answered exactly as with the search inline.
+    /// poses, unless the backlog fills and is thinned meanwhile (counted in
+    /// [`TrackerStats::backlog_dropped`]). For a live source, where waiting costs dropped frames;
+    /// a lossless replay (the default, off) waits, and every frame is answered exactly as with
+    /// the search inline.
     pub fn defer_late_searches(&mut self, on: bool) {
         self.defer = on;
     }
@@ -580,11 +579,11 @@ impl<'m> Tracker<'m> {
         self.backlog.push(edges, timestamp_ns);
         if let Some(pending) = self.pending {
             // Not due yet; or due, but the worker is not done (a machine slower than the
-            // reference, or loaded): the frame waits for it only when the backlog is full.
-            // Taking a search up later changes no pose (the same search, judged on its own
-            // frame, then the same kept frames), only which of them are answered late.
-            let deferred =
-                self.defer && timestamp_ns >= pending.due_ns && !self.backlog.is_full() && !self.search_done();
+            // reference, or loaded) and the frames do not wait for it. Taking a search up later
+            // changes no pose (the same search, judged on its own frame, then the same kept
+            // frames), only which of them are answered late; unless the backlog fills and is
+            // thinned meanwhile (counted in `backlog_dropped`): the last backstop under load.
+            let deferred = self.defer && timestamp_ns >= pending.due_ns && !self.search_done();
             if timestamp_ns < pending.due_ns || deferred {
                 self.stats.search_deferrals += u64::from(deferred);
                 let mut result = FrameResult::empty(self.state);
@@ -592,7 +591,6 @@ impl<'m> Tracker<'m> {
                 return result;
             }
             self.pending = None;
-            self.fresh_from_ns = pending.due_ns;
             let r = self.take_up(pending);
             self.note_late(pending.started_ns, r);
         }
@@ -612,16 +610,12 @@ impl<'m> Tracker<'m> {
         result
     }
 
-    /// Tracks the oldest kept frame. A fresh search starts from the first kept frame at or after
-    /// the due time of the search taken up last (the frame it was taken up on when the worker kept
-    /// pace): the older ones can only delay it, and a frame fixed by the timestamps keeps the
-    /// answers the same however late the search was taken up.
+    /// Tracks the oldest kept frame; a fresh search starts from it too. Not from the newest: a
+    /// search that failed is followed by one on the next frame, as inline, so that the searches
+    /// after a start stay near the hint's time (searching from the newest, the corridor's
+    /// searches fell 1 s apart, the rig walked out of the hint's reach between them, and the
+    /// sixth search committed the next doorway, 4 m off).
     fn catch_up_one(&mut self) -> Option<(u64, FrameResult)> {
-        if self.state != TrackerState::Tracking && self.confirm_count == 0 {
-            let before = self.backlog.dropped;
-            self.backlog.drop_older_than(self.fresh_from_ns);
-            self.stats.backlog_dropped += self.backlog.dropped - before;
-        }
         let mut buf = std::mem::take(&mut self.scratch);
         let t = self.backlog.pop_into(&mut buf);
         let r = t.map(|t| (t, self.step(&buf, t)));
@@ -653,7 +647,6 @@ impl<'m> Tracker<'m> {
     pub fn finish(&mut self) {
         self.late.clear();
         if let Some(pending) = self.pending.take() {
-            self.fresh_from_ns = pending.due_ns;
             let r = self.take_up(pending);
             self.note_late(pending.started_ns, r);
         }
