@@ -31,7 +31,9 @@
 //! live subscriber that has had later frames. At the end of a recording
 //! [`Tracker::finish`](crate::Tracker::finish) takes up a search under way and works off the rest.
 //! A search that fails is followed by one on the oldest kept frame (the next after its own), as
-//! inline: the searches after a start stay near the hint's time.
+//! inline: the searches after a start stay near the hint's time; unless the kept frames span
+//! more than two search budgets (a worker slower than the frames), when it starts from the newest
+//! and the older kept frames are dropped (counted): the lag stays bounded.
 //!
 //! Memory: the job (its own [`Initialiser`], an edge buffer for the largest frame) and the
 //! backlog's slots are made once in [`Tracker::new`](crate::Tracker::new); the job travels by
@@ -206,7 +208,7 @@ pub(crate) struct Backlog {
     slots: Vec<(u64, Vec<Edge>)>,
     head: usize,
     len: usize,
-    /// Frames dropped by thinning, since start.
+    /// Frames dropped by thinning or passed over by a fresh search, since start.
     pub(crate) dropped: u64,
 }
 
@@ -258,6 +260,25 @@ impl Backlog {
         self.len = kept;
     }
 
+    /// How far apart the oldest and the newest kept frames are (ns; 0 with fewer than two).
+    pub(crate) fn span_ns(&self) -> u64 {
+        if self.len < 2 {
+            return 0;
+        }
+        self.slots[self.at(self.len - 1)]
+            .0
+            .saturating_sub(self.slots[self.head].0)
+    }
+
+    /// Drops all but the newest frame (counted).
+    pub(crate) fn keep_newest(&mut self) {
+        if self.len > 1 {
+            self.dropped += (self.len - 1) as u64;
+            self.head = self.at(self.len - 1);
+            self.len = 1;
+        }
+    }
+
     /// Takes the oldest frame: its edges are swapped into `buf` (whose buffer takes the slot's
     /// place, so nothing is allocated) and its timestamp returned.
     pub(crate) fn pop_into(&mut self, buf: &mut Vec<Edge>) -> Option<u64> {
@@ -296,5 +317,18 @@ mod tests {
             b.push(&[], t);
         }
         assert_eq!(stamps(&mut b), [10, 14, 16]);
+    }
+
+    #[test]
+    fn the_span_runs_from_the_oldest_to_the_newest_and_keep_newest_keeps_one() {
+        let mut b = Backlog::new(8, 4);
+        assert_eq!(b.span_ns(), 0);
+        for t in [10, 20, 35] {
+            b.push(&[], t);
+        }
+        assert_eq!(b.span_ns(), 25);
+        b.keep_newest();
+        assert_eq!((b.span_ns(), b.dropped), (0, 2));
+        assert_eq!(stamps(&mut b), [35]);
     }
 }

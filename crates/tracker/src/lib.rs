@@ -145,7 +145,8 @@ pub struct TrackerStats {
     pub search_waits: u64,
     pub search_wait_time: Duration,
     /// Frames kept during a search and tracked afterwards (module `background`), and frames
-    /// the backlog dropped (thinned during a long search, or left at the end, [`Tracker::finish`]).
+    /// the backlog dropped (thinned during a long search, passed over by a fresh search when
+    /// the backlog spans more than two budgets, or left at the end, [`Tracker::finish`]).
     pub caught_up: u64,
     /// Due frames on which the worker was not done: the search was taken up on a later frame.
     pub search_deferrals: u64,
@@ -396,12 +397,7 @@ impl<'m> Tracker<'m> {
             return;
         };
         let volume = self.search_volume();
-        let budget_ms = if volume.diameter_m.is_none() {
-            self.cfg.initialisation.whole_model_time_budget_ms
-        } else {
-            self.cfg.initialisation.time_budget_ms
-        };
-        let budget = Duration::from_secs_f64(budget_ms.max(0.0) / 1e3);
+        let budget = self.search_budget();
         let i = &self.cfg.initialisation;
         let breadth = if self.widen {
             (
@@ -442,6 +438,16 @@ impl<'m> Tracker<'m> {
             relocalisation: None,
         };
         self.launch(job, pending);
+    }
+
+    /// The budget of the search the current state would start: the whole model's or a volume's.
+    fn search_budget(&self) -> Duration {
+        let budget_ms = if self.search_volume().diameter_m.is_none() {
+            self.cfg.initialisation.whole_model_time_budget_ms
+        } else {
+            self.cfg.initialisation.time_budget_ms
+        };
+        Duration::from_secs_f64(budget_ms.max(0.0) / 1e3)
     }
 
     /// Sends a prepared job to the worker (or runs it here without one) and marks it under way.
@@ -616,6 +622,16 @@ impl<'m> Tracker<'m> {
     /// searches fell 1 s apart, the rig walked out of the hint's reach between them, and the
     /// sixth search committed the next doorway, 4 m off).
     fn catch_up_one(&mut self) -> Option<(u64, FrameResult)> {
+        // ... unless the kept frames span more than two search budgets (a worker slower than the
+        // frames, searching again and again): then from the newest, so the lag stays bounded.
+        if self.state != TrackerState::Tracking && self.confirm_count == 0 {
+            let budget_ns = u64::try_from(self.search_budget().as_nanos()).unwrap_or(u64::MAX);
+            if self.backlog.span_ns() > budget_ns.saturating_mul(2) {
+                let before = self.backlog.dropped;
+                self.backlog.keep_newest();
+                self.stats.backlog_dropped += self.backlog.dropped - before;
+            }
+        }
         let mut buf = std::mem::take(&mut self.scratch);
         let t = self.backlog.pop_into(&mut buf);
         let r = t.map(|t| (t, self.step(&buf, t)));
