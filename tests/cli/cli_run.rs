@@ -104,7 +104,7 @@ fn a_short_replay_writes_a_tum_trajectory_near_the_truth() {
     assert_eq!(code, 0, "{stderr}");
     assert!(stdout.is_empty());
     // The search's result is taken up a budget later on the recording's clock (frame 5 of 6),
-    // and the frames kept meanwhile are tracked at the end: every frame has its pose.
+    // and the frames kept meanwhile are tracked at the end, their poses in the file too.
     let est = load_tum(&out).unwrap();
     assert!(est.len() >= 5, "{} poses: {stderr}", est.len());
     for e in &est {

@@ -171,7 +171,7 @@ pub struct SearchWorker<'m> {
 }
 
 impl SearchWorker<'_> {
-    /// Runs the jobs until the tracker's side is dropped ([`search_worker`]).
+    /// Runs the jobs until the tracker's side is dropped.
     pub fn run(self) {
         search_worker(self.jobs, self.done);
     }
@@ -186,7 +186,7 @@ pub struct SearchLink<'m> {
 /// The worker's loop: runs each job it receives and hands it back, until the tracker's side is
 /// dropped.
 /// A search that panics hands its job back with nothing found: the tracker searches afresh.
-pub fn search_worker<'m>(jobs: Receiver<Box<SearchJob<'m>>>, done: Sender<Box<SearchJob<'m>>>) {
+fn search_worker<'m>(jobs: Receiver<Box<SearchJob<'m>>>, done: Sender<Box<SearchJob<'m>>>) {
     while let Ok(mut job) = jobs.recv() {
         let ran = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| job.run()));
         if ran.is_err() {

@@ -37,7 +37,7 @@ pub mod visibility;
 mod vote;
 
 use background::Backlog;
-pub use background::{search_link, search_worker, SearchJob, SearchLink, SearchWorker};
+pub use background::{search_link, SearchJob, SearchLink, SearchWorker};
 pub use correspondence::{CorrespondenceState, CorrespondenceTable, HeldEdge, Track};
 pub use init::{Candidate, InitOptions, InitReport, Initialiser, SearchVolume};
 
@@ -148,9 +148,9 @@ pub struct TrackerStats {
     /// the backlog dropped (thinned during a long search, passed over by a fresh search when
     /// the backlog spans more than two budgets, or left at the end, [`Tracker::finish`]).
     pub caught_up: u64,
+    pub backlog_dropped: u64,
     /// Due frames on which the worker was not done: the search was taken up on a later frame.
     pub search_deferrals: u64,
-    pub backlog_dropped: u64,
     /// Poses of kept frames, handed out late through [`Tracker::late`] (not in `tracked`).
     pub late_poses: u64,
 }
@@ -193,8 +193,9 @@ const NARROW_VIEW_SHARE: f64 = 0.5;
 const VOLUME_SLACK_M: f64 = 0.1;
 
 /// Frames kept while a search runs (module `background`): a 950 ms search at 30 Hz keeps all
-/// of its 29; a longer one (the whole model) keeps every other, every fourth… A frame of the
-/// shipped rig's 1,536 edges takes about 0.2 MB.
+/// of its 29; a longer one (the whole model) keeps every other, every fourth… A slot holds the
+/// rig's most edges (the shipped rig: 1,536 of 248 bytes, 0.38 MB), so the backlog is about
+/// 12 MB, made at start-up.
 const BACKLOG_FRAMES: usize = 32;
 
 /// Kept frames tracked per arriving frame once a search is taken up: one more than arrive, so the
@@ -368,7 +369,7 @@ impl<'m> Tracker<'m> {
     }
 
     /// Runs the searches on a worker from now on (module `background`): `link` sends jobs to a
-    /// thread running [`search_worker`] and takes them back. Without one, a search runs on the
+    /// thread running [`SearchWorker::run`] and takes them back. Without one, a search runs on the
     /// frame that starts it; its result is taken up on the same later frame either way.
     pub fn attach_search_worker(&mut self, link: SearchLink<'m>) {
         self.link = Some(link);
