@@ -16,8 +16,10 @@
 //!
 //! Run: `cargo bench --bench pipeline` (needs the `desk` feature, on by default). Options after
 //! `--`: `--frames N` (default 300), `--seed S` (default 11), `--hogs N` (N threads spinning at
-//! the tracker's priority for the whole measurement: a machine busy with other work, issue 24's
-//! "two CPU hogs"), `--scenario lab|corridor|handheld` (default `lab`). Recordings are cached in
+//! the normal priority for the whole measurement: a machine busy with other work, issue 24's
+//! "two CPU hogs"), `--scenario lab|corridor|handheld` (default `lab`), `--no-realtime` (the frame
+//! path at the normal policy, `[budgets] realtime_priority = 0`, as where the OS refuses
+//! `SCHED_FIFO`; the header says which the runs got). Recordings are cached in
 //! `target/omnitrack-cache/` (or `$OMNITRACK_CACHE`), as for `benches/tracker/`.
 
 #[cfg(feature = "desk")]
@@ -221,6 +223,7 @@ mod bench {
         let mut frames = 300usize;
         let mut seed = 11u64;
         let mut hogs = 0usize;
+        let mut realtime = true;
         let mut name = ScenarioName::Lab;
         let mut it = std::env::args().skip(1);
         while let Some(x) = it.next() {
@@ -228,6 +231,7 @@ mod bench {
                 "--frames" => frames = it.next().and_then(|s| s.parse().ok()).expect("--frames N"),
                 "--seed" => seed = it.next().and_then(|s| s.parse().ok()).expect("--seed S"),
                 "--hogs" => hogs = it.next().and_then(|s| s.parse().ok()).expect("--hogs N"),
+                "--no-realtime" => realtime = false,
                 "--scenario" => {
                     let want = it.next().expect("--scenario lab|corridor|handheld");
                     name = *ScenarioName::ALL
@@ -255,7 +259,10 @@ mod bench {
         if made {
             eprintln!();
         }
-        let cfg = TrackerConfig::default();
+        let mut cfg = TrackerConfig::default();
+        if !realtime {
+            cfg.budgets.realtime_priority = 0;
+        }
         let model_path = rec.join("model.obj");
         let model = Model::load(&model_path).unwrap();
         let (table, origin) = load_or_build_table(&model_path, &model, None, &cfg).unwrap();
@@ -303,12 +310,13 @@ mod bench {
 
         println!();
         println!(
-            "Threaded pipeline, replayed `{}` at 30 Hz ({frames} frames of six 512×384 sensors, {cores} cores, {hogs} CPU hogs, load average before: {load}):",
-            name.as_str()
+            "Threaded pipeline, replayed `{}` at 30 Hz ({frames} frames of six 512×384 sensors, {cores} cores, {hogs} CPU hogs, load average before: {load}; {}):",
+            name.as_str(),
+            runs[1].summary.realtime
         );
         println!();
-        println!("| run | captured | processed | dropped | tracked | frames/s | init (ms) | latency p50 / p99 / max (ms) | edges p50 / p99 (ms) | track p50 / p99 (ms) | publish p50 / p99 (µs) | overruns edges / track / frame |");
-        println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |");
+        println!("| run | captured | processed | dropped | tracked | frames/s | init (ms) | latency p50 / p99 / max (ms) | sent p99 (ms) | edges p50 / p99 (ms) | track p50 / p99 (ms) | publish p50 / p99 (µs) | overruns edges / track / frame |");
+        println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |");
         for r in &runs {
             let s = &r.summary;
             let ms = |d: Duration| d.as_secs_f64() * 1e3;
@@ -316,7 +324,7 @@ mod bench {
             let t = s.stage(Stage::Track);
             let p = s.stage(Stage::Publish);
             println!(
-                "| {} | {} | {} | {} | {} | {:.1} | {:.0} | {:.1} / {:.1} / {:.1} | {:.1} / {:.1} | {:.1} / {:.1} | {:.0} / {:.0} | {} / {} / {} |",
+                "| {} | {} | {} | {} | {} | {:.1} | {:.0} | {:.1} / {:.1} / {:.1} | {:.1} | {:.1} / {:.1} | {:.1} / {:.1} | {:.0} / {:.0} | {} / {} / {} |",
                 r.name,
                 s.frames_captured,
                 s.frames_processed,
@@ -327,6 +335,7 @@ mod bench {
                 percentile(&r.latency, 0.5),
                 percentile(&r.latency, 0.99),
                 r.latency.last().copied().unwrap_or(f64::NAN),
+                ms(s.stage(Stage::Frame).p99),
                 ms(e.p50),
                 ms(e.p99),
                 ms(t.p50),
@@ -344,15 +353,16 @@ mod bench {
                 );
             }
         }
-        let paced = &runs[1];
-        let rate = paced.summary.frame_rate_hz();
-        let p99 = percentile(&paced.latency, 0.99);
+        let rate = runs[1].summary.frame_rate_hz().min(runs[2].summary.frame_rate_hz());
+        let p99 = [&runs[1], &runs[2]].map(|r| percentile(&r.latency, 0.99));
         println!();
         println!(
-            "Target (docs/design.md): ≥ 30 frames/s, p99 latency < 33 ms on 2 cores — paced run: {rate:.1} frames/s ({}), p99 {p99:.1} ms ({}); \
-             unpaced throughput {:.1} frames/s.",
+            "Target (docs/design.md): ≥ 30 frames/s, p99 latency < 33 ms on 2 cores — paced runs: {rate:.1} frames/s at least ({}), \
+             p99 {:.1} standing / {:.1} walking ms ({}); unpaced throughput {:.1} frames/s.",
             if rate >= 29.5 { "met" } else { "NOT met" },
-            if p99 < 33.0 { "met" } else { "NOT met" },
+            p99[0],
+            p99[1],
+            if p99.iter().all(|&p| p < 33.0) { "met" } else { "NOT met" },
             runs[0].summary.frame_rate_hz()
         );
     }

@@ -82,6 +82,11 @@ fn bad_values_name_the_key() {
             "[motion]\nmax_tilt_deg = 200\n",
             "key 'motion.max_tilt_deg': must be in (0, 180]",
         ),
+        (
+            "[budgets]\nrealtime_priority = 100\n",
+            "key 'budgets.realtime_priority': must be 0 (off) to 99",
+        ),
+        ("[budgets]\nrealtime_priority = -1\n", "realtime_priority = -1"),
         ("[typo]\n", "unknown field `typo`"),
         // Capacities and budgets far past any use are refused before they ask for gigabytes.
         (

@@ -23,7 +23,8 @@ use omnitrack::capture::{
 use omnitrack::config::TrackerConfig;
 use omnitrack::publish::{PoseStatus, PoseSubscriber, SearchState, StatusSample, StatusSubscriber};
 use omnitrack::runtime::pipeline::{
-    inside_publish, live_sensors, run_pipeline, FrameSink, PipelineOptions, PipelineThread, RunEnd, Stage, TumSink,
+    inside_publish, live_sensors, run_pipeline, upstream_priority, FrameSink, PipelineOptions, PipelineThread,
+    Realtime, RunEnd, Stage, TumSink,
 };
 use omnitrack::runtime::{FrameRecord, RunError, RunOptions, SinkError};
 use omnitrack::tracker::SearchVolume;
@@ -717,4 +718,100 @@ fn a_service_that_cannot_be_opened_stops_the_run_before_its_first_frame() {
     let summary = run_pipeline(replay(&f.rec), &f.model, &f.table, &cfg, &opts, &mut sink).unwrap();
     assert!(summary.publisher_error.is_some());
     assert_eq!(summary.frames_processed, 3);
+}
+
+/// (thread name as the kernel keeps it, SCHED_FIFO?, real-time priority) of every thread of
+/// this process, from `/proc/self/task/*/stat` (fields 40 `rt_priority` and 41 `policy`).
+fn thread_policies() -> Vec<(String, bool, u32)> {
+    let mut out = Vec::new();
+    for task in std::fs::read_dir("/proc/self/task").unwrap().flatten() {
+        let (Ok(comm), Ok(stat)) = (
+            std::fs::read_to_string(task.path().join("comm")),
+            std::fs::read_to_string(task.path().join("stat")),
+        ) else {
+            continue; // the thread ended meanwhile
+        };
+        // Fields from the third on follow the last ')' (the name may hold spaces and parens).
+        let rest: Vec<&str> = stat[stat.rfind(')').unwrap() + 1..].split_whitespace().collect();
+        let rt_priority: u32 = rest[40 - 3].parse().unwrap();
+        let policy: u32 = rest[41 - 3].parse().unwrap();
+        out.push((comm.trim().to_string(), policy == 1, rt_priority));
+    }
+    out
+}
+
+#[test]
+fn the_frame_path_runs_at_realtime_priority_where_allowed_and_the_searches_do_not() {
+    let _serial = serial();
+    let f = fixture();
+    let shipped = TrackerConfig::default().budgets.realtime_priority;
+    assert!(shipped > 0);
+    for (priority, lossless) in [(shipped, false), (0, false), (shipped, true)] {
+        let mut cfg = TrackerConfig::default();
+        cfg.budgets.realtime_priority = priority;
+        let mut opts = options(f, "realtime");
+        opts.lossless = lossless;
+        opts.pose_service = None;
+        opts.status_service = None;
+        // Sampled mid-run, from the sink's thread (the caller's: never changed).
+        struct Sample(Vec<(String, bool, u32)>, usize);
+        impl FrameSink for Sample {
+            fn frame(&mut self, _: &FrameRecord) -> Result<(), SinkError> {
+                self.1 += 1;
+                if self.1 == 5 {
+                    self.0 = thread_policies();
+                }
+                Ok(())
+            }
+        }
+        let mut sink = Sample(Vec::new(), 0);
+        let summary = run_pipeline(replay(&f.rec), &f.model, &f.table, &cfg, &opts, &mut sink).unwrap();
+        eprintln!(
+            "realtime_priority {priority}, lossless {lossless}: {} — {:?}",
+            summary.realtime, sink.0
+        );
+        let named = |prefix: &str| -> Vec<(bool, u32)> {
+            sink.0
+                .iter()
+                .filter(|(n, ..)| n.starts_with(prefix))
+                .map(|&(_, fifo, p)| (fifo, p))
+                .collect()
+        };
+        let tracking = [named("omnitrack-proc"), named("edges-")].concat();
+        let capture = named("omnitrack-capt");
+        assert!(tracking.len() >= 2 && !capture.is_empty(), "{:?}", sink.0);
+        let frame_path = [tracking.clone(), capture.clone()].concat();
+        let searches = named("omnitrack-sear");
+        assert!(!searches.is_empty(), "{:?}", sink.0);
+        assert!(searches.iter().all(|&s| s == (false, 0)), "searches: {searches:?}");
+        let me = thread_policies();
+        assert!(
+            me.iter()
+                .filter(|(n, ..)| n.starts_with("the_frame_path"))
+                .all(|&(_, fifo, _)| !fifo),
+            "the caller's thread is left alone"
+        );
+        match &summary.realtime {
+            Realtime::Granted(p) => {
+                assert!(!lossless);
+                assert_eq!(*p, priority);
+                assert!(tracking.iter().all(|&t| t == (true, u32::from(*p))), "{tracking:?}");
+                assert!(
+                    capture.iter().all(|&t| t == (true, u32::from(upstream_priority(*p)))),
+                    "{capture:?}"
+                );
+            }
+            Realtime::Refused { priority: p, reason } => {
+                assert!(!lossless);
+                assert_eq!(*p, priority);
+                assert!(!reason.is_empty());
+                assert!(frame_path.iter().all(|&(fifo, _)| !fifo), "{frame_path:?}");
+            }
+            Realtime::Off | Realtime::Lossless => {
+                assert_eq!(summary.realtime == Realtime::Lossless, lossless && priority > 0);
+                assert!(priority == 0 || lossless);
+                assert!(frame_path.iter().all(|&t| t == (false, 0)), "{frame_path:?}");
+            }
+        }
+    }
 }

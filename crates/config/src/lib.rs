@@ -159,6 +159,9 @@ pub struct BudgetConfig {
     pub frame_assembly_wait_ms: f64,
     /// Time between two status samples.
     pub status_interval_ms: f64,
+    /// `SCHED_FIFO` priority of the pipeline's frame-path threads (capture, assembly, process,
+    /// edge workers), 1–99, where the OS allows it; 0 = the normal policy.
+    pub realtime_priority: u8,
 }
 
 /// Every tunable of the tracker, grouped by the stage that reads it.
@@ -305,6 +308,7 @@ impl Default for BudgetConfig {
             publish_ms: 0.5,
             frame_assembly_wait_ms: 10.0,
             status_interval_ms: 250.0,
+            realtime_priority: 10,
         }
     }
 }
@@ -603,6 +607,12 @@ impl TrackerConfig {
         positive("budgets.publish_ms", self.budgets.publish_ms)?;
         positive("budgets.frame_assembly_wait_ms", self.budgets.frame_assembly_wait_ms)?;
         positive("budgets.status_interval_ms", self.budgets.status_interval_ms)?;
+        if self.budgets.realtime_priority > 99 {
+            return Err(format!(
+                "key 'budgets.realtime_priority': must be 0 (off) to 99, found {}",
+                self.budgets.realtime_priority
+            ));
+        }
         Ok(())
     }
 }

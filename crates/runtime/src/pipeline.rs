@@ -25,6 +25,11 @@
 //! - the **caller's thread** runs the sink, fed by a bounded channel of [`SINK_BUFFER`] records;
 //!   when it is full the tracker waits (the trajectory is never short of a processed frame).
 //!
+//! Scheduling (`priority`): where frames come in real time, process and the edge workers run at
+//! `SCHED_FIFO` `[budgets] realtime_priority`, capture and assembly one below, the search thread
+//! at the normal policy; the OS may refuse (one warning); [`PipelineSummary::realtime`] says what
+//! the run got.
+//!
 //! Latest frame wins: the hand-over to the tracker holds one frame; a newer frame replaces a
 //! pending one, which goes back to the pool and is counted as dropped (whole frame, and per
 //! sensor for each valid image in it). With [`PipelineOptions::lossless`] capture waits instead
@@ -67,6 +72,7 @@ mod live;
 mod logging;
 mod options;
 mod pool;
+mod priority;
 mod process;
 mod publishing;
 mod shared;
@@ -79,6 +85,9 @@ pub use live::{live_sensors, open_pipeline_source, LiveDevice, SensorCapture};
 pub use logging::init_logging;
 pub use omnitrack_io::publish::Stage;
 pub use options::{PipelineOptions, PipelineSource, PipelineThread};
+#[cfg(unix)]
+pub use priority::current_thread_policy;
+pub use priority::{upstream_priority, Realtime};
 pub use publishing::inside_publish;
 pub use signals::{stop_on_signals, SignalGuard};
 pub use sink::{FrameSink, TrajectoryFileError, TumSink};

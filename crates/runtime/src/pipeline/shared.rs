@@ -4,6 +4,7 @@
 //! In: the [`PipelineOptions`] and the budgets. Out: what every thread reads and counts into;
 //! [`run_pipeline`](super::run_pipeline) turns it into the summary at the end.
 
+use super::priority::{self, Realtime};
 use super::stats::SensorCounters;
 use super::{stage_budget, PipelineOptions, PipelineThread, Stage, StageClock};
 use omnitrack_config::BudgetConfig;
@@ -24,6 +25,10 @@ pub(super) struct Shared<'o> {
     pub(super) source_error: Mutex<Option<SourceError>>,
     pub(super) lossless: bool,
     pub(super) hook: Option<fn(PipelineThread)>,
+    /// `[budgets] realtime_priority` (0: off).
+    realtime_priority: u8,
+    /// What the frame-path threads got so far (`priority`).
+    pub(super) realtime: Mutex<Realtime>,
 }
 
 impl<'o> Shared<'o> {
@@ -38,6 +43,14 @@ impl<'o> Shared<'o> {
             source_error: Mutex::new(None),
             lossless: opts.lossless,
             hook: opts.on_thread_start,
+            realtime_priority: if opts.lossless { 0 } else { budgets.realtime_priority },
+            realtime: Mutex::new(if budgets.realtime_priority == 0 {
+                Realtime::Off
+            } else if opts.lossless {
+                Realtime::Lossless
+            } else {
+                Realtime::Granted(budgets.realtime_priority)
+            }),
         }
     }
 }
@@ -47,7 +60,20 @@ impl Shared<'_> {
         self.halt.load(Ordering::Relaxed) || self.stop.load(Ordering::Relaxed)
     }
 
+    /// Sets the thread's scheduling for its role (`priority`), then calls the caller's hook.
     pub(super) fn thread_started(&self, t: PipelineThread) {
+        if let Err(reason) = priority::apply(t, self.realtime_priority) {
+            let mut realtime = lock(&self.realtime);
+            if !matches!(*realtime, Realtime::Refused { .. }) {
+                let refused = Realtime::Refused {
+                    priority: self.realtime_priority,
+                    reason,
+                };
+                // Once per run: the run goes on, its latency at the mercy of other programs.
+                tracing::warn!("{refused}; set budgets.realtime_priority = 0 to not ask");
+                *realtime = refused;
+            }
+        }
         if let Some(hook) = self.hook {
             hook(t);
         }

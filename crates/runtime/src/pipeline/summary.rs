@@ -7,7 +7,7 @@
 use super::process::ProcessOutcome;
 use super::shared::{lock, Shared};
 use super::stats::SensorCounters;
-use super::{SensorSummary, Stage, StageSummary};
+use super::{Realtime, SensorSummary, Stage, StageSummary};
 use omnitrack_io::capture::SourceStats;
 use omnitrack_tracker::TrackerStats;
 use std::fmt;
@@ -50,6 +50,8 @@ pub struct PipelineSummary {
     /// Why a service could not be opened (the run stopped before its first frame, or with
     /// `require_services` off went on without it).
     pub publisher_error: Option<String>,
+    /// The frame path's scheduling (`[budgets] realtime_priority`).
+    pub realtime: Realtime,
 }
 
 impl PipelineSummary {
@@ -67,7 +69,7 @@ impl PipelineSummary {
 }
 
 impl fmt::Display for PipelineSummary {
-    /// One line: frames, rate, drops, latency, overruns.
+    /// One line: frames, rate, drops, latency, overruns, the frame path's scheduling.
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let lat = self.stage(Stage::Frame);
         write!(
@@ -86,7 +88,7 @@ impl fmt::Display for PipelineSummary {
                 write!(f, " {} {}", s.name(), st.overruns)?;
             }
         }
-        Ok(())
+        write!(f, "; {}", self.realtime)
     }
 }
 
@@ -125,5 +127,6 @@ pub(super) fn summarize(
         status_published: outcome.status_published,
         publish_errors: outcome.publish_errors,
         publisher_error: outcome.publisher_error,
+        realtime: lock(&shared.realtime).clone(),
     }
 }
