@@ -17,7 +17,8 @@
 //! Run: `cargo bench --bench pipeline` (needs the `desk` feature, on by default). Options after
 //! `--`: `--frames N` (default 300), `--seed S` (default 11), `--hogs N` (N threads spinning at
 //! the normal priority for the whole measurement: a machine busy with other work, issue 24's
-//! "two CPU hogs"), `--scenario lab|corridor|handheld` (default `lab`), `--no-realtime` (the frame
+//! "two CPU hogs"), `--scenario lab|corridor|handheld` (default `lab`), `--building SEED` (a
+//! random building of issue 11 instead, `tracker` bench's `--buildings`, walked at 30 Hz), `--no-realtime` (the frame
 //! path at the normal policy, `[budgets] realtime_priority = 0`, as where the OS refuses
 //! `SCHED_FIFO`; the header says which the runs got). Recordings are cached in
 //! `target/omnitrack-cache/` (or `$OMNITRACK_CACHE`), as for `benches/tracker/`.
@@ -27,7 +28,8 @@ mod bench {
     use nalgebra::Point3;
     use omnitrack::capture::{FrameSet, FrameSource, Pacing, ReplaySource, SourceError, SourceStats};
     use omnitrack::config::TrackerConfig;
-    use omnitrack::desk::recording::{cached_scenario, RecordingOptions};
+    use omnitrack::desk::recording::{cached_building, cached_scenario, RecordingOptions};
+    use omnitrack::desk::scenario::random::RandomBuilding;
     use omnitrack::desk::scenario::{Scenario, ScenarioName};
     use omnitrack::publish::{PoseStatus, PoseSubscriber};
     use omnitrack::runtime::pipeline::{run_pipeline, PipelineOptions, PipelineSummary, Stage};
@@ -225,6 +227,7 @@ mod bench {
         let mut hogs = 0usize;
         let mut realtime = true;
         let mut name = ScenarioName::Lab;
+        let mut building: Option<u64> = None;
         let mut it = std::env::args().skip(1);
         while let Some(x) = it.next() {
             match x.as_str() {
@@ -232,6 +235,9 @@ mod bench {
                 "--seed" => seed = it.next().and_then(|s| s.parse().ok()).expect("--seed S"),
                 "--hogs" => hogs = it.next().and_then(|s| s.parse().ok()).expect("--hogs N"),
                 "--no-realtime" => realtime = false,
+                "--building" => {
+                    building = Some(it.next().and_then(|s| s.parse().ok()).expect("--building SEED"));
+                }
                 "--scenario" => {
                     let want = it.next().expect("--scenario lab|corridor|handheld");
                     name = *ScenarioName::ALL
@@ -243,19 +249,42 @@ mod bench {
             }
         }
         let rig = Rig::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("firmware_config/ladybug2.toml")).unwrap();
-        let mut scenario = Scenario::get(name);
-        scenario.frame_rate_hz = 30.0;
-        let (rec, made) = cached_scenario(
-            &cache_root(),
-            &scenario,
-            frames,
-            seed,
-            "30hz",
-            &rig,
-            &RecordingOptions::default(),
-            |d, t| eprint!("\rrendering {}: {d}/{t}", name.as_str()),
-        )
-        .unwrap();
+        let (rec, made, title) = match building {
+            // A building nobody here drew (issue 11), walked at a camera's 30 Hz.
+            Some(b) => {
+                let mut b = RandomBuilding::new(b);
+                b.frame_rate_hz = 30.0;
+                let title = b.name();
+                eprintln!("{title}: {b}");
+                let (rec, made) = cached_building(
+                    &cache_root(),
+                    &b,
+                    frames,
+                    "30hz",
+                    &rig,
+                    &RecordingOptions::default(),
+                    |d, t| eprint!("\rrendering {title}: {d}/{t}"),
+                )
+                .unwrap();
+                (rec, made, title)
+            }
+            None => {
+                let mut scenario = Scenario::get(name);
+                scenario.frame_rate_hz = 30.0;
+                let (rec, made) = cached_scenario(
+                    &cache_root(),
+                    &scenario,
+                    frames,
+                    seed,
+                    "30hz",
+                    &rig,
+                    &RecordingOptions::default(),
+                    |d, t| eprint!("\rrendering {}: {d}/{t}", name.as_str()),
+                )
+                .unwrap();
+                (rec, made, name.as_str().to_string())
+            }
+        };
         if made {
             eprintln!();
         }
@@ -310,8 +339,7 @@ mod bench {
 
         println!();
         println!(
-            "Threaded pipeline, replayed `{}` at 30 Hz ({frames} frames of six 512×384 sensors, {cores} cores, {hogs} CPU hogs, load average before: {load}; {}):",
-            name.as_str(),
+            "Threaded pipeline, replayed `{title}` at 30 Hz ({frames} frames of six 512×384 sensors, {cores} cores, {hogs} CPU hogs, load average before: {load}; {}):",
             runs[1].summary.realtime
         );
         println!();

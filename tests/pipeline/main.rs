@@ -815,3 +815,89 @@ fn the_frame_path_runs_at_realtime_priority_where_allowed_and_the_searches_do_no
         }
     }
 }
+
+/// Every sensor's image missing for frames `from..to`: nothing to track.
+struct Blackout {
+    inner: ReplaySource,
+    from: u64,
+    to: u64,
+    frame: u64,
+}
+
+impl FrameSource for Blackout {
+    fn rig(&self) -> &Rig {
+        self.inner.rig()
+    }
+    fn next_frame(&mut self, out: &mut FrameSet) -> Result<bool, SourceError> {
+        let more = self.inner.next_frame(out)?;
+        if more && (self.from..self.to).contains(&self.frame) {
+            for k in 0..out.sensors_mut().len() {
+                out.sensor_mut(k).set_invalid(ImageFault::Missing, 0);
+            }
+        }
+        self.frame += u64::from(more);
+        Ok(more)
+    }
+    fn stats(&self) -> &SourceStats {
+        self.inner.stats()
+    }
+}
+
+#[test]
+fn frames_without_a_pose_publish_the_last_one_with_its_covariance_grown_for_the_time_since() {
+    let _serial = serial();
+    let f = fixture();
+    const FRAMES: u64 = 60;
+    const FROM: u64 = 30;
+    const TO: u64 = 32;
+    let rec = ping_pong(f, FRAMES as usize);
+    let opts = options(f, "blackout");
+    let cfg = TrackerConfig::default();
+    let subscriber = PoseSubscriber::create(opts.pose_service.as_deref().unwrap()).unwrap();
+    let done = Arc::new(AtomicBool::new(false));
+    let samples = collect(move || subscriber.receive().unwrap(), Arc::clone(&done));
+    let source = Blackout {
+        inner: ReplaySource::open(&rec, Pacing::AsFastAsPossible).unwrap(),
+        from: FROM,
+        to: TO,
+        frame: 0,
+    };
+    let mut sink = Recorder {
+        records: Vec::new(),
+        tum: None,
+        stop_after: None,
+    };
+    let source: Box<dyn FrameSource + Send> = Box::new(source);
+    let summary = run_pipeline(source, &f.model, &f.table, &cfg, &opts, &mut sink).unwrap();
+    done.store(true, Ordering::Relaxed);
+    let samples = samples.join().unwrap();
+    eprintln!("{summary}");
+    assert_eq!(samples.len() as u64, FRAMES);
+    let good = &samples[FROM as usize - 1];
+    assert_eq!(
+        good.pose_status(),
+        Ok(PoseStatus::Tracking),
+        "tracking before the blackout"
+    );
+    let speed = cfg.motion.max_speed_m_s;
+    let turn = cfg.motion.max_turn_rate_deg_s.to_radians();
+    let mut last_sd = 0.0;
+    for s in &samples[FROM as usize..TO as usize] {
+        assert_ne!(s.pose_status(), Ok(PoseStatus::Tracking));
+        assert_eq!(s.position_m, good.position_m);
+        assert_eq!(s.rotation_wxyz, good.rotation_wxyz);
+        let dt = (s.timestamp_ns - good.timestamp_ns) as f64 * 1e-9;
+        for k in 0..3 {
+            let (p, r) = (7 * k, 7 * (k + 3));
+            assert!((s.covariance[p] - (good.covariance[p] + (speed * dt).powi(2))).abs() < 1e-9);
+            assert!((s.covariance[r] - (good.covariance[r] + (turn * dt).powi(2))).abs() < 1e-9);
+        }
+        let sd = s.covariance[0].sqrt();
+        assert!(sd.is_finite() && sd > last_sd, "σx {sd} m after {dt} s");
+        last_sd = sd;
+    }
+    // Tracking again after it.
+    assert!(samples[TO as usize..]
+        .iter()
+        .any(|s| s.pose_status() == Ok(PoseStatus::Tracking)));
+}

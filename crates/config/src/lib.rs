@@ -134,6 +134,9 @@ pub struct MotionConfig {
     /// Fastest plausible turn of the rig (deg/s): a relocalised or re-initialised pose that
     /// turned further since the last good frame (beyond `maintenance.max_jump_deg`) is refused.
     pub max_turn_rate_deg_s: f64,
+    /// Fastest plausible speed of the rig (m/s): while no frame is tracked, the published pose
+    /// (the last good one) has its position σ grown by this × the time since.
+    pub max_speed_m_s: f64,
     /// Largest tilt of the rig's z axis from the world's up (deg) a search considers; 180 keeps
     /// every orientation.
     pub max_tilt_deg: f64,
@@ -290,7 +293,8 @@ impl Default for MotionConfig {
         Self {
             upright: false,
             upright_height_m: 1.2,
-            max_turn_rate_deg_s: 360.0,       // ours: heads turn at up to ~300–400°/s
+            max_turn_rate_deg_s: 360.0, // ours: heads turn at up to ~300–400°/s
+            max_speed_m_s: 2.0,
             max_tilt_deg: 60.0,               // ours: a worn rig leans less than a look at the floor
             height_above_floor_m: [1.0, 2.0], // ours: worn 1.2–1.9 m, hand-held or on a cart 1.0–1.6 m
         } // Koch–Teller §5.4
@@ -589,6 +593,7 @@ impl TrackerConfig {
         positive("noise.edge_normal_sigma_deg", self.noise.edge_normal_sigma_deg)?;
         positive("motion.upright_height_m", self.motion.upright_height_m)?;
         positive("motion.max_turn_rate_deg_s", self.motion.max_turn_rate_deg_s)?;
+        positive("motion.max_speed_m_s", self.motion.max_speed_m_s)?;
         let tilt = self.motion.max_tilt_deg;
         if !(tilt > 0.0 && tilt <= 180.0) {
             return Err(format!("key 'motion.max_tilt_deg': must be in (0, 180], found {tilt}"));

@@ -3,7 +3,7 @@
 //!
 //! In: frame handles from the hand-over ([`Handover`](super::pool::Handover)). Out: the frame
 //! back to the pool before publishing, a [`PoseSample`] per frame (the last good pose while not
-//! tracking), a [`StatusSample`] every `budgets.status_interval_ms`, a [`FrameRecord`] per frame to
+//! tracking, its covariance grown by `[motion]`'s speed limits for the time since), a [`StatusSample`] every `budgets.status_interval_ms`, a [`FrameRecord`] per frame to
 //! the sink's channel, and the [`ProcessOutcome`] at the end.
 
 use super::pool::Pool;
@@ -13,7 +13,8 @@ use super::stats::SensorCounters;
 use super::{stage_budget, PipelineOptions, PipelineThread, RunEnd, Stage, StageClock, TICK};
 use crate::FrameRecord;
 use crossbeam::channel::{Receiver, RecvTimeoutError, Sender};
-use omnitrack_config::TrackerConfig;
+use nalgebra::Matrix6;
+use omnitrack_config::{MotionConfig, TrackerConfig};
 use omnitrack_core::geometry::Pose;
 use omnitrack_core::model::Model;
 use omnitrack_core::rig::Rig;
@@ -51,6 +52,21 @@ fn pose_status(r: &FrameResult) -> PoseStatus {
     }
 }
 
+/// The covariance of the last good pose `elapsed_ns` later, with nothing observed since: each
+/// position σ grows by `max_speed_m_s` × the time, each rotation σ by `max_turn_rate_deg_s` × the
+/// time (independent per axis, added to the variances), so the rig is within about one σ of the
+/// last pose as long as it moved no faster than those.
+fn grown_covariance(last: &Matrix6<f64>, elapsed_ns: u64, motion: &MotionConfig) -> Matrix6<f64> {
+    let t = elapsed_ns as f64 * 1e-9;
+    let (dp, dr) = (motion.max_speed_m_s * t, motion.max_turn_rate_deg_s.to_radians() * t);
+    let mut c = *last;
+    for k in 0..3 {
+        c[(k, k)] += dp * dp;
+        c[(k + 3, k + 3)] += dr * dr;
+    }
+    c
+}
+
 /// The process thread: edges, tracker, publishers.
 struct Processor<'a, 'o, 'm> {
     shared: &'a Shared<'o>,
@@ -69,6 +85,9 @@ struct Processor<'a, 'o, 'm> {
     /// The sequence number of the last frame processed.
     last_sequence: u64,
     last_pose: Pose,
+    /// The last good pose's time and covariance, which the samples after it grow.
+    last_good: Option<(u64, Matrix6<f64>)>,
+    motion: MotionConfig,
     last_state: PoseStatus,
     first_frame: Option<Instant>,
     last_frame: Option<Instant>,
@@ -193,6 +212,7 @@ impl Processor<'_, '_, '_> {
         }
         if let Some(p) = &r.pose {
             self.last_pose = *p;
+            self.last_good = Some((record.timestamp_ns, r.covariance));
         }
         self.last_state = pose_status(r);
         let publish_time = self.publish_pose(&record);
@@ -228,6 +248,12 @@ impl Processor<'_, '_, '_> {
     fn publish_pose(&mut self, record: &FrameRecord) -> Option<Duration> {
         let publisher = self.poses.as_ref()?;
         let r = &record.result;
+        // A frame without a pose carries the last good one, as uncertain as the time since
+        // allows: its covariance grown by the fastest plausible motion.
+        let covariance = match (r.pose, self.last_good) {
+            (None, Some((ts, c))) => grown_covariance(&c, record.timestamp_ns.saturating_sub(ts), &self.motion),
+            _ => r.covariance,
+        };
         let started = Instant::now();
         let sent = publishing(|| {
             publisher.publish_pose(
@@ -235,7 +261,7 @@ impl Processor<'_, '_, '_> {
                 record.sequence,
                 self.last_state,
                 &self.last_pose,
-                &r.covariance,
+                &covariance,
                 r.inliers,
                 r.xi_rad2,
             )
@@ -371,6 +397,8 @@ pub(super) fn run_process(
         last_sequence: 0,
         last_ts: 0,
         last_pose: Pose::identity(),
+        last_good: None,
+        motion: cfg.motion.clone(),
         last_state: PoseStatus::Initializing,
         first_frame: None,
         last_frame: None,
@@ -410,4 +438,27 @@ pub(super) fn run_process(
     });
     outcome.publisher_error = publisher_error;
     outcome
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_last_good_covariance_grows_with_the_time_since_it() {
+        let motion = MotionConfig::default();
+        let last = Matrix6::from_diagonal(&nalgebra::Vector6::new(1e-4, 2e-4, 3e-4, 1e-6, 2e-6, 3e-6));
+        assert_eq!(grown_covariance(&last, 0, &motion), last);
+        let half = grown_covariance(&last, 500_000_000, &motion);
+        let v = motion.max_speed_m_s * 0.5;
+        let w = motion.max_turn_rate_deg_s.to_radians() * 0.5;
+        assert!((half[(0, 0)] - (1e-4 + v * v)).abs() < 1e-12);
+        assert!((half[(5, 5)] - (3e-6 + w * w)).abs() < 1e-12);
+        assert_eq!(half[(0, 1)], 0.0);
+        let one = grown_covariance(&last, 1_000_000_000, &motion);
+        assert!((0..6).all(|k| one[(k, k)] > half[(k, k)]));
+        // Never tracked: unknown stays unknown.
+        let unknown = Matrix6::from_diagonal_element(f64::INFINITY);
+        assert!(grown_covariance(&unknown, 1, &motion)[(0, 0)].is_infinite());
+    }
 }
