@@ -323,22 +323,24 @@ fn every_processed_frame_is_published_and_equals_the_trajectory() {
     }
 }
 
-/// Sensor `k` fails (its images missing) from frame `from` on.
-struct FailingSensor {
+/// The images of `sensors` missing over `frames` (frame indices of the source).
+struct FailingSensors {
     inner: ReplaySource,
-    k: usize,
-    from: u64,
+    sensors: std::ops::Range<usize>,
+    frames: std::ops::Range<u64>,
     frame: u64,
 }
 
-impl FrameSource for FailingSensor {
+impl FrameSource for FailingSensors {
     fn rig(&self) -> &Rig {
         self.inner.rig()
     }
     fn next_frame(&mut self, out: &mut FrameSet) -> Result<bool, SourceError> {
         let more = self.inner.next_frame(out)?;
-        if more && self.frame >= self.from {
-            out.sensor_mut(self.k).set_invalid(ImageFault::Missing, 0);
+        if more && self.frames.contains(&self.frame) {
+            for k in self.sensors.clone() {
+                out.sensor_mut(k).set_invalid(ImageFault::Missing, 0);
+            }
         }
         self.frame += u64::from(more);
         Ok(more)
@@ -362,10 +364,10 @@ fn a_sensor_that_dies_mid_run_shows_on_the_status_while_poses_go_on() {
     let status = StatusSubscriber::create(opts.status_service.as_deref().unwrap()).unwrap();
     let done = Arc::new(AtomicBool::new(false));
     let statuses = collect(move || status.receive().unwrap(), Arc::clone(&done));
-    let source = FailingSensor {
+    let source = FailingSensors {
         inner: ReplaySource::open(&rec, Pacing::AsFastAsPossible).unwrap(),
-        k: DEAD,
-        from: FROM,
+        sensors: DEAD..DEAD + 1,
+        frames: FROM..u64::MAX,
         frame: 0,
     };
     let mut sink = Recorder {
@@ -816,33 +818,6 @@ fn the_frame_path_runs_at_realtime_priority_where_allowed_and_the_searches_do_no
     }
 }
 
-/// Every sensor's image missing for frames `from..to`: nothing to track.
-struct Blackout {
-    inner: ReplaySource,
-    from: u64,
-    to: u64,
-    frame: u64,
-}
-
-impl FrameSource for Blackout {
-    fn rig(&self) -> &Rig {
-        self.inner.rig()
-    }
-    fn next_frame(&mut self, out: &mut FrameSet) -> Result<bool, SourceError> {
-        let more = self.inner.next_frame(out)?;
-        if more && (self.from..self.to).contains(&self.frame) {
-            for k in 0..out.sensors_mut().len() {
-                out.sensor_mut(k).set_invalid(ImageFault::Missing, 0);
-            }
-        }
-        self.frame += u64::from(more);
-        Ok(more)
-    }
-    fn stats(&self) -> &SourceStats {
-        self.inner.stats()
-    }
-}
-
 #[test]
 fn frames_without_a_pose_publish_the_last_one_with_its_covariance_grown_for_the_time_since() {
     let _serial = serial();
@@ -856,10 +831,12 @@ fn frames_without_a_pose_publish_the_last_one_with_its_covariance_grown_for_the_
     let subscriber = PoseSubscriber::create(opts.pose_service.as_deref().unwrap()).unwrap();
     let done = Arc::new(AtomicBool::new(false));
     let samples = collect(move || subscriber.receive().unwrap(), Arc::clone(&done));
-    let source = Blackout {
-        inner: ReplaySource::open(&rec, Pacing::AsFastAsPossible).unwrap(),
-        from: FROM,
-        to: TO,
+    // Every sensor dark: nothing to track.
+    let inner = ReplaySource::open(&rec, Pacing::AsFastAsPossible).unwrap();
+    let source = FailingSensors {
+        sensors: 0..inner.rig().sensors.len(),
+        inner,
+        frames: FROM..TO,
         frame: 0,
     };
     let mut sink = Recorder {
