@@ -8,7 +8,7 @@ use std::time::Duration;
 use nalgebra::{Isometry3, Matrix6, Translation3, UnitQuaternion, Vector3};
 use omnitrack::publish::{
     format_pose_line, format_status_line, listen, listen_status, PosePublisher, PoseSample, PoseStatus, PoseSubscriber,
-    Stage, StatusPublisher, StatusSample, StatusSubscriber, STATUS_MAX_SENSORS,
+    SearchUnderWay, Stage, StatusPublisher, StatusSample, StatusSubscriber, STATUS_MAX_SENSORS,
 };
 
 mod common;
@@ -63,7 +63,7 @@ fn pose_sample_has_the_documented_c_layout() {
     assert_eq!(offset_of!(PoseSample, inliers), 368);
     assert_eq!(offset_of!(PoseSample, xi_rad2), 376);
 
-    assert_eq!(size_of::<StatusSample>(), 280);
+    assert_eq!(size_of::<StatusSample>(), 320);
     assert_eq!(align_of::<StatusSample>(), 8);
     assert_eq!(offset_of!(StatusSample, timestamp_ns), 0);
     assert_eq!(offset_of!(StatusSample, sequence), 8);
@@ -75,6 +75,28 @@ fn pose_sample_has_the_documented_c_layout() {
     assert_eq!(offset_of!(StatusSample, frames_dropped), 88);
     assert_eq!(offset_of!(StatusSample, stage_p50_us), 216);
     assert_eq!(offset_of!(StatusSample, stage_p99_us), 248);
+    assert_eq!(offset_of!(StatusSample, source), 280);
+    assert_eq!(offset_of!(StatusSample, pid), 312);
+    assert_eq!(offset_of!(StatusSample, searching), 316);
+    assert_eq!(offset_of!(StatusSample, reserved), 317);
+}
+
+#[test]
+fn the_status_names_its_source_cut_at_a_character_boundary() {
+    let mut s = StatusSample::default();
+    assert_eq!(s.source(), "");
+    s.set_source("ladybug2");
+    assert_eq!(s.source(), "ladybug2");
+    assert!(s.source[8..].iter().all(|&b| b == 0));
+    // 31 ASCII bytes and a two-byte 'é' do not fit in 32: the 'é' goes whole.
+    let long = format!("{}é-and-more", "r".repeat(31));
+    s.set_source(&long);
+    assert_eq!(s.source(), "r".repeat(31));
+    s.set_source("short");
+    assert_eq!(s.source(), "short", "a shorter name leaves nothing of the longer one");
+    // A foreign writer's bytes that are not UTF-8: the valid beginning.
+    s.source[2] = 0xff;
+    assert_eq!(s.source(), "sh");
 }
 
 #[test]
@@ -86,7 +108,7 @@ fn type_names_are_the_interface_names() {
     );
     assert_eq!(
         unsafe { <StatusSample as ZeroCopySend>::type_name() },
-        "omnitrack.StatusSample.v2"
+        "omnitrack.StatusSample.v3"
     );
 }
 
@@ -201,8 +223,11 @@ fn status_round_trip() {
         sequence: 7,
         tracker_state: PoseStatus::Lost as u8,
         sensor_count: 6,
+        pid: 4242,
+        searching: u8::from(SearchUnderWay::Relocalisation),
         ..StatusSample::default()
     };
+    s.set_source("rig-under-test");
     for i in 0..STATUS_MAX_SENSORS {
         s.frame_rate_hz[i] = 30.0 - i as f32 * 0.25;
         s.frames_dropped[i] = 100 + i as u64;
@@ -330,8 +355,11 @@ fn listen_status_prints_one_documented_line_per_status_sample() {
         sensor_count: 2,
         search: u8::from(SearchState::Widened),
         search_widened_to_m: 4.3,
+        pid: 77,
+        searching: u8::from(SearchUnderWay::Reinitialisation),
         ..StatusSample::default()
     };
+    s.set_source("hall \"B\"");
     s.frame_rate_hz[..2].copy_from_slice(&[30.0, 29.5]);
     s.frames_dropped[..2].copy_from_slice(&[0, 3]);
     for st in Stage::ALL {
@@ -351,7 +379,7 @@ fn listen_status_prints_one_documented_line_per_status_sample() {
     let first = lines[0].split_once(' ').unwrap().1;
     assert_eq!(
         first,
-        "t=42ns state=tracking search=widened:4.3 sensors=2 fps=[30.0,29.5] dropped=[0,3] \
+        "t=42ns source=\"hall \\\"B\\\"\" pid=77 state=tracking searching=reinitialising search=widened:4.3 sensors=2 fps=[30.0,29.5] dropped=[0,3] \
          p50_us=[capture=10,edges=20,match=30,solve=40,publish=50,frame=60,track=70] \
          p99_us=[capture=100,edges=200,match=300,solve=400,publish=500,frame=600,track=700]"
     );
@@ -360,13 +388,17 @@ fn listen_status_prints_one_documented_line_per_status_sample() {
         &StatusSample {
             sensor_count: 200,
             search: 9,
+            searching: 7,
             ..StatusSample::default()
         },
         &mut one,
     )
     .unwrap();
     let one = String::from_utf8(one).unwrap();
-    assert!(one.contains(" search=unknown(9) sensors=16 "), "{one}");
+    assert!(
+        one.contains(" source=\"\" pid=0 state=initializing searching=unknown(7) search=unknown(9) sensors=16 "),
+        "{one}"
+    );
 }
 
 /// One tracker per service: a second publisher is refused while the first lives (its poses

@@ -9,7 +9,7 @@ use omnitrack::capture::{FrameSet, FrameSource, Pacing, ReplaySource, SourceErro
 use omnitrack::config::TrackerConfig;
 use omnitrack::edges::EdgeDetector;
 use omnitrack::runtime::{track, FrameRecord, RunOptions};
-use omnitrack::tracker::{SearchVolume, Tracker, TrackerEvent, TrackerState, TrackerStats};
+use omnitrack::tracker::{SearchKind, SearchVolume, Tracker, TrackerEvent, TrackerState, TrackerStats};
 use omnitrack::Rig;
 use std::path::Path;
 use std::sync::OnceLock;
@@ -225,9 +225,11 @@ fn recovers_after_the_rig_is_occluded_for_a_second() {
         sensors: usize::MAX,
     };
     let mut states = Vec::new();
+    let mut searches = Vec::new();
     let mut late = Vec::new();
-    let stats = run_hinted(f, &mut source, &mut |r, _| {
+    let stats = run_hinted(f, &mut source, &mut |r, t| {
         states.push(r.result.state);
+        searches.push(t.search_under_way());
         if r.sequence >= 60 {
             if let Some(p) = &r.result.pose {
                 late.push(errors(f, r.timestamp_ns, p));
@@ -245,6 +247,21 @@ fn recovers_after_the_rig_is_occluded_for_a_second() {
         "tracking resumes: {states:?}"
     );
     assert!(stats.losses >= 1 && stats.reinitialisations >= 1, "{stats:?}");
+    // What the status service says meanwhile: the first search, then after the loss the
+    // re-initialisation, and nothing once tracking resumed for good.
+    assert_eq!(searches[0], Some(SearchKind::Initialisation));
+    let first_pose = states.iter().position(|s| *s == TrackerState::Tracking).unwrap();
+    assert!(
+        searches[first_pose..]
+            .iter()
+            .all(|k| *k != Some(SearchKind::Initialisation)),
+        "{searches:?}"
+    );
+    assert!(
+        searches[lost_at..].contains(&Some(SearchKind::Reinitialisation)),
+        "{searches:?}"
+    );
+    assert_eq!(searches.last(), Some(&None), "{searches:?}");
     assert!(late.len() >= 35, "frames tracked after recovery: {}", late.len());
     let worst = late.iter().fold(0.0f64, |m, e| m.max(e.0));
     assert!(worst < 0.15, "worst error after recovery {:.1} cm", worst * 100.0);

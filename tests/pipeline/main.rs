@@ -375,11 +375,20 @@ fn a_sensor_that_dies_mid_run_shows_on_the_status_while_poses_go_on() {
         tum: None,
         stop_after: None,
     };
+    let rig_name = source.rig().name.clone();
     let source: Box<dyn FrameSource + Send> = Box::new(source);
     let summary = run_pipeline(source, &f.model, &f.table, &cfg, &opts, &mut sink).unwrap();
     done.store(true, Ordering::Relaxed);
     let statuses: Vec<StatusSample> = statuses.join().unwrap();
     eprintln!("{summary}");
+    // Every status names who publishes.
+    assert!(!rig_name.is_empty());
+    assert!(
+        statuses
+            .iter()
+            .all(|s| s.source() == rig_name && s.pid == std::process::id()),
+        "{statuses:?}"
+    );
 
     // Lossless: every frame reached the tracker; poses went on without the sensor.
     assert_eq!(summary.frames_processed, FRAMES);
@@ -767,7 +776,11 @@ fn the_frame_path_runs_at_realtime_priority_where_allowed_and_the_searches_do_no
             }
         }
         let mut sink = Sample(Vec::new(), 0);
-        let summary = run_pipeline(replay(&f.rec), &f.model, &f.table, &cfg, &opts, &mut sink).unwrap();
+        // Paced at the recorded rate, so that the capture thread is still there on the fifth
+        // frame: as fast as it decodes, latest-wins capture can read the whole recording and
+        // end while the first frames are still being tracked.
+        let source: Box<dyn FrameSource + Send> = Box::new(ReplaySource::open(&f.rec, Pacing::RealTime).unwrap());
+        let summary = run_pipeline(source, &f.model, &f.table, &cfg, &opts, &mut sink).unwrap();
         eprintln!(
             "realtime_priority {priority}, lossless {lossless}: {} — {:?}",
             summary.realtime, sink.0

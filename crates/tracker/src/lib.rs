@@ -64,6 +64,18 @@ pub enum TrackerState {
     Lost,
 }
 
+/// A search the tracker runs off the frame path ([`Tracker::search_under_way`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SearchKind {
+    /// The first search for a pose: the hint's volume, or the whole model.
+    Initialisation,
+    /// The motion prior failed on a frame: a local search about the last good pose (module
+    /// `maintenance`).
+    Relocalisation,
+    /// Tracking was lost: a search that widens with every failed attempt.
+    Reinitialisation,
+}
+
 /// Something that happened on a frame, for logs and benchmarks.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum TrackerEvent {
@@ -389,6 +401,18 @@ impl<'m> Tracker<'m> {
     /// Whether a search is under way.
     pub fn searching(&self) -> bool {
         self.pending.is_some()
+    }
+
+    /// The search under way, if any: why frames are not being tracked just now.
+    pub fn search_under_way(&self) -> Option<SearchKind> {
+        let pending = self.pending.as_ref()?;
+        Some(if pending.relocalisation.is_some() {
+            SearchKind::Relocalisation
+        } else if self.state == TrackerState::Initializing {
+            SearchKind::Initialisation
+        } else {
+            SearchKind::Reinitialisation
+        })
     }
 
     /// Starts a search of the current state's volume on this frame's `edges` (module

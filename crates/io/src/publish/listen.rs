@@ -17,18 +17,25 @@
 //! Status lines (`--status`), same rules:
 //!
 //! ```text
-//! seq=7 t=1700000000123456789ns state=tracking search=none sensors=6 fps=[30.0,30.0,30.0,30.0,30.0,29.9] dropped=[0,0,0,0,0,2] p50_us=[capture=812,edges=3950,match=420,solve=610,publish=48,frame=8400,track=1700] p99_us=[…]
+//! seq=7 t=1700000000123456789ns source="ladybug2" pid=4242 state=tracking searching=none search=none sensors=6 fps=[30.0,30.0,30.0,30.0,30.0,29.9] dropped=[0,0,0,0,0,2] p50_us=[capture=812,edges=3950,match=420,solve=610,publish=48,frame=8400,track=1700] p99_us=[…]
 //! ```
 //!
-//! - `state`: the tracker's [`PoseStatus`]; `search`: the last search's [`SearchState`]
-//!   (`none`, `as_given`, `widened` followed by `:D` metres, `no_cells`);
+//! - `source`: the publishing rig's name, quoted and escaped as a Rust string; `pid`: the
+//!   publishing process;
+//! - `state`: the tracker's [`PoseStatus`]; `searching`: the search running now
+//!   ([`SearchUnderWay`]: `none`, `initialising`, `relocalising`, `reinitialising`); `search`:
+//!   the last search's [`SearchState`] (`none`, `as_given`, `widened` followed by `:D` metres,
+//!   `no_cells`);
 //! - `sensors`, then per sensor the delivered images per second and the images lost since start;
 //! - `p50_us` / `p99_us`: per [`Stage`], in microseconds (0 = not measured yet).
 
 use std::io::Write;
 use std::time::Duration;
 
-use super::{PoseSample, PoseStatus, PoseSubscriber, PublishError, SearchState, Stage, StatusSample, StatusSubscriber};
+use super::{
+    PoseSample, PoseStatus, PoseSubscriber, PublishError, SearchState, SearchUnderWay, Stage, StatusSample,
+    StatusSubscriber,
+};
 
 /// Writes one sample as one line in the format above (without the newline).
 pub fn format_pose_line(s: &PoseSample, out: &mut dyn Write) -> std::io::Result<()> {
@@ -64,8 +71,20 @@ pub fn format_pose_line(s: &PoseSample, out: &mut dyn Write) -> std::io::Result<
 
 /// Writes one status sample as one line in the format above (without the newline).
 pub fn format_status_line(s: &StatusSample, out: &mut dyn Write) -> std::io::Result<()> {
-    write!(out, "seq={} t={}ns state=", s.sequence, s.timestamp_ns)?;
+    write!(
+        out,
+        "seq={} t={}ns source={:?} pid={} state=",
+        s.sequence,
+        s.timestamp_ns,
+        s.source(),
+        s.pid
+    )?;
     match PoseStatus::try_from(s.tracker_state) {
+        Ok(st) => write!(out, "{}", st.as_str())?,
+        Err(b) => write!(out, "unknown({b})")?,
+    }
+    write!(out, " searching=")?;
+    match SearchUnderWay::try_from(s.searching) {
         Ok(st) => write!(out, "{}", st.as_str())?,
         Err(b) => write!(out, "unknown({b})")?,
     }

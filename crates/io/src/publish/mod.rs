@@ -50,8 +50,8 @@ use iceoryx2::service::port_factory::{event as event_factory, publish_subscribe 
 
 pub use listen::{format_pose_line, format_status_line, listen, listen_status, ListenError};
 pub use sample::{
-    PoseSample, PoseStatus, SearchState, Stage, StatusSample, WireError, POSE_WIRE_BYTES, STATUS_MAX_SENSORS,
-    STATUS_STAGES,
+    PoseSample, PoseStatus, SearchState, SearchUnderWay, Stage, StatusSample, WireError, POSE_WIRE_BYTES,
+    STATUS_MAX_SENSORS, STATUS_SOURCE_BYTES, STATUS_STAGES,
 };
 
 /// Name of the pose service (docs/interfaces.md).

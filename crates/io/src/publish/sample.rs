@@ -314,6 +314,60 @@ impl TryFrom<u8> for SearchState {
     }
 }
 
+/// The search running now on the tracker's search thread, as carried in
+/// [`StatusSample::searching`]: while one runs, the pose service repeats the last good pose
+/// (status lost, its covariance grown) and this says why and what is being done about it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[repr(u8)]
+pub enum SearchUnderWay {
+    /// No search is running.
+    None = 0,
+    /// The first search for a pose (the hint's volume, or the whole model).
+    Initialisation = 1,
+    /// The motion prior failed on a frame: a local search about the last good pose.
+    Relocalisation = 2,
+    /// Tracking was lost: a search of a volume that grows with every failed attempt.
+    Reinitialisation = 3,
+}
+
+impl SearchUnderWay {
+    /// The word used by `omnitrack listen --status`: `none`, `initialising`, `relocalising`,
+    /// `reinitialising`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            SearchUnderWay::None => "none",
+            SearchUnderWay::Initialisation => "initialising",
+            SearchUnderWay::Relocalisation => "relocalising",
+            SearchUnderWay::Reinitialisation => "reinitialising",
+        }
+    }
+}
+
+impl From<SearchUnderWay> for u8 {
+    fn from(s: SearchUnderWay) -> u8 {
+        s as u8
+    }
+}
+
+impl TryFrom<u8> for SearchUnderWay {
+    /// The byte that is not a known kind of search.
+    type Error = u8;
+
+    fn try_from(v: u8) -> Result<Self, u8> {
+        match v {
+            0 => Ok(SearchUnderWay::None),
+            1 => Ok(SearchUnderWay::Initialisation),
+            2 => Ok(SearchUnderWay::Relocalisation),
+            3 => Ok(SearchUnderWay::Reinitialisation),
+            other => Err(other),
+        }
+    }
+}
+
+/// Bytes of [`StatusSample::source`]: a rig name longer than this is cut at a character
+/// boundary.
+pub const STATUS_SOURCE_BYTES: usize = 32;
+
 /// Most sensors a [`StatusSample`] reports on.
 pub const STATUS_MAX_SENSORS: usize = 16;
 /// Number of stage-timing slots in a [`StatusSample`] (see [`Stage`]).
@@ -379,7 +433,7 @@ impl Stage {
 }
 
 /// Health of the running tracker, published on `omnitrack/status` (a few times a second is
-/// plenty). C layout, 280 bytes, alignment 8:
+/// plenty). C layout, 320 bytes, alignment 8:
 ///
 /// | offset | field | type |
 /// | --- | --- | --- |
@@ -393,11 +447,17 @@ impl Stage {
 /// | 88 | `frames_dropped` | [u64; 16] |
 /// | 216 | `stage_p50_us` | [u32; 8] |
 /// | 248 | `stage_p99_us` | [u32; 8] |
+/// | 280 | `source` | [u8; 32] |
+/// | 312 | `pid` | u32 |
+/// | 316 | `searching` | u8 ([`SearchUnderWay`]) |
+/// | 317 | `reserved` | [u8; 3], zero |
 ///
 /// v2 (2026-11-27) put the search's state in what was v1's padding: same size, new name, since
-/// a v1 writer leaves those bytes undefined.
+/// a v1 writer leaves those bytes undefined. v3 (2026-11-28) added who publishes (the rig's
+/// name and the process) and the search under way: the pose message, fixed as `.v1` by the
+/// interface, carries neither, and the two services of one prefix have one publisher each.
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("omnitrack.StatusSample.v2")]
+#[type_name("omnitrack.StatusSample.v3")]
 #[repr(C)]
 pub struct StatusSample {
     /// When this status was taken, nanoseconds (same clock as [`PoseSample::timestamp_ns`]).
@@ -421,6 +481,15 @@ pub struct StatusSample {
     pub stage_p50_us: [u32; STATUS_STAGES],
     /// 99th percentile time per [`Stage`] slot, microseconds (0 = not measured).
     pub stage_p99_us: [u32; STATUS_STAGES],
+    /// The publishing tracker's rig name (the rig file's `name`), UTF-8, NUL-padded: which rig
+    /// the poses of this prefix come from ([`StatusSample::set_source`], [`StatusSample::source`]).
+    pub source: [u8; STATUS_SOURCE_BYTES],
+    /// The publishing tracker's process id.
+    pub pid: u32,
+    /// [`SearchUnderWay`] byte: the search running now, if any.
+    pub searching: u8,
+    /// Zero; room for later fields of the same version's size.
+    pub reserved: [u8; 3],
 }
 
 impl Default for StatusSample {
@@ -436,6 +505,33 @@ impl Default for StatusSample {
             frames_dropped: [0; STATUS_MAX_SENSORS],
             stage_p50_us: [0; STATUS_STAGES],
             stage_p99_us: [0; STATUS_STAGES],
+            source: [0; STATUS_SOURCE_BYTES],
+            pid: 0,
+            searching: SearchUnderWay::None as u8,
+            reserved: [0; 3],
+        }
+    }
+}
+
+impl StatusSample {
+    /// Writes `name` into [`StatusSample::source`], cut at the last character boundary that
+    /// fits, the rest NUL.
+    pub fn set_source(&mut self, name: &str) {
+        let mut end = name.len().min(STATUS_SOURCE_BYTES);
+        while !name.is_char_boundary(end) {
+            end -= 1;
+        }
+        self.source = [0; STATUS_SOURCE_BYTES];
+        self.source[..end].copy_from_slice(&name.as_bytes()[..end]);
+    }
+
+    /// [`StatusSample::source`] up to its first NUL; of bytes that are not UTF-8 (a foreign
+    /// writer), the valid beginning.
+    pub fn source(&self) -> &str {
+        let bytes = &self.source[..self.source.iter().position(|&b| b == 0).unwrap_or(STATUS_SOURCE_BYTES)];
+        match std::str::from_utf8(bytes) {
+            Ok(s) => s,
+            Err(e) => std::str::from_utf8(&bytes[..e.valid_up_to()]).unwrap_or_default(),
         }
     }
 }

@@ -20,10 +20,13 @@ use omnitrack_core::model::Model;
 use omnitrack_core::rig::Rig;
 use omnitrack_edges::EdgeDetector;
 use omnitrack_io::publish::{
-    PosePublisher, PoseSample, PoseStatus, SearchState, StatusPublisher, StatusSample, STATUS_MAX_SENSORS,
+    PosePublisher, PoseSample, PoseStatus, SearchState, SearchUnderWay, StatusPublisher, StatusSample,
+    STATUS_MAX_SENSORS,
 };
 use omnitrack_tracker::visibility::VisibilityTable;
-use omnitrack_tracker::{search_link, FrameResult, InitReport, Tracker, TrackerEvent, TrackerState, TrackerStats};
+use omnitrack_tracker::{
+    search_link, FrameResult, InitReport, SearchKind, Tracker, TrackerEvent, TrackerState, TrackerStats,
+};
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
@@ -102,6 +105,8 @@ struct Processor<'a, 'o, 'm> {
     /// What the last search made of its volume, and the widened diameter (m), for the status.
     search: SearchState,
     search_widened_to_m: f32,
+    /// Who publishes (rig name, process id): every status sample starts from it.
+    status_source: StatusSample,
 }
 
 impl Processor<'_, '_, '_> {
@@ -301,7 +306,13 @@ impl Processor<'_, '_, '_> {
             sensor_count: self.shared.sensors.len().min(STATUS_MAX_SENSORS) as u8,
             search: self.search as u8,
             search_widened_to_m: self.search_widened_to_m,
-            ..StatusSample::default()
+            searching: match self.tracker.search_under_way() {
+                None => SearchUnderWay::None,
+                Some(SearchKind::Initialisation) => SearchUnderWay::Initialisation,
+                Some(SearchKind::Relocalisation) => SearchUnderWay::Relocalisation,
+                Some(SearchKind::Reinitialisation) => SearchUnderWay::Reinitialisation,
+            } as u8,
+            ..self.status_source
         };
         for (k, c) in self.shared.sensors.iter().enumerate() {
             let snap = c.snapshot();
@@ -411,6 +422,14 @@ pub(super) fn run_process(
         status_overruns: [0; Stage::COUNT],
         search: SearchState::None,
         search_widened_to_m: 0.0,
+        status_source: {
+            let mut s = StatusSample {
+                pid: std::process::id(),
+                ..StatusSample::default()
+            };
+            s.set_source(&rig.name);
+            s
+        },
     };
     // The searches run on their own thread while the frames go on (`omnitrack_tracker::background`);
     // it ends when the tracker, holding its job channel, is dropped with the processor.
