@@ -88,6 +88,9 @@ struct Cli {
     /// Print one line per panorama and row.
     #[arg(long)]
     verbose: bool,
+    /// Print every frame's state, error against the truth and tracker event (stderr).
+    #[arg(long)]
+    events: bool,
     /// Instead of the table: per panorama, what the initialisation sees at the true pose (the
     /// share of VIS(T) explained, the polished truth's score against the acceptance limit) and
     /// the search's candidates from the first hint radius (the whole house when no row has a
@@ -168,6 +171,9 @@ fn run(cli: &Cli) -> Result<(), String> {
     let json = std::fs::read_to_string(&json_path).map_err(|e| format!("{}: {e}", json_path.display()))?;
     let tour = tour::parse(&json, cli.floor.as_deref()).map_err(|e| format!("{}: {e}", json_path.display()))?;
     let mut panos: Vec<&tour::Pano> = tour.panos.iter().collect();
+    // A hint's direction is seeded by the panorama's place in the whole tour, so that a run of
+    // a few (`--panos`) gives them the hints, and the results, of the full run.
+    let tour_index = |pano: &tour::Pano| tour.panos.iter().position(|p| p.id == pano.id).unwrap_or(0);
     if !cli.panos.is_empty() {
         for wanted in &cli.panos {
             if !tour.panos.iter().any(|p| &p.id == wanted) {
@@ -224,7 +230,8 @@ fn run(cli: &Cli) -> Result<(), String> {
                 Row::WholeHouse => None,
             });
             let (mut found, mut first) = (0, 0);
-            for (k, (pano, dir)) in panos.iter().zip(&recordings).enumerate() {
+            for (pano, dir) in panos.iter().zip(&recordings) {
+                let k = tour_index(pano);
                 let truth = pano.t_world_rig();
                 // With no hinted row, the whole house is searched.
                 let volume = SearchVolume {
@@ -255,7 +262,8 @@ fn run(cli: &Cli) -> Result<(), String> {
         println!("| --- | --- | --- | --- | --- | --- |");
         for row in &rows {
             let mut outcomes = Vec::new();
-            for (k, (pano, dir)) in panos.iter().zip(&recordings).enumerate() {
+            for (pano, dir) in panos.iter().zip(&recordings) {
+                let k = tour_index(pano);
                 let truth = pano.t_world_rig();
                 let hint = match row {
                     Row::Hint(radius) => Some(SearchVolume {
@@ -264,7 +272,7 @@ fn run(cli: &Cli) -> Result<(), String> {
                     }),
                     Row::WholeHouse => None,
                 };
-                let outcome = track_one(dir, &model, &table, &cfg, hint, cli.seed, &truth)?;
+                let outcome = track_one(dir, &model, &table, &cfg, (hint, cli.seed, cli.events), &truth)?;
                 let (dp, dr) = outcome.last.unwrap_or((f64::NAN, f64::NAN));
                 let _ = writeln!(
                     csv,
@@ -428,8 +436,7 @@ fn track_one(
     model: &Model,
     table: &VisibilityTable,
     cfg: &TrackerConfig,
-    hint: Option<SearchVolume>,
-    seed: u64,
+    (hint, seed, events): (Option<SearchVolume>, u64, bool),
     truth: &Pose,
 ) -> Result<Outcome, String> {
     let mut source = ReplaySource::open(dir, Pacing::AsFastAsPossible).map_err(|e| e.to_string())?;
@@ -443,6 +450,21 @@ fn track_one(
     let mut sink = |record: &omnitrack::runtime::FrameRecord, _: &omnitrack::tracker::Tracker| {
         elapsed += record.frame_time;
         outcome.total_time += record.frame_time;
+        if events {
+            let e = record.result.pose.map(|p| {
+                (
+                    (p.translation.vector - truth.translation.vector).norm(),
+                    p.rotation.angle_to(&truth.rotation).to_degrees(),
+                )
+            });
+            eprintln!(
+                "    frame at {} ns{}: {:?}, error (m, °) {e:?}, {:?}",
+                record.timestamp_ns,
+                if record.late { " (late)" } else { "" },
+                record.result.state,
+                record.result.event
+            );
+        }
         match record.result.pose {
             Some(p) => {
                 let dp = (p.translation.vector - truth.translation.vector).norm();
