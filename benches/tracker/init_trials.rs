@@ -16,6 +16,9 @@ pub(crate) const TRIAL_WINDOW: usize = 25;
 /// …and is judged this many frames after its commit.
 pub(crate) const TRIAL_AFTER: usize = 10;
 pub(crate) const WINDOW_AND_AFTER: usize = TRIAL_WINDOW + TRIAL_AFTER;
+/// A judged frame whose pose is worked out late (a relocalisation under way when it came) is
+/// waited for this many frames more.
+const TRIAL_LATE_SLACK: usize = 45;
 
 /// What `init_trials` counted.
 #[derive(Default, Clone, Copy)]
@@ -97,7 +100,9 @@ pub(crate) fn init_trials(
         // Verbose: the commit carried by the initialiser's polish alone, frame to frame.
         let mut chain: Option<omnitrack::geometry::Pose> = None;
         let mut elapsed_ms = f64::NAN;
-        for k in 0..WINDOW + AFTER {
+        // The judged frame's time and truth, once it has come.
+        let mut judged: Option<(u64, Option<omnitrack::geometry::Pose>)> = None;
+        for k in 0..WINDOW + AFTER + TRIAL_LATE_SLACK {
             if committed.is_none() && k >= WINDOW {
                 break;
             }
@@ -196,9 +201,19 @@ pub(crate) fn init_trials(
                     );
                 }
                 // Judged AFTER frames of tracking: a commit a little off that converges is
-                // right; one that settles somewhere else, or loses lock, is not.
-                if k >= committed_at + AFTER || r.state != TrackerState::Tracking {
-                    let (dp, dr) = match (r.pose, g) {
+                // right; one that settles somewhere else, or loses lock, is not. The judged
+                // frame's pose may come late: a relocalisation under way when it came answers
+                // it once taken up (module `background` of the tracker).
+                if k == committed_at + AFTER {
+                    judged = Some((ts, g));
+                }
+                let pose = judged.and_then(|(t, _)| {
+                    let on_time = if t == ts { r.pose } else { None };
+                    on_time.or_else(|| tracker.late().iter().find(|(lt, _)| *lt == t).and_then(|(_, l)| l.pose))
+                });
+                let lost = r.state != TrackerState::Tracking;
+                if pose.is_some() || lost || k >= committed_at + AFTER + TRIAL_LATE_SLACK {
+                    let (dp, dr) = match (pose, judged.and_then(|(_, g)| g)) {
                         (Some(p), Some(g)) => (
                             (p.translation.vector - g.translation.vector).norm(),
                             p.rotation.angle_to(&g.rotation).to_degrees(),
