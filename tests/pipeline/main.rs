@@ -764,6 +764,8 @@ fn the_frame_path_runs_at_realtime_priority_where_allowed_and_the_searches_do_no
         opts.lossless = lossless;
         opts.pose_service = None;
         opts.status_service = None;
+        // The threads are sampled on the fifth frame: a few more are enough.
+        opts.run.max_frames = Some(8);
         // Sampled mid-run, from the sink's thread (the caller's: never changed).
         struct Sample(Vec<(String, bool, u32)>, usize);
         impl FrameSink for Sample {
