@@ -249,6 +249,10 @@ pub(crate) fn init_trials(
                 elapsed_ms = started.elapsed().as_secs_f64() * 1e3;
             }
         }
+        // The recording ended before the judged frame's pose came: a commit, not right.
+        if let (None, Some(committed_at)) = (outcome, committed) {
+            outcome = Some((f64::INFINITY, f64::INFINITY, committed_at + 1));
+        }
         match outcome {
             Some((dp, dr, n)) => {
                 times_ms.push(elapsed_ms);

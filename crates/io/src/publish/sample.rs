@@ -315,8 +315,9 @@ impl TryFrom<u8> for SearchState {
 }
 
 /// The search running now on the tracker's search thread, as carried in
-/// [`StatusSample::searching`]: while one runs, the pose service repeats the last good pose
-/// (status lost, its covariance grown) and this says why and what is being done about it.
+/// [`StatusSample::searching`]: while one runs, frames get no pose of their own (the pose
+/// service repeats the last good pose, status lost and its covariance grown; before the first
+/// pose, status initializing), and this says which search it is waiting for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 #[repr(u8)]
 pub enum SearchUnderWay {

@@ -272,7 +272,7 @@ fn run(cli: &Cli) -> Result<(), String> {
                     }),
                     Row::WholeHouse => None,
                 };
-                let outcome = track_one(dir, &model, &table, &cfg, (hint, cli.seed, cli.events), &truth)?;
+                let outcome = track_one(dir, &model, &table, &cfg, hint, cli.seed, cli.events, &truth)?;
                 let (dp, dr) = outcome.last.unwrap_or((f64::NAN, f64::NAN));
                 let _ = writeln!(
                     csv,
@@ -431,12 +431,15 @@ fn in_sight(model: &Model, table: &VisibilityTable, pose: &Pose) -> Vec<usize> {
 }
 
 /// Tracks one recording from `hint` and measures the outcome against `truth`.
+#[allow(clippy::too_many_arguments)]
 fn track_one(
     dir: &Path,
     model: &Model,
     table: &VisibilityTable,
     cfg: &TrackerConfig,
-    (hint, seed, events): (Option<SearchVolume>, u64, bool),
+    hint: Option<SearchVolume>,
+    seed: u64,
+    events: bool,
     truth: &Pose,
 ) -> Result<Outcome, String> {
     let mut source = ReplaySource::open(dir, Pacing::AsFastAsPossible).map_err(|e| e.to_string())?;
@@ -450,25 +453,23 @@ fn track_one(
     let mut sink = |record: &omnitrack::runtime::FrameRecord, _: &omnitrack::tracker::Tracker| {
         elapsed += record.frame_time;
         outcome.total_time += record.frame_time;
+        let error = record.result.pose.map(|p| {
+            (
+                (p.translation.vector - truth.translation.vector).norm(),
+                p.rotation.angle_to(&truth.rotation).to_degrees(),
+            )
+        });
         if events {
-            let e = record.result.pose.map(|p| {
-                (
-                    (p.translation.vector - truth.translation.vector).norm(),
-                    p.rotation.angle_to(&truth.rotation).to_degrees(),
-                )
-            });
             eprintln!(
-                "    frame at {} ns{}: {:?}, error (m, °) {e:?}, {:?}",
+                "    frame at {} ns{}: {:?}, error (m, °) {error:?}, {:?}",
                 record.timestamp_ns,
                 if record.late { " (late)" } else { "" },
                 record.result.state,
                 record.result.event
             );
         }
-        match record.result.pose {
-            Some(p) => {
-                let dp = (p.translation.vector - truth.translation.vector).norm();
-                let dr = p.rotation.angle_to(&truth.rotation).to_degrees();
+        match (record.result.pose, error) {
+            (Some(p), Some((dp, dr))) => {
                 if dp > 1.0 || dr > 10.0 {
                     outcome.wrong = true;
                 }
@@ -479,7 +480,7 @@ fn track_one(
                 outcome.last = Some((dp, dr));
                 outcome.last_offset = Some(p.translation.vector - truth.translation.vector);
             }
-            None => {
+            _ => {
                 outcome.last = None;
                 outcome.last_offset = None;
             }
