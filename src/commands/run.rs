@@ -107,8 +107,10 @@ pub fn run(a: Args) -> CommandResult {
                         );
                     }
                     eprintln!(
-                        "omnitrack: frame {}: searched {} of {} cells in {:.0} ms",
+                        "omnitrack: frame {}: looked at {} of {} cells (positions scored under the vanishing directions), searched {} of {} (segment-edge triplets) in {:.0} ms",
                         r.sequence,
+                        rep.plan_cells_scanned,
+                        rep.plan_cells_in_volume,
                         rep.cells_searched,
                         rep.cells_in_volume,
                         rep.elapsed.as_secs_f64() * 1e3

@@ -816,3 +816,72 @@ fn saving_replaces_a_link_and_never_writes_through_it() {
     let e = VisibilityTable::load_unchecked(std::path::Path::new("/dev/zero")).unwrap_err();
     assert!(e.to_string().contains("not a regular file"), "{e}");
 }
+
+/// Issue 47: a grid position of the search asks for the few dozen segments spanning the widest
+/// angle in sight. On a detailed model (here the two rooms with 60 small window panes, 240 short
+/// segments, standing in for an architect's sashes and trims) ranking the candidates by the
+/// angle they span before casting rays gives exactly the brute-force answer (every candidate
+/// ray-cast, ranked by the angle in sight) for a fraction of the rays.
+#[test]
+fn the_widest_segments_in_sight_are_those_of_brute_force_for_a_fraction_of_the_rays() {
+    use omnitrack::visibility::at_pose::{spanned_angle, PoseVisibility};
+    let mut obj = two_rooms();
+    // Panes 0.12 m square, 2 mm proud of the walls y = 0 (room A) and y = 3 (room B), in rows.
+    for row in 0..3 {
+        for col in 0..10 {
+            let z = 1.0 + 0.3 * row as f64;
+            let xa = 0.3 + 0.35 * col as f64;
+            obj.rect(1, 0.002, [z, xa], [z + 0.12, xa + 0.12], 1.0);
+            let xb = 4.6 + 0.35 * col as f64;
+            obj.rect(1, 2.998, [z, xb], [z + 0.12, xb + 0.12], -1.0);
+        }
+    }
+    let model = obj.model();
+    assert!(model.segments.len() >= 240, "{} segments", model.segments.len());
+    let table = build_table(&model, "panes.obj", &options());
+    let mut sight = PoseVisibility::new(&model);
+    let mut kept = Vec::with_capacity(model.segments.len());
+    let (mut rays_ranked, mut rays_all, mut positions) = (0u64, 0u64, 0);
+    for ix in 0..16 {
+        for iy in 0..7 {
+            let at = Point3::new(0.25 + 0.5 * ix as f64, 0.2 + 0.4 * iy as f64, 1.3);
+            if table.query(&at).is_none() {
+                continue;
+            }
+            let before = sight.rays_cast();
+            let mut all: Vec<f64> = sight
+                .at(&model, &table, &at)
+                .iter()
+                .map(|s| {
+                    let seg = &model.segments[s.segment as usize];
+                    spanned_angle(&at, &seg.a, &seg.b) * f64::from(s.mask.count_ones()) / 8.0
+                })
+                .collect();
+            rays_all += sight.rays_cast() - before;
+            all.sort_by(|a, b| b.total_cmp(a));
+            for keep in [1, 12, 48] {
+                let before = sight.rays_cast();
+                sight.widest(&model, &table, &at, keep, &mut kept);
+                if keep == 12 {
+                    rays_ranked += sight.rays_cast() - before;
+                }
+                let mut got: Vec<f64> = kept.iter().map(|k| k.0).collect();
+                got.sort_by(|a, b| b.total_cmp(a));
+                let want = &all[..keep.min(all.len())];
+                assert_eq!(got.len(), want.len(), "at {at:?}, keep {keep}");
+                for (g, a) in got.iter().zip(want) {
+                    assert!(
+                        (g - a).abs() < 1e-12,
+                        "at {at:?}, keep {keep}: {got:?} against {want:?}"
+                    );
+                }
+            }
+            positions += 1;
+        }
+    }
+    assert!(positions > 40, "{positions} positions in the rooms");
+    assert!(
+        rays_ranked * 3 < rays_all,
+        "ranked {rays_ranked} rays against {rays_all} for all, over {positions} positions"
+    );
+}

@@ -11,5 +11,6 @@ pub mod opencv_calib;
 pub mod pictures;
 pub mod recording;
 pub mod render;
+pub mod results;
 pub mod scenario;
 pub mod vis_truth;

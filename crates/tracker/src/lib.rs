@@ -28,6 +28,7 @@
 
 pub mod background;
 pub mod correspondence;
+pub mod edge_index;
 mod floor;
 pub mod init;
 mod maintenance;
@@ -165,6 +166,10 @@ pub struct TrackerStats {
     pub search_deferrals: u64,
     /// Poses of kept frames, handed out late through [`Tracker::late`] (not in `tracked`).
     pub late_poses: u64,
+    /// Over all initialisation searches: the grid cells meeting their volumes, and those they
+    /// looked at before the budget was spent ([`InitReport::plan_cells_scanned`]).
+    pub plan_cells_in_volume: u64,
+    pub plan_cells_scanned: u64,
 }
 
 /// A search under way off the frame path: when its result is due (the search frame's timestamp
@@ -814,6 +819,8 @@ impl<'m> Tracker<'m> {
         }
         self.search_attempts += 1;
         self.stats.search_time += report.elapsed;
+        self.stats.plan_cells_in_volume += report.plan_cells_in_volume as u64;
+        self.stats.plan_cells_scanned += report.plan_cells_scanned as u64;
         self.stats.search_backstops += u64::from(report.backstop);
         self.stats.first_search.get_or_insert(report.elapsed);
         result.event = Some(TrackerEvent::Searched(report));

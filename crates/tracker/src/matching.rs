@@ -117,7 +117,7 @@ impl Gate {
     /// Whether `e` passes the hue gate and, where hue cannot compare the two edges, the
     /// polarity gate.
     #[inline]
-    fn signature_matches(&self, e: &Edge) -> bool {
+    pub(crate) fn signature_matches(&self, e: &Edge) -> bool {
         let Some((sig, max)) = &self.hue else {
             return true;
         };
@@ -196,7 +196,7 @@ pub fn best_edge_and_cover(
 /// (angle shared by edge and segment, the shorter one's angle, the segment's angle) about `c`
 /// in the plane of normal `n`.
 #[inline]
-fn shared_angle(pred: &Predicted, c: &Point3<f64>, n: &Vector3<f64>, edge: &Edge) -> (f64, f64, f64) {
+pub(crate) fn shared_angle(pred: &Predicted, c: &Point3<f64>, n: &Vector3<f64>, edge: &Edge) -> (f64, f64, f64) {
     let a = pred.ends_rig[0] - c.coords;
     let b = pred.ends_rig[1] - c.coords;
     let Some(u) = a.try_normalize(1e-12) else {

@@ -65,8 +65,14 @@ impl Initialiser<'_> {
             .is_some_and(|f| p.z - f >= lo - HEIGHT_SLACK_M && p.z - f <= hi + HEIGHT_SLACK_M)
     }
 
+    /// [`Self::polish`] without the floor test, charged when done (its rays with it).
     pub(super) fn polish_unchecked(&mut self, start: &Pose, edges: &[Edge]) -> Option<Candidate> {
+        let c = self.polish_steps(start, edges);
         self.spend(super::work::POLISH);
+        c
+    }
+
+    fn polish_steps(&mut self, start: &Pose, edges: &[Edge]) -> Option<Candidate> {
         let inlier = self.opts.inlier_alpha_rad;
         let mut pose = *start;
         for gate_rad in [4.0 * inlier, 2.0 * inlier, inlier] {

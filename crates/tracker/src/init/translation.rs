@@ -12,7 +12,10 @@ use super::{
     GRID_SHARE, GRID_STEP_M, GRID_WORTH, HEIGHT_STEP_M, SAME_POSITION_M, SAME_ROTATION_RAD, VOTED_CANDIDATES,
     VOTED_ROTATIONS,
 };
-use crate::matching::{best_edge_and_cover, Gate, Predicted};
+use crate::edge_index::EdgeIndex;
+#[cfg(debug_assertions)]
+use crate::matching::best_edge_and_cover;
+use crate::matching::{overlap, shared_angle, Gate, Predicted};
 use crate::vanishing::MAX_ROTATIONS;
 use crate::vote::{Grid, PEAKS};
 use nalgebra::{Point3, Translation3, UnitQuaternion, Vector3};
@@ -100,8 +103,9 @@ impl Initialiser<'_> {
     /// longest segments in sight from each; the best few per rotation (within [`GRID_WORTH`] of
     /// the best of all) climbed and polished into candidates. With the rotation known the
     /// translation is three numbers, few enough to search outright. The scan spends at most
-    /// [`GRID_SHARE`] of the work budget `limit`, the climbs and polishes the rest.
-    pub(super) fn grid_search(&mut self, edges: &[Edge], volume: &SearchVolume, limit: u64) {
+    /// [`GRID_SHARE`] of the work budget `limit`, the climbs and polishes the rest. Returns the
+    /// plan cells looked at (every position scored) and those meeting the volume.
+    pub(super) fn grid_search(&mut self, edges: &[Edge], volume: &SearchVolume, limit: u64) -> (usize, usize) {
         let scan_limit = (GRID_SHARE * limit as f64) as u64;
         let h = &self.table.header;
         let half = 0.5 * h.spacing_m;
@@ -120,70 +124,30 @@ impl Initialiser<'_> {
             best.clear();
         }
         self.select_plan_cells(volume);
-        // Plan cells nearest first, every rotation at each: the time budget cuts the far cells
-        // of all rotations alike, never a whole rotation. Every cell of the table's grid is
+        let grid = GridLattice {
+            half,
+            step,
+            slab: [slab_lo, slab_hi],
+            band: [band_lo, band_hi],
+        };
+        // Plan cells nearest first, every rotation at each: the budget cuts the far cells of
+        // all rotations alike, never a whole rotation. Every cell of the table's grid is
         // searched, whether or not its node is valid: a closet or a hallway narrower than the
         // node spacing often has its node inside a wall, and the rig can still stand there.
+        // (Looking at every cell on a coarser lattice first and refining the most promising
+        // was tried, and committed more twins: docs/decisions.md.)
+        let mut scanned = 0;
         'cells: for ci in 0..self.plan_cells.len() {
-            if self.spent(scan_limit) {
-                break;
-            }
             let centre = self.plan_cells[ci].1;
             for ix in 0..steps {
                 for iy in 0..steps {
-                    let (x, y) = (
-                        centre.x - half + (ix as f64 + 0.5) * step,
-                        centre.y - half + (iy as f64 + 0.5) * step,
-                    );
-                    // Heights: inside the band above the floor beneath (the known height when
-                    // upright; the whole slab in a model without floors).
-                    let (z_lo, z_hi) = match self.opts.upright_height_m {
-                        Some(z) => (z, z),
-                        None if self.floors.any() => {
-                            match self
-                                .floors
-                                .band(x, y, [slab_lo, slab_hi], [band_lo, band_hi], self.at_pose.solid())
-                            {
-                                Some(b) => b,
-                                None => continue,
-                            }
-                        }
-                        None => (slab_lo, slab_hi),
-                    };
-                    if z_hi < z_lo {
-                        continue;
-                    }
-                    let inside =
-                        |p: &Point3<f64>| volume.diameter_m.is_none_or(|d| (p - volume.centre).norm() <= 0.5 * d);
-                    let plan = Point3::new(x, y, 0.5 * (z_lo + z_hi));
-                    let (lo, hi) = (Point3::new(x, y, z_lo), Point3::new(x, y, z_hi));
-                    if !inside(&lo) && !inside(&hi) && !inside(&plan) {
-                        continue;
-                    }
-                    // The longest segments in sight from the middle of the heights: a bounded
-                    // cost per position, and the lines that decide where the rig is.
-                    self.longest_in_sight(&plan, GRID_SEGMENTS);
-                    let segs = std::mem::take(&mut self.grid_segs);
-                    let mut z = z_lo;
-                    while z <= z_hi + 1e-9 {
-                        let p = Point3::new(x, y, z);
-                        z += GRID_STEP_M;
-                        if !inside(&p) {
-                            continue;
-                        }
-                        for ri in 0..self.vanishing_count {
-                            let pose = Pose::from_parts(Translation3::from(p.coords), self.vanishing_rot[ri]);
-                            if let Some(score) = self.coarse_merit(&pose, &segs, &gate, min_len) {
-                                keep_best_apart(&mut self.grid_best[ri], (score, p));
-                            }
-                        }
-                    }
-                    self.grid_segs = segs;
                     if self.spent(scan_limit) {
                         break 'cells;
                     }
+                    self.grid_position(&grid, &centre, ix, iy, volume, &gate, min_len);
                 }
             }
+            scanned = ci + 1;
         }
         // Positions far below the best of any rotation are not worth a climb and a polish; the
         // others climb best first, so that the deadline cuts the least promising.
@@ -219,6 +183,66 @@ impl Initialiser<'_> {
                 self.offer(c);
             }
         }
+        (scanned, self.plan_cells.len())
+    }
+
+    /// The grid's position (`ix`, `iy`) of the plan cell about `centre`: its heights (inside the
+    /// band above the floor beneath, the known height when upright, the whole slab in a model
+    /// without floors) and the vanishing directions' rotations scored by
+    /// [`Self::coarse_merit`] over the [`GRID_SEGMENTS`] longest segments in sight from the
+    /// middle of its heights, each kept among its rotation's best. Returns the best score
+    /// (`None`: nothing to stand on in the volume, or too little in sight).
+    #[allow(clippy::too_many_arguments)]
+    fn grid_position(
+        &mut self,
+        grid: &GridLattice,
+        centre: &Point3<f64>,
+        ix: usize,
+        iy: usize,
+        volume: &SearchVolume,
+        gate: &Gate,
+        min_len: f64,
+    ) -> Option<f64> {
+        let (x, y) = (
+            centre.x - grid.half + (ix as f64 + 0.5) * grid.step,
+            centre.y - grid.half + (iy as f64 + 0.5) * grid.step,
+        );
+        let (z_lo, z_hi) = match self.opts.upright_height_m {
+            Some(z) => (z, z),
+            None if self.floors.any() => self.floors.band(x, y, grid.slab, grid.band, self.at_pose.solid())?,
+            None => (grid.slab[0], grid.slab[1]),
+        };
+        if z_hi < z_lo {
+            return None;
+        }
+        let inside = |p: &Point3<f64>| volume.diameter_m.is_none_or(|d| (p - volume.centre).norm() <= 0.5 * d);
+        let plan = Point3::new(x, y, 0.5 * (z_lo + z_hi));
+        let (lo, hi) = (Point3::new(x, y, z_lo), Point3::new(x, y, z_hi));
+        if !inside(&lo) && !inside(&hi) && !inside(&plan) {
+            return None;
+        }
+        // The longest segments in sight from the middle of the heights: a bounded cost per
+        // position, and the lines that decide where the rig is.
+        self.longest_in_sight(&plan, GRID_SEGMENTS);
+        let segs = std::mem::take(&mut self.grid_segs);
+        let mut best = None;
+        let mut z = z_lo;
+        while z <= z_hi + 1e-9 {
+            let p = Point3::new(x, y, z);
+            z += GRID_STEP_M;
+            if !inside(&p) {
+                continue;
+            }
+            for ri in 0..self.vanishing_count {
+                let pose = Pose::from_parts(Translation3::from(p.coords), self.vanishing_rot[ri]);
+                if let Some(score) = self.coarse_merit(&pose, &segs, gate, min_len) {
+                    keep_best_apart(&mut self.grid_best[ri], (score, p));
+                    best = Some(best.map_or(score, |b: f64| b.max(score)));
+                }
+            }
+        }
+        self.grid_segs = segs;
+        best
     }
 
     /// Coordinate ascent of the coarse merit ([`Self::coarse_merit`]) from `start` in x, y and
@@ -265,28 +289,24 @@ impl Initialiser<'_> {
     }
 
     /// `self.grid_segs` ← the `keep` longest (by the angle they span in sight) of the segments
-    /// in sight from `at`.
+    /// in sight from `at` (all of them for `usize::MAX`). Charged with the rays it cast
+    /// ([`Self::spend`]): on a detailed model a query costs many times a plain one's.
     pub(super) fn longest_in_sight(&mut self, at: &Point3<f64>, keep: usize) {
-        self.spend(work::SIGHT);
-        let seen = self.at_pose.at(self.model, self.table, at);
-        self.grid_order.clear();
-        for s in seen {
-            let seg = &self.model.segments[s.segment as usize];
-            let (a, b) = (seg.a - at, seg.b - at);
-            if self.grid_order.len() < self.grid_order.capacity() {
-                let angle = a.cross(&b).norm().atan2(a.dot(&b));
-                self.grid_order.push((angle * f64::from(s.fraction), s.segment));
-            }
-        }
-        let keep = self.grid_order.len().min(keep);
-        if keep > 0 && keep < self.grid_order.len() {
-            self.grid_order
-                .select_nth_unstable_by(keep - 1, |x, y| y.0.total_cmp(&x.0));
-        }
         self.grid_segs.clear();
-        for i in 0..keep {
-            self.grid_segs.push(self.grid_order[i].1);
+        if keep == usize::MAX {
+            let seen = self.at_pose.at(self.model, self.table, at);
+            for s in seen {
+                if self.grid_segs.len() < self.grid_segs.capacity() {
+                    self.grid_segs.push(s.segment);
+                }
+            }
+        } else {
+            let mut order = std::mem::take(&mut self.grid_order);
+            self.at_pose.widest(self.model, self.table, at, keep, &mut order);
+            self.grid_segs.extend(order.iter().map(|o| o.1));
+            self.grid_order = order;
         }
+        self.spend(work::SIGHT);
     }
 
     /// [`Candidate::merit`] at a coarse gate, for the grid: of `segments`, those at least
@@ -299,7 +319,6 @@ impl Initialiser<'_> {
     /// 64 longest let the grid drop the truth in favour of poses along texture (3 m hint: 20 of
     /// 32 within 10 cm with 64, 24 with all 256).
     pub(super) fn coarse_merit(&mut self, pose: &Pose, segments: &[u32], gate: &Gate, min_len: f64) -> Option<f64> {
-        self.spend(segments.len() as u64 * self.vote_edges.len() as u64 / 100 * work::MERIT_PER_SEGMENT_100_EDGES);
         let (mut explained, mut counted) = (0.0, 0usize);
         self.support_pred.clear();
         for &s in segments {
@@ -309,19 +328,116 @@ impl Initialiser<'_> {
                 continue;
             }
             counted += 1;
-            if let (Some(_), cover) = best_edge_and_cover(&pred, &self.centres, &self.vote_edges, gate) {
+            let cover = cover_near(&pred, &self.centres, &self.vote_edges, &mut self.vote_index, gate);
+            if let Some(cover) = cover {
                 explained += (cover / FULL_COVER).min(1.0);
             }
             if self.support_pred.len() < self.support_pred.capacity() {
                 self.support_pred.push(pred);
             }
         }
-        if counted < 6 {
-            return None;
+        let support = (counted >= 6).then(|| self.indexed_support(gate.cos_alpha));
+        // Debug builds (the tests) check one score in 16 against every pair, as the scores were
+        // computed before the index.
+        self.merit_calls = self.merit_calls.wrapping_add(1);
+        #[cfg(debug_assertions)]
+        if let Some(support) = support.filter(|_| self.merit_calls % 16 == 1) {
+            let mut all = 0.0;
+            for &s in segments {
+                let seg = &self.model.segments[s as usize];
+                let pred = Predicted::new(&[seg.a, seg.b], pose, &self.centres);
+                if pred.length_rad >= min_len {
+                    if let (Some(_), cover) = best_edge_and_cover(&pred, &self.centres, &self.vote_edges, gate) {
+                        all += (cover / FULL_COVER).min(1.0);
+                    }
+                }
+            }
+            let plain = self.predicted_support(self.vote_edges.iter(), gate.cos_alpha);
+            debug_assert!(
+                (all - explained).abs() < 1e-9,
+                "explained {explained} by the index, {all} by all pairs"
+            );
+            debug_assert!(
+                (plain - support).abs() < 1e-12,
+                "support {support} by the index, {plain} by all pairs"
+            );
         }
-        let support = self.predicted_support(self.vote_edges.iter(), gate.cos_alpha);
-        Some(explained / counted as f64 * support)
+        self.spend(segments.len() as u64 * self.vote_edges.len() as u64 / 100 * work::MERIT_PER_SEGMENT_100_EDGES);
+        Some(explained / counted as f64 * support?)
     }
+
+    /// [`Self::predicted_support`] over the vote's edges, by the index: the share (by angle) of
+    /// `self.vote_edges` that one of `self.support_pred` explains (plane within the gate,
+    /// overlapping by half). Each predicted plane marks the edges it explains among those its
+    /// gate can pass; the sum runs over the edges in order, as the plain one does.
+    fn indexed_support(&mut self, cos_gate: f64) -> f64 {
+        let n = self.vote_edges.len();
+        self.vote_explained[..n].fill(false);
+        for pred in &self.support_pred {
+            for (s, c) in self.centres.iter().enumerate() {
+                let nrm = &pred.normals[s];
+                let (edges, marks) = (&self.vote_edges, &mut self.vote_explained);
+                self.vote_index.near(s, nrm, cos_gate, |i| {
+                    if !marks[i] {
+                        let e = &edges[i];
+                        marks[i] = nrm.dot(&e.plane.normal).abs() >= cos_gate && overlap(pred, c, nrm, e) >= 0.5;
+                    }
+                });
+            }
+        }
+        let (mut explained, mut total) = (0.0, 0.0);
+        for (e, &hit) in self.vote_edges.iter().zip(&self.vote_explained[..n]) {
+            if (e.sensor as usize) < self.centres.len() {
+                total += e.length_rad;
+                if hit {
+                    explained += e.length_rad;
+                }
+            }
+        }
+        if total > 0.0 {
+            explained / total
+        } else {
+            0.0
+        }
+    }
+}
+
+/// [`best_edge_and_cover`]'s cover of `pred` over the edges of `index` (built from `edges`)
+/// that can pass the gate: `None` if no edge passes it.
+fn cover_near(
+    pred: &Predicted,
+    centres: &[Point3<f64>],
+    edges: &[Edge],
+    index: &mut EdgeIndex,
+    gate: &Gate,
+) -> Option<f64> {
+    let mut covered = 0.0;
+    let mut any = false;
+    for (s, c) in centres.iter().enumerate() {
+        let n = &pred.normals[s];
+        index.near(s, n, gate.cos_alpha, |i| {
+            let e = &edges[i];
+            if n.dot(&e.plane.normal).abs() < gate.cos_alpha || !gate.signature_matches(e) {
+                return;
+            }
+            let (common, shorter, seg) = shared_angle(pred, c, n, e);
+            if common <= 0.0 || shorter <= 0.0 || common / shorter < gate.min_overlap {
+                return;
+            }
+            covered += common / seg;
+            any = true;
+        });
+    }
+    any.then_some(covered.min(1.0))
+}
+
+/// The grid search's lattice in each plan cell: half the node spacing and the step between its
+/// positions (m), the table's slab of heights and the height band above a floor (m).
+struct GridLattice {
+    half: f64,
+    step: f64,
+    slab: [f64; 2],
+    band: [f64; 2],
 }
 
 /// Keeps `entry` (score, position; highest score best) among the best [`GRID_KEEP`] that are at

@@ -45,6 +45,7 @@ impl Initialiser<'_> {
             // Never full: at most VOTE_EDGES are taken.
             let _ = self.vote_edges.push(edges[i as usize]);
         }
+        self.vote_index.build(&self.vote_edges);
         let m = self.top.len();
         let mm = self.opts.edges_considered;
         self.le_mask.iter_mut().for_each(|x| *x = 0);

@@ -256,10 +256,10 @@ fn run(cli: &Cli) -> Result<(), String> {
             panos.len(),
             today()
         );
-        println!(
-            "| search volume | within 10 cm / 2° | within 30 cm / 5° | wrong commits | no pose | first pose p50 / max (ms) |"
-        );
-        println!("| --- | --- | --- | --- | --- | --- |");
+        let header = "| search volume | within 10 cm / 2° | within 30 cm / 5° | wrong commits | no pose | first pose p50 / max (ms) |\n| --- | --- | --- | --- | --- | --- |";
+        println!("{header}");
+        let mut summary = String::from(header);
+        let mut misses = String::new();
         for row in &rows {
             let mut outcomes = Vec::new();
             for (pano, dir) in panos.iter().zip(&recordings) {
@@ -304,9 +304,57 @@ fn run(cli: &Cli) -> Result<(), String> {
                         outcome.time_to_first_pose.map(ms)
                     );
                 }
+                if !(dp <= 0.1 && dr <= 2.0) {
+                    let _ = writeln!(
+                        misses,
+                        "- {} from {}: {}",
+                        pano.id,
+                        row.name(),
+                        if dp.is_nan() {
+                            "no pose".to_string()
+                        } else {
+                            format!(
+                                "{:.1} cm, {dr:.2}°{}",
+                                dp * 100.0,
+                                if outcome.wrong { ", wrong" } else { "" }
+                            )
+                        }
+                    );
+                }
                 outcomes.push(outcome);
             }
-            println!("{}", table_row(&row.name(), &outcomes));
+            let line = table_row(&row.name(), &outcomes);
+            println!("{line}");
+            summary.push('\n');
+            summary.push_str(&line);
+        }
+        // The table as a results file, when the whole tour was run with the shipped config.
+        if cli.panos.is_empty() {
+            let config = match &cli.config {
+                Some(c) => format!(", config {} (not the shipped one)", c.display()),
+                None => String::new(),
+            };
+            let text = format!(
+                "{summary}\n\nNot within 10 cm / 2°:\n{misses}\nHints of radius R centred {} m from the truth (seed {}){config}; \
+                 the first-pose times are wall time on this machine, with whatever else ran on it.",
+                cli.hint_offset_m, cli.seed
+            );
+            let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+            match omnitrack::desk::results::write(
+                &root,
+                &format!("zind-{}-{}", rig.name, cli.rows.join("_")),
+                &format!(
+                    "ZInD sample tour, rig {} ({} sensors), {} panoramas",
+                    rig.name,
+                    rig.sensors.len(),
+                    panos.len()
+                ),
+                "cargo run --release -p omnitrack-tools --bin zind_bench -- --tour DIR [--rig R] [--rows ...]",
+                &text,
+            ) {
+                Ok(path) => eprintln!("zind_bench: results in {}", path.display()),
+                Err(e) => eprintln!("zind_bench: results file not written: {e}"),
+            }
         }
     }
     write(&cli.out.join("results.csv"), csv.as_bytes())?;
@@ -557,8 +605,12 @@ fn diagnose(
             let (dp, dr) = err(&c.pose);
             let _ = write!(
                 line,
-                "  polished: {dp:.3} m {dr:.2}° explained {:.2} support {:.2} blank {:.2}",
-                c.explained, c.support, c.blank
+                "  polished: {dp:.3} m {dr:.2}° merit {:.3} inliers {} explained {:.2} support {:.2} blank {:.2}",
+                c.merit(),
+                c.inliers,
+                c.explained,
+                c.support,
+                c.blank
             );
         }
         None => line.push_str("  polished: none"),
@@ -592,8 +644,10 @@ fn diagnose(
         }
         let _ = write!(
             line,
-            " [{dp:.2} m {dr:.1}° z {:.2} expl {:.2} sup {:.2} blank {:.2} soft {:.2}]",
+            " [{dp:.2} m {dr:.1}° z {:.2} merit {:.3} inliers {} expl {:.2} sup {:.2} blank {:.2} soft {:.2}]",
             c.pose.translation.vector.z,
+            c.merit(),
+            c.inliers,
             c.explained,
             c.support,
             c.blank,

@@ -1,0 +1,395 @@
+//! The `--model` mode (issue 47): the first pose in a detailed building model (an architect's
+//! IFC through `omnitrack-desk model from-ifc`, or any OBJ), from start poses sampled over the
+//! model, each searched from a 1.5 m hint, a 3 m hint and no hint, with any rig.
+//!
+//! In: the model, the rig, the shipped (or given) configuration, the appearance. Out: one table
+//! row per search volume (pose within 10 cm / 2°, within 30 cm / 5°, wrong commits, no pose,
+//! cells looked at, time to the first pose) and one line per start with `--verbose`.
+//!
+//! **Starts.** Valid nodes of the visibility table's middle layer, drawn by a seeded generator
+//! (`--seed`), each moved by up to 0.35 m in plan and turned to a random heading, tilted by up
+//! to 5°. A start whose true pose shows fewer than three model segments on the rig's images is
+//! not counted (no search can place it). Each start is rendered once (one frame, the
+//! `--appearance` of the bench) and replayed still, a frame interval apart, as a rig standing
+//! there would see it: the measure is the search, not the maintenance of a moving view.
+//!
+//! **Hints** as `zind_bench` makes them: a ball of radius 1.5 m or 3 m whose centre is 0.72 m
+//! from the truth in a seeded direction, and the whole model. A trial gives up after
+//! [`WINDOW`] frames without a pose; a commit is judged [`AFTER`] frames later.
+//! A wrong commit is any pose more than 1 m or 10° off on any frame of the trial.
+
+use nalgebra::{Point3, Translation3, UnitQuaternion, Vector3};
+use omnitrack::capture::{FrameSet, FrameSource, Pacing, ReplaySource};
+use omnitrack::config::TrackerConfig;
+use omnitrack::desk::recording::{write_recording, RecordingOptions};
+use omnitrack::edges::EdgeDetector;
+use omnitrack::geometry::Pose;
+use omnitrack::runtime::load_or_build_table;
+use omnitrack::tracker::{SearchVolume, Tracker};
+use omnitrack::trajectory::Stamped;
+use omnitrack::{Model, Rig};
+use std::path::Path;
+use std::time::Instant;
+
+use crate::{cache_root, Args};
+use omnitrack::desk::demo::percentile;
+
+/// Frames a trial waits for a pose (30 s: three whole-model search budgets), and frames after
+/// the commit it is judged at.
+const WINDOW: usize = 300;
+const AFTER: usize = 10;
+/// The hints' centres lie this far from the truth (m), as `zind_bench`'s.
+const HINT_OFFSET_M: f64 = 0.72;
+/// A start is moved this far from its node at most (m), and tilted this far at most (°).
+const JITTER_M: f64 = 0.35;
+const TILT_DEG: f64 = 5.0;
+
+/// xorshift64*: the bench's own seeded draws.
+struct Draw(u64);
+
+impl Draw {
+    fn next(&mut self) -> f64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        (self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+/// One search volume's counts.
+#[derive(Default)]
+struct Row {
+    counted: usize,
+    within_10: usize,
+    within_30: usize,
+    wrong: usize,
+    none: usize,
+    first_pose_ms: Vec<f64>,
+    cells: Vec<(usize, usize)>,
+}
+
+/// The `--model` mode (module doc).
+pub(crate) fn detailed(a: &Args, rig: &Rig, label: &str, options: &RecordingOptions, model_path: &Path) {
+    let model = Model::load(model_path).unwrap_or_else(|e| {
+        eprintln!("--model {}: {}", model_path.display(), e.message);
+        std::process::exit(2);
+    });
+    let cfg = match &a.config {
+        Some(p) => TrackerConfig::load(p).unwrap(),
+        None => TrackerConfig::default(),
+    };
+    let (table, origin) = load_or_build_table(model_path, &model, None, &cfg).unwrap();
+    let name = model_path
+        .file_stem()
+        .map_or("model".into(), |s| s.to_string_lossy().to_string());
+    let long = model
+        .segments
+        .iter()
+        .filter(|s| (s.b - s.a).norm() >= cfg.visibility.min_segment_length_m)
+        .count();
+    eprintln!(
+        "{name}: {} faces, {} segments ({long} at least {} m); {origin}",
+        model.faces.len(),
+        model.segments.len(),
+        cfg.visibility.min_segment_length_m
+    );
+    // The starts: nodes of the middle layer, moved and turned.
+    let layers = table.header.heights_m.len().max(1);
+    let middle = layers / 2;
+    let nodes: Vec<Point3<f64>> = (0..table.node_count() as u32)
+        .map(|n| table.node_position(n))
+        .filter(|p| {
+            let k = ((p.z - table.header.origin[2] - table.header.heights_m[0]) / 0.25).round();
+            let want = ((table.header.heights_m[middle] - table.header.heights_m[0]) / 0.25).round();
+            (k - want).abs() < 0.5
+        })
+        .collect();
+    if nodes.is_empty() {
+        eprintln!("{name}: the visibility table has no node to start from");
+        std::process::exit(2);
+    }
+    let mut draw = Draw(0x9E37_79B9_7F4A_7C15 ^ a.seed.wrapping_mul(0xD1B5_4A32_D192_ED03));
+    let interval_ns = 100_000_000u64;
+    let mut truth = Vec::new();
+    for k in 0..a.starts {
+        let node = nodes[(draw.next() * nodes.len() as f64) as usize % nodes.len()];
+        let p = node
+            + Vector3::new(
+                (2.0 * draw.next() - 1.0) * JITTER_M,
+                (2.0 * draw.next() - 1.0) * JITTER_M,
+                0.0,
+            );
+        let yaw = draw.next() * std::f64::consts::TAU;
+        let tilt_axis = draw.next() * std::f64::consts::TAU;
+        let tilt = draw.next() * TILT_DEG.to_radians();
+        let r = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), yaw)
+            * UnitQuaternion::from_scaled_axis(Vector3::new(tilt_axis.cos(), tilt_axis.sin(), 0.0) * tilt);
+        truth.push(Stamped {
+            timestamp_ns: k as u64 * interval_ns,
+            pose: Pose::from_parts(Translation3::from(p.coords), r),
+        });
+    }
+    // One recording holds every start, a frame each (no motion blur: the frames are not a walk).
+    let mut opts = options.clone();
+    opts.appearance.motion_blur = 0.0;
+    let key = format!(
+        "{name}-{:016x}-starts{}-seed{}-{label}",
+        omnitrack::visibility::model_hash(&model),
+        a.starts,
+        a.seed
+    );
+    let dir = cache_root().join(key);
+    if !dir.join("complete").exists() {
+        let _ = std::fs::remove_dir_all(&dir);
+        let text = std::fs::read_to_string(model_path).unwrap();
+        write_recording(&dir, rig, &text, &truth, &opts, |d, t| {
+            eprint!("\rrendering {name}: {d}/{t}")
+        })
+        .unwrap();
+        std::fs::write(dir.join("complete"), b"").unwrap();
+        eprintln!();
+    }
+    let mut source = ReplaySource::open(&dir, Pacing::AsFastAsPossible).unwrap();
+    let mut frame = FrameSet::for_rig(rig);
+    let mut detector = EdgeDetector::new(rig, &cfg.edges);
+    let volumes: [(&str, Option<f64>); 3] = [
+        ("hint, radius 1.5 m", Some(1.5)),
+        ("hint, radius 3 m", Some(3.0)),
+        ("no hint", None),
+    ];
+    let mut rows: Vec<Row> = volumes.iter().map(|_| Row::default()).collect();
+    let mut blind = 0;
+    for (k, t) in truth.iter().enumerate() {
+        if !source.next_frame(&mut frame).unwrap() {
+            break;
+        }
+        let detect_started = Instant::now();
+        let edges = detector.detect(&frame).to_vec();
+        let detect_ms = detect_started.elapsed().as_secs_f64() * 1e3;
+        let truth_pose = t.pose;
+        for (v, &(row_name, radius)) in volumes.iter().enumerate() {
+            let angle = draw.next() * std::f64::consts::TAU;
+            let hint = radius.map(|r| SearchVolume {
+                centre: Point3::from(
+                    truth_pose.translation.vector + Vector3::new(angle.cos(), angle.sin(), 0.0) * HINT_OFFSET_M,
+                ),
+                diameter_m: Some(2.0 * r),
+            });
+            let mut tracker = Tracker::new(rig, &model, &table, &cfg, hint, 1 + k as u64);
+            if tracker.segments_in_view(&truth_pose) < 3 {
+                if v == 0 {
+                    blind += 1;
+                }
+                continue;
+            }
+            let row = &mut rows[v];
+            row.counted += 1;
+            let started = Instant::now();
+            let (mut first, mut committed_at, mut last, mut wrong) = (None, None, None, false);
+            let off = |p: &Pose| {
+                (
+                    (p.translation.vector - truth_pose.translation.vector).norm(),
+                    p.rotation.angle_to(&truth_pose.rotation).to_degrees(),
+                )
+            };
+            for f in 0..WINDOW + AFTER {
+                if committed_at.is_none() && f >= WINDOW {
+                    break;
+                }
+                let ts = t.timestamp_ns + f as u64 * interval_ns;
+                let r = tracker.process(&edges, ts);
+                let mut poses: Vec<Pose> = tracker.late().iter().filter_map(|(_, l)| l.pose).collect();
+                poses.extend(r.pose);
+                for p in poses {
+                    let (dp, dr) = off(&p);
+                    wrong |= dp > 1.0 || dr > 10.0;
+                    if first.is_none() {
+                        first = Some(started.elapsed().as_secs_f64() * 1e3 + detect_ms);
+                        committed_at = Some(f);
+                    }
+                    last = Some(p);
+                }
+                if committed_at.is_some_and(|c| f >= c + AFTER) {
+                    break;
+                }
+            }
+            tracker.finish();
+            for (_, l) in tracker.late() {
+                if let Some(p) = l.pose {
+                    wrong |= off(&p).0 > 1.0 || off(&p).1 > 10.0;
+                    last = Some(p);
+                }
+            }
+            let stats = tracker.stats();
+            let cells = (stats.plan_cells_scanned as usize, stats.plan_cells_in_volume as usize);
+            row.cells.push(cells);
+            let verdict = match last {
+                None => {
+                    row.none += 1;
+                    "no pose".to_string()
+                }
+                Some(p) => {
+                    let (dp, dr) = off(&p);
+                    row.within_10 += usize::from(dp <= 0.10 && dr <= 2.0);
+                    row.within_30 += usize::from(dp <= 0.30 && dr <= 5.0);
+                    row.wrong += usize::from(wrong);
+                    format!("{:.1} cm {:.2}°{}", dp * 100.0, dr, if wrong { " WRONG" } else { "" })
+                }
+            };
+            if let Some(ms) = first {
+                row.first_pose_ms.push(ms);
+            }
+            if a.verbose {
+                eprintln!(
+                    "  start {k} {row_name}: {verdict}; first pose {}; looked at {} of {} cells",
+                    first.map_or("none".into(), |ms| format!("{ms:.0} ms")),
+                    cells.0,
+                    cells.1
+                );
+                let off_truth = last.is_none_or(|p| off(&p).0 > 0.1 || off(&p).1 > 2.0);
+                if off_truth {
+                    eprintln!(
+                        "{}",
+                        diagnose(rig, &model, &table, &cfg, &edges, hint, &truth_pose, 1 + k as u64)
+                    );
+                }
+            }
+        }
+    }
+    let title = format!(
+        "{name} ({} segments, {long} used), rig {}, {} starts ({blind} more that see fewer than 3 model segments not counted), appearance {label}",
+        model.segments.len(),
+        rig.name,
+        rows[0].counted,
+    );
+    let mut table = String::from(
+        "| search | within 10 cm / 2° | within 30 cm / 5° | wrong commits | no pose | cells looked at (all searches) | first pose p50 / max (ms) |\n| --- | --- | --- | --- | --- | --- | --- |",
+    );
+    for (row, (row_name, _)) in rows.iter_mut().zip(volumes) {
+        row.first_pose_ms.sort_by(f64::total_cmp);
+        let (looked, of) = row.cells.iter().fold((0, 0), |s, c| (s.0 + c.0, s.1 + c.1));
+        table.push_str(&format!(
+            "\n| {row_name} | {} of {n} | {} | {} | {} | {looked} of {of} | {:.0} / {:.0} |",
+            row.within_10,
+            row.within_30,
+            row.wrong,
+            row.none,
+            percentile(&row.first_pose_ms, 0.5),
+            row.first_pose_ms.last().copied().unwrap_or(f64::NAN),
+            n = row.counted,
+        ));
+    }
+    println!("\n{title}:\n\n{table}");
+    let note = format!(
+        "{table}\n\nStarts drawn with seed {}; {}. Wrong: a pose more than 1 m or 10° off on any frame. \
+         First-pose times are wall time (edges and search) on this machine, with whatever else ran on it.",
+        a.seed,
+        match &a.config {
+            Some(c) => format!("config {} (NOT the shipped one)", c.display()),
+            None => "the shipped configuration".into(),
+        }
+    );
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    match omnitrack::desk::results::write(
+        root,
+        &format!("detailed-{name}-{}-{label}", rig.name),
+        &title,
+        &format!(
+            "cargo bench --bench tracker -- --model {} --starts {} --appearance {label}",
+            model_path.display(),
+            a.starts
+        ),
+        &note,
+    ) {
+        Ok(path) => eprintln!("{name}: results in {}", path.display()),
+        Err(e) => eprintln!("{name}: results file not written: {e}"),
+    }
+}
+
+/// The search of one start taken apart (`--verbose`, for starts not placed within 10 cm): the
+/// truth as the search's scores see it, and the search's candidates with their distances from
+/// it and their scores.
+#[allow(clippy::too_many_arguments)]
+fn diagnose(
+    rig: &Rig,
+    model: &Model,
+    table: &omnitrack::visibility::VisibilityTable,
+    cfg: &TrackerConfig,
+    edges: &[omnitrack::edges::Edge],
+    hint: Option<SearchVolume>,
+    truth: &Pose,
+    seed: u64,
+) -> String {
+    use omnitrack::tracker::{InitOptions, Initialiser};
+    use rand::SeedableRng;
+    use std::fmt::Write;
+    let max_edges = rig.sensors.len() * cfg.edges.max_edges_per_sensor as usize;
+    let mut init = Initialiser::new(
+        rig,
+        model,
+        table,
+        InitOptions::from_config(cfg),
+        cfg.solver_options(),
+        max_edges,
+    );
+    let volume = hint.unwrap_or(SearchVolume {
+        centre: Point3::origin(),
+        diameter_m: None,
+    });
+    if volume.diameter_m.is_none() {
+        init.set_time_budget(std::time::Duration::from_secs_f64(
+            cfg.initialisation.whole_model_time_budget_ms / 1e3,
+        ));
+    }
+    let err = |p: &Pose| {
+        (
+            (p.translation.vector - truth.translation.vector).norm(),
+            p.rotation.angle_to(&truth.rotation).to_degrees(),
+        )
+    };
+    let mut line = String::from("    truth:");
+    match init.polish(truth, edges) {
+        Some(c) => {
+            let (dp, dr) = err(&c.pose);
+            let _ = write!(
+                line,
+                " polished {dp:.3} m {dr:.2}°, merit {:.3} (explained {:.2} support {:.2} blank {:.2}, {} inliers)",
+                c.merit(),
+                c.explained,
+                c.support,
+                c.blank,
+                c.inliers
+            );
+        }
+        None => line.push_str(" polished: none"),
+    }
+    let mut rng = rand::rngs::SmallRng::seed_from_u64(seed);
+    let (candidates, report) = init.run(edges, &volume, &mut rng);
+    let candidates = candidates.to_vec();
+    let _ = write!(
+        line,
+        "; grid merit {:.3}\n    search: {} rotations, looked at {} of {} cells, triplets in {} of {}, work {}{}",
+        init.grid_merit(truth).unwrap_or(f64::NAN),
+        report.rotations,
+        report.plan_cells_scanned,
+        report.plan_cells_in_volume,
+        report.cells_searched,
+        report.cells_in_volume,
+        report.work,
+        if report.backstop { " (backstop)" } else { "" }
+    );
+    for c in candidates.iter().take(8) {
+        let (dp, dr) = err(&c.pose);
+        let _ = write!(
+            line,
+            "\n      {dp:6.2} m {dr:6.1}°: merit {:.3} (explained {:.2} support {:.2} blank {:.2}, {} inliers), grid {:.3}",
+            c.merit(),
+            c.explained,
+            c.support,
+            c.blank,
+            c.inliers,
+            init.grid_merit(&c.pose).unwrap_or(f64::NAN)
+        );
+    }
+    line
+}

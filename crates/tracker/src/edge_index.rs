@@ -1,0 +1,279 @@
+//! The frame's edges by the direction of their planes (beyond the paper): which edges a
+//! predicted segment can match at all, without looking at every edge.
+//!
+//! In: a frame's [`Edge`]s (their planes' unit normals, rig frame, and sensors). Out: for a
+//! sensor and a predicted plane normal, every edge of that sensor whose normal lies within a
+//! gate angle of it, either way round ([`EdgeIndex::near`]); nothing the gate would pass is
+//! left out, so a matcher that applies its own gate test to these edges gives the answer it
+//! gives over all of them.
+//!
+//! **Why.** The initialiser's grid scores every position of its volume under every rotation
+//! by matching the few dozen segments in sight against the frame's few hundred longest edges.
+//! Matching all pairs made that scan cost segments × edges per position, and a volume of a
+//! detailed building ran out of budget after a third of its cells. A predicted segment passes
+//! a 6° gate with a small share of a frame's edges (those of one of its sensors whose planes
+//! lean as its plane does), so the scan's cost follows the pairs that can match.
+//!
+//! **How.** A normal n and −n are the same plane: each edge's normal is taken with n_z ≥ 0
+//! and binned by n_z ([`Z_BINS`] bins over [0, 1]) and azimuth ([`AZ_BINS`] bins), per sensor,
+//! by a counting sort into arrays sized once. Two unit vectors within angle g are within chord
+//! c = 2 sin(g/2), so their n_z differ by at most c, and their azimuths, seen from the axis, by
+//! at most asin(c / r) where r is the query's distance from the axis (all azimuths when r ≤ c).
+//! A plane may match the query's opposite (−m) only when both lie within c of the horizon:
+//! then the window about the opposite azimuth is searched too.
+//!
+//! Fixed memory: sized in [`EdgeIndex::new`]; [`EdgeIndex::build`] and [`EdgeIndex::near`]
+//! allocate nothing.
+
+use nalgebra::Vector3;
+use omnitrack_edges::Edge;
+use std::f64::consts::{PI, TAU};
+
+/// Bins of |n_z| over [0, 1].
+pub const Z_BINS: usize = 16;
+/// Bins of azimuth over [0, 2π).
+pub const AZ_BINS: usize = 64;
+const BUCKETS: usize = Z_BINS * AZ_BINS;
+
+/// A frame's edges binned by sensor and plane normal.
+pub struct EdgeIndex {
+    /// Edge indices in bucket order.
+    order: Vec<u16>,
+    /// Per (sensor, bucket): where its edges start in `order`; one more entry at the end.
+    start: Vec<u32>,
+    /// Scratch of the counting sort: each edge's bucket.
+    key: Vec<u32>,
+    sensors: usize,
+    /// Edges handed out by [`Self::near`] since [`Self::build`]: the work a caller charges.
+    visited: u64,
+}
+
+/// The bucket of a unit normal (taken with n_z ≥ 0).
+fn bucket(n: &Vector3<f64>) -> (usize, usize) {
+    let n = if n.z < 0.0 { -n } else { *n };
+    let zb = ((n.z * Z_BINS as f64) as usize).min(Z_BINS - 1);
+    (zb, az_bin(n.y.atan2(n.x)))
+}
+
+fn az_bin(az: f64) -> usize {
+    let a = az.rem_euclid(TAU);
+    ((a / TAU * AZ_BINS as f64) as usize).min(AZ_BINS - 1)
+}
+
+impl EdgeIndex {
+    /// Room for `max_edges` edges (at most 65,536) over `sensors` sensors.
+    pub fn new(max_edges: usize, sensors: usize) -> EdgeIndex {
+        let sensors = sensors.max(1);
+        EdgeIndex {
+            order: Vec::with_capacity(max_edges.min(1 << 16)),
+            start: vec![0; sensors * BUCKETS + 1],
+            key: Vec::with_capacity(max_edges.min(1 << 16)),
+            sensors,
+            visited: 0,
+        }
+    }
+
+    /// Bins `edges` (those of sensors beyond the index's count, and beyond its capacity, are
+    /// left out).
+    pub fn build(&mut self, edges: &[Edge]) {
+        self.start.fill(0);
+        self.key.clear();
+        self.visited = 0;
+        for e in edges.iter().take(self.key.capacity()) {
+            let s = e.sensor as usize;
+            let k = if s < self.sensors {
+                let (zb, ab) = bucket(&e.plane.normal);
+                (s * BUCKETS + zb * AZ_BINS + ab) as u32
+            } else {
+                u32::MAX
+            };
+            self.key.push(k);
+            if k != u32::MAX {
+                self.start[k as usize + 1] += 1;
+            }
+        }
+        for i in 1..self.start.len() {
+            self.start[i] += self.start[i - 1];
+        }
+        self.order.clear();
+        self.order.resize(self.start[self.start.len() - 1] as usize, 0);
+        // Each bucket's cursor runs from its first slot to its end, so the edges of a bucket
+        // keep their order in the frame; then the starts are shifted back by one bucket.
+        for (i, &k) in self.key.iter().enumerate() {
+            if k != u32::MAX {
+                let b = k as usize;
+                self.order[self.start[b] as usize] = i as u16;
+                self.start[b] += 1;
+            }
+        }
+        for b in (1..self.start.len()).rev() {
+            self.start[b] = self.start[b - 1];
+        }
+        self.start[0] = 0;
+    }
+
+    /// Calls `f` with the index of every edge of `sensor` whose plane normal is within the
+    /// angle whose cosine is `cos_gate` of `m` or of −m (`m` unit length), and perhaps a few
+    /// more: the caller applies its own test.
+    #[inline]
+    pub fn near(&mut self, sensor: usize, m: &Vector3<f64>, cos_gate: f64, mut f: impl FnMut(usize)) {
+        if sensor >= self.sensors {
+            return;
+        }
+        let m = if m.z < 0.0 { -m } else { *m };
+        let chord = (2.0 - 2.0 * cos_gate.clamp(-1.0, 1.0)).max(0.0).sqrt();
+        let z_lo = (((m.z - chord) * Z_BINS as f64).floor().max(0.0)) as usize;
+        let z_hi = (((m.z + chord) * Z_BINS as f64) as usize).min(Z_BINS - 1);
+        let r = (1.0 - m.z * m.z).max(0.0).sqrt();
+        let az = m.y.atan2(m.x);
+        let base = sensor * BUCKETS;
+        let mut visit = |lo: f64, hi: f64, start: &[u32], order: &[u16], visited: &mut u64| {
+            let (b_lo, span) = if hi - lo >= TAU {
+                (0, AZ_BINS)
+            } else {
+                let b_lo = az_bin(lo);
+                let w = TAU / AZ_BINS as f64;
+                // Bins from the one holding `lo` to the one holding `hi`, going round.
+                let first = (lo / w).floor();
+                let last = (hi / w).floor();
+                (b_lo, ((last - first) as usize + 1).min(AZ_BINS))
+            };
+            for zb in z_lo..=z_hi {
+                for k in 0..span {
+                    let b = base + zb * AZ_BINS + (b_lo + k) % AZ_BINS;
+                    let (from, to) = (start[b] as usize, start[b + 1] as usize);
+                    *visited += (to - from) as u64;
+                    for &i in &order[from..to] {
+                        f(i as usize);
+                    }
+                }
+            }
+        };
+        let half = if r <= chord { PI } else { (chord / r).min(1.0).asin() };
+        visit(az - half, az + half, &self.start, &self.order, &mut self.visited);
+        // Near the horizon the plane may match −m, whose canonical azimuth is the opposite
+        // (unless the first window already went all the way round).
+        if m.z <= chord && half < PI {
+            visit(
+                az + PI - half,
+                az + PI + half,
+                &self.start,
+                &self.order,
+                &mut self.visited,
+            );
+        }
+    }
+
+    /// Edges handed out by [`Self::near`] since the last [`Self::build`].
+    pub fn visited(&self) -> u64 {
+        self.visited
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Point3;
+    use omnitrack_core::geometry::EdgePlane;
+
+    fn edge(sensor: u8, n: Vector3<f64>) -> Edge {
+        let n = nalgebra::Unit::new_normalize(n);
+        let a = nalgebra::Unit::new_normalize(n.cross(&Vector3::new(0.3, 0.5, 0.8)));
+        let b = nalgebra::Unit::new_normalize(n.cross(&a));
+        Edge {
+            sensor,
+            plane: EdgePlane {
+                normal: n,
+                centre: Point3::origin(),
+                ends: [a, b],
+            },
+            px: [nalgebra::Point2::origin(); 2],
+            length_rad: 0.1,
+            strength: 1.0,
+            hue: omnitrack_edges::HueSignature {
+                left_mean: f32::NAN,
+                left_var: f32::NAN,
+                right_mean: f32::NAN,
+                right_var: f32::NAN,
+                left_kept: 0.0,
+                right_kept: 0.0,
+            },
+            polarity: 0,
+            edgels: 10,
+            rms_rad: 0.0,
+            gaps: [[0.0; 2]; omnitrack_edges::MAX_GAPS],
+            n_gaps: 0,
+            shown: [[0.0; 2]; omnitrack_edges::MAX_GAPS + 1],
+            n_shown: 0,
+        }
+    }
+
+    /// xorshift64* in [0, 1).
+    fn uniform(x: &mut u64) -> f64 {
+        *x ^= *x >> 12;
+        *x ^= *x << 25;
+        *x ^= *x >> 27;
+        (x.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    fn unit(x: &mut u64) -> Vector3<f64> {
+        loop {
+            let v = Vector3::new(2.0 * uniform(x) - 1.0, 2.0 * uniform(x) - 1.0, 2.0 * uniform(x) - 1.0);
+            if v.norm() > 0.1 && v.norm() <= 1.0 {
+                return v.normalize();
+            }
+        }
+    }
+
+    #[test]
+    fn every_edge_within_the_gate_is_handed_out_and_none_twice() {
+        let mut x = 0x1234_5678_9abc_def1u64;
+        let mut edges = Vec::new();
+        for k in 0..600 {
+            // Many near the horizon and near the pole, where the bins wrap and the windows
+            // widen; the rest anywhere.
+            let n = match k % 4 {
+                0 => Vector3::new(
+                    uniform(&mut x) - 0.5,
+                    uniform(&mut x) - 0.5,
+                    0.02 * (uniform(&mut x) - 0.5),
+                ),
+                1 => Vector3::new(0.05 * (uniform(&mut x) - 0.5), 0.05 * (uniform(&mut x) - 0.5), 1.0),
+                _ => unit(&mut x),
+            };
+            edges.push(edge((k % 3) as u8, n));
+        }
+        let mut index = EdgeIndex::new(1024, 3);
+        index.build(&edges);
+        let mut total_visited = 0;
+        for q in 0..2000 {
+            let m = match q % 4 {
+                0 => Vector3::new(
+                    uniform(&mut x) - 0.5,
+                    uniform(&mut x) - 0.5,
+                    0.03 * (uniform(&mut x) - 0.5),
+                )
+                .normalize(),
+                1 => Vector3::new(0.1 * (uniform(&mut x) - 0.5), 0.1 * (uniform(&mut x) - 0.5), -1.0).normalize(),
+                _ => unit(&mut x),
+            };
+            let sensor = q % 3;
+            let gate: f64 = [2.0f64, 6.0, 12.0][q % 3].to_radians();
+            let mut seen = vec![0u32; edges.len()];
+            index.near(sensor, &m, gate.cos(), |i| seen[i] += 1);
+            for (i, e) in edges.iter().enumerate() {
+                let passes = e.sensor as usize == sensor && m.dot(&e.plane.normal).abs() >= gate.cos();
+                assert!(seen[i] <= 1, "edge {i} handed out {} times", seen[i]);
+                assert!(!passes || seen[i] == 1, "edge {i} within {gate} of {m:?} left out");
+                assert!(
+                    seen[i] == 0 || e.sensor as usize == sensor,
+                    "edge {i} of another sensor"
+                );
+            }
+            total_visited += seen.iter().sum::<u32>();
+        }
+        // Far fewer than all of a sensor's edges per query.
+        assert!(total_visited < 2000 * 200 / 4, "visited {total_visited}");
+        assert_eq!(index.visited(), u64::from(total_visited));
+    }
+}
