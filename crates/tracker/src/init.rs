@@ -652,15 +652,10 @@ impl<'m> Initialiser<'m> {
         self.work = self.work.saturating_add(units.max(cast));
     }
 
-    /// Occlusion rays cast so far (`visibility::at_pose`) and (segment, edge) pairs the grid's
-    /// scores looked at since the frame's edges were taken: for measuring what the steps cost.
+    /// Occlusion rays cast so far (`visibility::at_pose`): what the searches are charged for
+    /// on a detailed model.
     pub fn rays_cast(&self) -> u64 {
         self.at_pose.rays_cast()
-    }
-
-    /// See [`Self::rays_cast`].
-    pub fn pairs_visited(&self) -> u64 {
-        self.vote_index.visited()
     }
 
     /// Whether the run has spent `limit` work units, or the wall clock's backstop has fallen.

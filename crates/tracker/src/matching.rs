@@ -176,21 +176,37 @@ pub fn best_edge_and_cover(
         if s >= centres.len() {
             continue;
         }
-        let n = &pred.normals[s];
-        let cos = n.dot(&e.plane.normal).abs();
-        if cos < gate.cos_alpha || !gate.signature_matches(e) {
-            continue;
-        }
-        let (common, shorter, seg) = shared_angle(pred, &centres[s], n, e);
-        if common <= 0.0 || shorter <= 0.0 || common / shorter < gate.min_overlap {
-            continue;
-        }
-        covered += common / seg;
-        if best.is_none_or(|(_, c)| cos > c) {
-            best = Some((i, cos));
+        if let Some((cos, share)) = gated_cover(pred, &centres[s], &pred.normals[s], e, gate) {
+            covered += share;
+            if best.is_none_or(|(_, c)| cos > c) {
+                best = Some((i, cos));
+            }
         }
     }
     (best.map(|(i, cos)| (i, cos.min(1.0).acos())), covered.min(1.0))
+}
+
+/// Whether `edge` passes `gate` against `pred` seen by the sensor centred at `c` (its predicted
+/// plane normal `n`): the planes' |cos| and the share of the segment the edge covers, or `None`.
+/// One pair of [`best_edge_and_cover`], for callers that choose the edges themselves
+/// (`crate::edge_index`).
+#[inline]
+pub(crate) fn gated_cover(
+    pred: &Predicted,
+    c: &Point3<f64>,
+    n: &Vector3<f64>,
+    edge: &Edge,
+    gate: &Gate,
+) -> Option<(f64, f64)> {
+    let cos = n.dot(&edge.plane.normal).abs();
+    if cos < gate.cos_alpha || !gate.signature_matches(edge) {
+        return None;
+    }
+    let (common, shorter, seg) = shared_angle(pred, c, n, edge);
+    if common <= 0.0 || shorter <= 0.0 || common / shorter < gate.min_overlap {
+        return None;
+    }
+    Some((cos, common / seg))
 }
 
 /// (angle shared by edge and segment, the shorter one's angle, the segment's angle) about `c`

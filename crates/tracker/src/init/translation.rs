@@ -15,7 +15,7 @@ use super::{
 use crate::edge_index::EdgeIndex;
 #[cfg(debug_assertions)]
 use crate::matching::best_edge_and_cover;
-use crate::matching::{overlap, shared_angle, Gate, Predicted};
+use crate::matching::{gated_cover, overlap, Gate, Predicted};
 use crate::vanishing::MAX_ROTATIONS;
 use crate::vote::{Grid, PEAKS};
 use nalgebra::{Point3, Translation3, UnitQuaternion, Vector3};
@@ -190,8 +190,7 @@ impl Initialiser<'_> {
     /// band above the floor beneath, the known height when upright, the whole slab in a model
     /// without floors) and the vanishing directions' rotations scored by
     /// [`Self::coarse_merit`] over the [`GRID_SEGMENTS`] longest segments in sight from the
-    /// middle of its heights, each kept among its rotation's best. Returns the best score
-    /// (`None`: nothing to stand on in the volume, or too little in sight).
+    /// middle of its heights, each kept among its rotation's best.
     #[allow(clippy::too_many_arguments)]
     fn grid_position(
         &mut self,
@@ -202,30 +201,32 @@ impl Initialiser<'_> {
         volume: &SearchVolume,
         gate: &Gate,
         min_len: f64,
-    ) -> Option<f64> {
+    ) {
         let (x, y) = (
             centre.x - grid.half + (ix as f64 + 0.5) * grid.step,
             centre.y - grid.half + (iy as f64 + 0.5) * grid.step,
         );
         let (z_lo, z_hi) = match self.opts.upright_height_m {
             Some(z) => (z, z),
-            None if self.floors.any() => self.floors.band(x, y, grid.slab, grid.band, self.at_pose.solid())?,
+            None if self.floors.any() => match self.floors.band(x, y, grid.slab, grid.band, self.at_pose.solid()) {
+                Some(b) => b,
+                None => return,
+            },
             None => (grid.slab[0], grid.slab[1]),
         };
         if z_hi < z_lo {
-            return None;
+            return;
         }
         let inside = |p: &Point3<f64>| volume.diameter_m.is_none_or(|d| (p - volume.centre).norm() <= 0.5 * d);
         let plan = Point3::new(x, y, 0.5 * (z_lo + z_hi));
         let (lo, hi) = (Point3::new(x, y, z_lo), Point3::new(x, y, z_hi));
         if !inside(&lo) && !inside(&hi) && !inside(&plan) {
-            return None;
+            return;
         }
         // The longest segments in sight from the middle of the heights: a bounded cost per
         // position, and the lines that decide where the rig is.
         self.longest_in_sight(&plan, GRID_SEGMENTS);
         let segs = std::mem::take(&mut self.grid_segs);
-        let mut best = None;
         let mut z = z_lo;
         while z <= z_hi + 1e-9 {
             let p = Point3::new(x, y, z);
@@ -237,12 +238,10 @@ impl Initialiser<'_> {
                 let pose = Pose::from_parts(Translation3::from(p.coords), self.vanishing_rot[ri]);
                 if let Some(score) = self.coarse_merit(&pose, &segs, gate, min_len) {
                     keep_best_apart(&mut self.grid_best[ri], (score, p));
-                    best = Some(best.map_or(score, |b: f64| b.max(score)));
                 }
             }
         }
         self.grid_segs = segs;
-        best
     }
 
     /// Coordinate ascent of the coarse merit ([`Self::coarse_merit`]) from `start` in x, y and
@@ -416,16 +415,10 @@ fn cover_near(
     for (s, c) in centres.iter().enumerate() {
         let n = &pred.normals[s];
         index.near(s, n, gate.cos_alpha, |i| {
-            let e = &edges[i];
-            if n.dot(&e.plane.normal).abs() < gate.cos_alpha || !gate.signature_matches(e) {
-                return;
+            if let Some((_, share)) = gated_cover(pred, c, n, &edges[i], gate) {
+                covered += share;
+                any = true;
             }
-            let (common, shorter, seg) = shared_angle(pred, c, n, e);
-            if common <= 0.0 || shorter <= 0.0 || common / shorter < gate.min_overlap {
-                return;
-            }
-            covered += common / seg;
-            any = true;
         });
     }
     any.then_some(covered.min(1.0))
