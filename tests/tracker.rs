@@ -1004,3 +1004,65 @@ fn a_search_in_a_detailed_model_is_charged_for_its_rays_and_still_finds_the_trut
         "{found:?}"
     );
 }
+
+/// A volume too large for one search's budget is swept over several searches (issue 47): each
+/// continues where the last stopped (`set_sweep_from` at the last `swept_to_m`), skips exactly
+/// the cells nearer the centre, and together they look at every cell of the volume, the far
+/// one holding the truth included, which the first search never reached.
+#[test]
+fn a_volume_too_large_for_one_search_is_swept_over_several_until_every_cell_is_looked_at() {
+    use rand::SeedableRng;
+    let f = fixture();
+    let (rig, cfg, edges, truth) = first_frame(f);
+    let mut init = lab_initialiser(f, &rig, &cfg);
+    init.set_time_budget(std::time::Duration::from_millis(150));
+    init.set_backstop_factor(1000);
+    let volume = SearchVolume {
+        centre: Point3::from(truth.translation.vector + Vector3::new(3.5, -2.0, 0.0)),
+        diameter_m: Some(10.0),
+    };
+    let near = |c: &omnitrack::tracker::Candidate| {
+        (c.pose.translation.vector - truth.translation.vector).norm() < 0.1
+            && c.pose.rotation.angle_to(&truth.rotation) < 1f64.to_radians()
+    };
+    let mut rng = rand::rngs::SmallRng::seed_from_u64(7);
+    let (mut from, mut looked_at, mut searches, mut found_at) = (0.0, 0, 0, None);
+    let mut in_volume;
+    loop {
+        init.set_sweep_from(from);
+        let (found, report) = init.run(&edges, &volume, &mut rng);
+        let found_truth = found.iter().any(near);
+        eprintln!("sweep {searches}: {report:?} truth found: {found_truth}");
+        in_volume = report.plan_cells_in_volume;
+        // Exactly the cells looked at before are skipped (up to those tied in distance with
+        // the first one not looked at, which are looked at again).
+        assert!(report.plan_cells_skipped <= looked_at, "{report:?}");
+        assert!(report.plan_cells_skipped + 8 >= looked_at, "{report:?}");
+        assert!(
+            report.plan_cells_scanned > 0,
+            "a sweep that looks at nothing never ends"
+        );
+        looked_at = report.plan_cells_skipped + report.plan_cells_scanned;
+        if found_truth && found_at.is_none() {
+            found_at = Some(searches);
+        }
+        searches += 1;
+        match report.swept_to_m {
+            Some(m) => {
+                assert!(m > from, "the sweep moves out: {m} after {from}");
+                from = m;
+            }
+            None => break,
+        }
+        assert!(searches < 60, "the sweep of {in_volume} cells did not end");
+    }
+    assert_eq!(looked_at, in_volume);
+    assert!(
+        searches >= 3,
+        "one budget looked at {in_volume} cells: the test needs a larger volume"
+    );
+    assert!(
+        found_at.is_some_and(|k| k > 0),
+        "the truth, 4 m from the centre, found by search {found_at:?} of {searches}"
+    );
+}

@@ -106,8 +106,12 @@ pub fn run(a: Args) -> CommandResult {
                             r.sequence, d
                         );
                     }
+                    let volume = match rep.diameter_m {
+                        Some(d) => format!("a {d:.1} m volume"),
+                        None => "the whole model".to_string(),
+                    };
                     eprintln!(
-                        "omnitrack: frame {}: looked at {} of {} cells (positions scored under the vanishing directions), searched {} of {} (segment-edge triplets) in {:.0} ms",
+                        "omnitrack: frame {}: in {volume}, looked at {} of {} cells (positions scored under the vanishing directions), searched {} of {} (segment-edge triplets) in {:.0} ms",
                         r.sequence,
                         rep.plan_cells_scanned,
                         rep.plan_cells_in_volume,

@@ -124,7 +124,11 @@
 //! - the grid's scores match each predicted segment only against the edges whose planes can
 //!   pass its gate (module `edge_index`; checked against all pairs in debug builds);
 //! - [`InitReport::plan_cells_scanned`] says how many of the volume's cells the scan looked
-//!   at before its share of the budget was spent.
+//!   at before its share of the budget was spent, and [`InitReport::swept_to_m`] how far out;
+//!   [`Initialiser::set_sweep_from`] lets a later search continue from there, so that searches
+//!   over several frames cover a volume one budget does not. The tracker does not sweep yet:
+//!   deciding only once a sweep had covered the volume added a wrong commit on the ZInD tour
+//!   (docs/decisions.md).
 //!
 //! **The whole model** (start-up without a hint, over a thousand cells in `lab`) deals its cells
 //! to [`LANES`] lanes, each with its own per-cell buffers, its share of the work budget and a
@@ -378,11 +382,20 @@ pub struct InitReport {
     /// The volume held no valid node: the diameter (m) of the volume actually searched, about
     /// the same centre, out to the nearest valid nodes (`None`: the volume as given).
     pub widened_to_m: Option<f64>,
+    /// The diameter (m) of the volume searched (`None`: the whole model).
+    pub diameter_m: Option<f64>,
     /// The grid search's plan cells (those of the table's grid meeting the volume) and how
     /// many of them it looked at before its share of the budget was spent: every position of
     /// a cell looked at was scored.
     pub plan_cells_in_volume: usize,
     pub plan_cells_scanned: usize,
+    /// Of the volume's plan cells, those nearer its centre than [`Initialiser::set_sweep_from`]
+    /// (looked at by earlier searches of a sweep) and skipped by this one.
+    pub plan_cells_skipped: usize,
+    /// How far from the centre (m, in plan) the cells looked at by now reach: the distance of
+    /// the nearest cell not yet looked at, where the next search of a sweep starts. `None`:
+    /// every cell of the volume has been looked at.
+    pub swept_to_m: Option<f64>,
 }
 
 /// Lanes of the whole-model search (and most threads it uses).
@@ -505,6 +518,9 @@ pub struct Initialiser<'m> {
     /// A rotation the rig cannot have turned further from than the angle (rad): samples beyond
     /// it are dropped before they take a place in the pool.
     rotation_prior: Option<(UnitQuaternion<f64>, f64)>,
+    /// Cells nearer the volume's centre than this (m, in plan) are skipped: earlier searches
+    /// of the sweep looked at them.
+    sweep_from_m: f64,
 }
 
 impl<'m> Initialiser<'m> {
@@ -572,6 +588,7 @@ impl<'m> Initialiser<'m> {
             vanishing_count: 0,
             yaw_twins: true,
             rotation_prior: None,
+            sweep_from_m: 0.0,
         }
     }
 
@@ -606,6 +623,15 @@ impl<'m> Initialiser<'m> {
     /// the plausible samples. `None`: any rotation.
     pub fn set_rotation_prior(&mut self, prior: Option<(UnitQuaternion<f64>, f64)>) {
         self.rotation_prior = prior;
+    }
+
+    /// Continues a sweep of the volume: the next searches skip the cells nearer its centre
+    /// than `m` (in plan), which an earlier search of the same volume looked at without
+    /// finding anything acceptable, and look further out (0: the whole volume, nearest first).
+    /// A volume too large for one search's budget is then covered over a few frames rather
+    /// than its nearest cells searched again and again.
+    pub fn set_sweep_from(&mut self, m: f64) {
+        self.sweep_from_m = if m.is_finite() { m.max(0.0) } else { 0.0 };
     }
 
     /// The rotation hypotheses the vanishing directions of `edges` give (module `vanishing`), for
@@ -706,6 +732,17 @@ impl<'m> Initialiser<'m> {
             None => volume,
         };
         report.cells_in_volume = self.cells.len();
+        report.diameter_m = volume.diameter_m;
+        // A sweep's later searches leave the cells the earlier ones looked at (the triplets'
+        // cells by the same plan distance as the grid's).
+        if self.sweep_from_m > 0.0 {
+            let (centre, from) = (volume.centre, self.sweep_from_m);
+            let table = self.table;
+            self.cells.retain(|&(_, node)| {
+                let p = table.node_position(node);
+                (p.x - centre.x).hypot(p.y - centre.y) >= from
+            });
+        }
         let mut rotations = [UnitQuaternion::identity(); MAX_ROTATIONS];
         let found = self.vanishing.rotations(edges, self.opts.max_tilt_rad, &mut rotations);
         self.vanishing_count = 0;
@@ -717,7 +754,11 @@ impl<'m> Initialiser<'m> {
         }
         // The grid search under the vanishing directions first: on real photographs it finds
         // what the triplets miss, and the triplets then have what is left of the time budget.
-        (report.plan_cells_scanned, report.plan_cells_in_volume) = self.grid_search(edges, volume, limit);
+        let sweep = self.grid_search(edges, volume, limit);
+        report.plan_cells_in_volume = sweep.in_volume;
+        report.plan_cells_scanned = sweep.scanned;
+        report.plan_cells_skipped = sweep.skipped;
+        report.swept_to_m = sweep.next_m;
         report.grid_elapsed = started.elapsed();
         report.rotations = self.vanishing_count;
         // The triplets leave twice what polishing their best samples costs: a cell's sampling

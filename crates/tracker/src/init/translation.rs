@@ -105,7 +105,7 @@ impl Initialiser<'_> {
     /// translation is three numbers, few enough to search outright. The scan spends at most
     /// [`GRID_SHARE`] of the work budget `limit`, the climbs and polishes the rest. Returns the
     /// plan cells looked at (every position scored) and those meeting the volume.
-    pub(super) fn grid_search(&mut self, edges: &[Edge], volume: &SearchVolume, limit: u64) -> (usize, usize) {
+    pub(super) fn grid_search(&mut self, edges: &[Edge], volume: &SearchVolume, limit: u64) -> GridSweep {
         let scan_limit = (GRID_SHARE * limit as f64) as u64;
         let h = &self.table.header;
         let half = 0.5 * h.spacing_m;
@@ -136,8 +136,9 @@ impl Initialiser<'_> {
         // node spacing often has its node inside a wall, and the rig can still stand there.
         // (Looking at every cell on a coarser lattice first and refining the most promising
         // was tried, and committed more twins: docs/decisions.md.)
-        let mut scanned = 0;
-        'cells: for ci in 0..self.plan_cells.len() {
+        let first = self.plan_cells.partition_point(|c| c.0 < self.sweep_from_m);
+        let mut scanned = first;
+        'cells: for ci in first..self.plan_cells.len() {
             let centre = self.plan_cells[ci].1;
             for ix in 0..steps {
                 for iy in 0..steps {
@@ -183,7 +184,12 @@ impl Initialiser<'_> {
                 self.offer(c);
             }
         }
-        (scanned, self.plan_cells.len())
+        GridSweep {
+            in_volume: self.plan_cells.len(),
+            skipped: first,
+            scanned: scanned - first,
+            next_m: self.plan_cells.get(scanned).map(|c| c.0),
+        }
     }
 
     /// The grid's position (`ix`, `iy`) of the plan cell about `centre`: its heights (inside the
@@ -431,6 +437,16 @@ struct GridLattice {
     step: f64,
     slab: [f64; 2],
     band: [f64; 2],
+}
+
+/// What the grid's scan of a volume's plan cells (nearest first) covered: the cells meeting
+/// the volume, those skipped as an earlier search of the sweep's, those scored now, and the
+/// distance (m, in plan) of the first cell not looked at (`None`: the volume is covered).
+pub(super) struct GridSweep {
+    pub in_volume: usize,
+    pub skipped: usize,
+    pub scanned: usize,
+    pub next_m: Option<f64>,
 }
 
 /// Keeps `entry` (score, position; highest score best) among the best [`GRID_KEEP`] that are at
