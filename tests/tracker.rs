@@ -385,6 +385,14 @@ fn a_search_commits_no_pose_outside_the_volume_it_searched() {
     assert!(searched >= 1);
 }
 
+/// Whether a search's candidates hold the truth (within 10 cm and 1°).
+fn finds_truth(found: &[omnitrack::tracker::Candidate], truth: &omnitrack::Pose) -> bool {
+    found.iter().any(|c| {
+        (c.pose.translation.vector - truth.translation.vector).norm() < 0.1
+            && c.pose.rotation.angle_to(&truth.rotation) < 1f64.to_radians()
+    })
+}
+
 /// The initialiser of the lab fixture's model and table for `rig` and `cfg`.
 /// Its budget is 60 s of work, which lets every search here finish its volume: these tests judge
 /// the search, not its budget (which the test of issue 24 below sets itself).
@@ -417,13 +425,7 @@ fn a_search_volume_without_a_valid_node_searches_the_nearest_nodes() {
     let (found, report) = init.run(&edges, &volume, &mut rng);
     let widened = report.widened_to_m.expect("the volume was widened");
     assert!(widened > 1.0 && report.cells_in_volume > 0, "{report:?}");
-    assert!(
-        found
-            .iter()
-            .any(|c| (c.pose.translation.vector - truth.translation.vector).norm() < 0.1
-                && c.pose.rotation.angle_to(&truth.rotation) < 1f64.to_radians()),
-        "{found:?}"
-    );
+    assert!(finds_truth(found, &truth), "{found:?}");
     // A volume with valid nodes is searched as given.
     let (_, report) = init.run(&edges, &hint(f), &mut rng);
     assert_eq!(report.widened_to_m, None);
@@ -464,12 +466,6 @@ fn a_rotation_prior_and_a_tilt_limit_keep_the_search_to_plausible_rotations() {
         init
     };
     let volume = hint(f);
-    let near_truth = |found: &[omnitrack::tracker::Candidate], deg: f64| {
-        found.iter().any(|c| {
-            (c.pose.translation.vector - truth.translation.vector).norm() < 0.1
-                && c.pose.rotation.angle_to(&truth.rotation) < deg.to_radians()
-        })
-    };
     let mut init = initialiser(180.0);
     let limit = 30f64.to_radians();
     let twin = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), std::f64::consts::PI) * truth.rotation;
@@ -481,7 +477,7 @@ fn a_rotation_prior_and_a_tilt_limit_keep_the_search_to_plausible_rotations() {
         init.set_rotation_prior(prior);
         let mut rng = rand::rngs::SmallRng::seed_from_u64(5);
         let (found, report) = init.run(&edges, &volume, &mut rng);
-        assert_eq!(near_truth(found, 1.0), expect_truth, "prior {prior:?}: {found:?}");
+        assert_eq!(finds_truth(found, &truth), expect_truth, "prior {prior:?}: {found:?}");
         assert_eq!(report.tilted, 0, "no tilt limit at 180°");
         if let Some((r, _)) = prior {
             // The polish may settle a little beyond the limit, never on the far side.
@@ -496,7 +492,7 @@ fn a_rotation_prior_and_a_tilt_limit_keep_the_search_to_plausible_rotations() {
     let mut init = initialiser(10.0);
     let mut rng = rand::rngs::SmallRng::seed_from_u64(5);
     let (found, report) = init.run(&edges, &volume, &mut rng);
-    assert!(near_truth(found, 1.0), "{found:?}");
+    assert!(finds_truth(found, &truth), "{found:?}");
     assert!(report.tilted > 0, "{report:?}");
     let tilt = |c: &omnitrack::tracker::Candidate| (c.pose.rotation * Vector3::z()).z.acos().to_degrees();
     assert!(found.iter().all(|c| tilt(c) < 12.0), "{found:?}");
@@ -996,13 +992,7 @@ fn a_search_in_a_detailed_model_is_charged_for_its_rays_and_still_finds_the_trut
         "{report:?}"
     );
     assert!(report.plan_cells_scanned <= report.plan_cells_in_volume, "{report:?}");
-    assert!(
-        found
-            .iter()
-            .any(|c| (c.pose.translation.vector - truth.translation.vector).norm() < 0.1
-                && c.pose.rotation.angle_to(&truth.rotation) < 1f64.to_radians()),
-        "{found:?}"
-    );
+    assert!(finds_truth(&found, &truth), "{found:?}");
 }
 
 /// A volume too large for one search's budget is swept over several searches (issue 47): each
@@ -1021,18 +1011,13 @@ fn a_volume_too_large_for_one_search_is_swept_over_several_until_every_cell_is_l
         centre: Point3::from(truth.translation.vector + Vector3::new(3.5, -2.0, 0.0)),
         diameter_m: Some(10.0),
     };
-    let near = |c: &omnitrack::tracker::Candidate| {
-        (c.pose.translation.vector - truth.translation.vector).norm() < 0.1
-            && c.pose.rotation.angle_to(&truth.rotation) < 1f64.to_radians()
-    };
     let mut rng = rand::rngs::SmallRng::seed_from_u64(7);
     let (mut from, mut looked_at, mut searches, mut found_at) = (0.0, 0, 0, None);
     let mut in_volume;
     loop {
         init.set_sweep_from(from);
         let (found, report) = init.run(&edges, &volume, &mut rng);
-        let found_truth = found.iter().any(near);
-        eprintln!("sweep {searches}: {report:?} truth found: {found_truth}");
+        let found_truth = finds_truth(found, &truth);
         in_volume = report.plan_cells_in_volume;
         // Exactly the cells looked at before are skipped (up to those tied in distance with
         // the first one not looked at, which are looked at again).

@@ -22,6 +22,19 @@ pub struct HueSignature {
     pub right_kept: f32,
 }
 
+impl HueSignature {
+    /// No hue measured on either side (no pixel kept): an edge made by hand or from a file
+    /// without hue.
+    pub const NONE: HueSignature = HueSignature {
+        left_mean: f32::NAN,
+        left_var: f32::NAN,
+        right_mean: f32::NAN,
+        right_var: f32::NAN,
+        left_kept: 0.0,
+        right_kept: 0.0,
+    };
+}
+
 /// Running sums of one strip.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub(crate) struct HueAcc {

@@ -626,9 +626,9 @@ impl<'m> Initialiser<'m> {
     }
 
     /// Continues a sweep of the volume: the next searches skip the cells nearer its centre
-    /// than `m` (in plan), which an earlier search of the same volume looked at without
-    /// finding anything acceptable, and look further out (0: the whole volume, nearest first).
-    /// A volume too large for one search's budget is then covered over a few frames rather
+    /// than `m` (in plan), which an earlier search of the same volume looked at (its
+    /// [`InitReport::swept_to_m`]), and look further out (0: the whole volume, nearest first).
+    /// A volume too large for one search's budget is then covered over a few searches rather
     /// than its nearest cells searched again and again.
     pub fn set_sweep_from(&mut self, m: f64) {
         self.sweep_from_m = if m.is_finite() { m.max(0.0) } else { 0.0 };

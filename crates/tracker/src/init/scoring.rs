@@ -175,26 +175,13 @@ impl Initialiser<'_> {
     /// The share (by angle) of `edges` that one of `self.support_pred` explains: plane within
     /// the gate (cos) and overlapping.
     pub(super) fn predicted_support<'e>(&self, edges: impl Iterator<Item = &'e Edge>, cos_gate: f64) -> f64 {
-        let (mut explained, mut total) = (0.0, 0.0);
-        for e in edges {
+        length_share(edges, self.centres.len(), |_, e| {
             let s = e.sensor as usize;
-            if s >= self.centres.len() {
-                continue;
-            }
-            total += e.length_rad;
-            let hit = self.support_pred.iter().any(|pred| {
+            self.support_pred.iter().any(|pred| {
                 let nrm = &pred.normals[s];
                 nrm.dot(&e.plane.normal).abs() >= cos_gate && overlap(pred, &self.centres[s], nrm, e) >= 0.5
-            });
-            if hit {
-                explained += e.length_rad;
-            }
-        }
-        if total > 0.0 {
-            explained / total
-        } else {
-            0.0
-        }
+            })
+        })
     }
 
     /// How many model segments the rig images long enough to detect from `pose`: in sight
@@ -338,6 +325,30 @@ pub(super) fn in_view(view: &ViewMap, pose: &Pose, a: &Point3<f64>, b: &Point3<f
         }
     }
     n as f64 / SAMPLES as f64
+}
+
+/// The share (by angle) of `edges` for which `hit(k, edge)` holds (k: the edge's place in
+/// `edges`), over the edges of the rig's `sensors` (others are not counted; 0 without any).
+pub(super) fn length_share<'e>(
+    edges: impl Iterator<Item = &'e Edge>,
+    sensors: usize,
+    mut hit: impl FnMut(usize, &Edge) -> bool,
+) -> f64 {
+    let (mut explained, mut total) = (0.0, 0.0);
+    for (k, e) in edges.enumerate() {
+        if (e.sensor as usize) >= sensors {
+            continue;
+        }
+        total += e.length_rad;
+        if hit(k, e) {
+            explained += e.length_rad;
+        }
+    }
+    if total > 0.0 {
+        explained / total
+    } else {
+        0.0
+    }
 }
 
 #[cfg(test)]

@@ -6,6 +6,7 @@
 //! In: the frame's edges, the search volume or a centre and diameter, the rotations to try, a
 //! work budget. Out: polished candidates offered to the initialiser's list.
 
+use super::scoring::length_share;
 use super::work;
 use super::{
     layer_half_height, GridBest, Initialiser, SearchVolume, CLIMB, FULL_COVER, GRID_GATE_RAD, GRID_KEEP, GRID_SEGMENTS,
@@ -390,20 +391,8 @@ impl Initialiser<'_> {
                 });
             }
         }
-        let (mut explained, mut total) = (0.0, 0.0);
-        for (e, &hit) in self.vote_edges.iter().zip(&self.vote_explained[..n]) {
-            if (e.sensor as usize) < self.centres.len() {
-                total += e.length_rad;
-                if hit {
-                    explained += e.length_rad;
-                }
-            }
-        }
-        if total > 0.0 {
-            explained / total
-        } else {
-            0.0
-        }
+        let marks = &self.vote_explained[..n];
+        length_share(self.vote_edges.iter(), self.centres.len(), |k, _| marks[k])
     }
 }
 
