@@ -6,7 +6,7 @@
 //! Run: `cargo bench --bench edges_real -- --images DIR --out DIR [OPTIONS]` (needs the `desk`
 //! feature, on by default). DIR holds 8-bit PNG or JPEG photographs (`*.png`, `*.jpg`, `*.jpeg`,
 //! searched one level of sub-directories deep as well); for each image NAME.ext the CSV is
-//! written to OUT/NAME.csv (header of docs/interfaces.md, then the extra columns of the README) and
+//! written to OUT/NAME.csv (the header and extra columns of docs/interfaces.md, "Edges CSV") and
 //! every timed detection to OUT/timing.csv (`image,pass,ms`). Options:
 //! - `--intrinsics fx,fy,cx,cy` (pixels, OpenCV convention): the pinhole every image is seen
 //!   through; without it f = image width and the principal point at the image centre. The

@@ -31,7 +31,7 @@
 //! Measured 2026-11-27 (2 cores, 1,000 positions, range 40 m; recall of segments > 2° /
 //! precision): res 64: 9.2 s, 2.4 MB, 97.3 % / 87.7 %; with neighbour merging 10.0 s, 2.9 MB,
 //! 99.6 % / 72.9 %; res 128: 15.9 s, 97.5 % / 90.7 %; res 256: 31.5 s, 2.6 MB, 97.5 % / 92.6 %.
-//! Campus: 97,794 m² in 493 s, 708 MB peak (README, Prior visibility table).
+//! Campus: 97,794 m² in 493 s, 708 MB peak (docs/visibility.md, "Campus scale").
 
 #[cfg(feature = "desk")]
 mod bench {

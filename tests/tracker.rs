@@ -660,7 +660,7 @@ fn heavy_clutter_and_texture_commit_no_wrong_pose() {
     );
 }
 
-/// The realistic world (README, "A synthetic world that predicts the real one": casings, one
+/// The realistic world (docs/real-photos.md, "A synthetic world that predicts the real one": casings, one
 /// paint, floorboards, closed doors, walls off the model, blur and JPEG): the tracker may track
 /// less well than in the default world, but never commits or relocalises to a wrong place.
 #[test]

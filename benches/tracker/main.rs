@@ -223,7 +223,7 @@ fn main() {
             eprintln!("--appearance {e}");
             std::process::exit(2);
         });
-        // The spec names the recording: `realistic` for the preset the README quotes.
+        // The spec names the recording: `realistic` for the preset docs/real-photos.md quotes.
         label = if a.rig.is_some() {
             format!("{label}-{spec}")
         } else {

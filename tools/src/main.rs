@@ -1,7 +1,7 @@
 //! `omnitrack-desk`: offline tools that prepare the tracker's inputs on a workstation.
 //!
 //! `omnitrack-desk extrude PLAN.geojson --out MODEL.obj` extrudes a GeoJSON floor plan
-//! (docs/floorplan.md) into the OBJ building model the tracker loads, and reports how many
+//! (docs/models.md) into the OBJ building model the tracker loads, and reports how many
 //! faces, vertices and model segments the tracker will see in it.
 //!
 //! `omnitrack-desk render --rig R --model M.obj --trajectory T.tum --out DIR` renders a synthetic
@@ -46,7 +46,7 @@ struct Cli {
 enum Command {
     /// Extrude a GeoJSON floor plan into a Wavefront OBJ building model.
     Extrude {
-        /// The floor plan (GeoJSON FeatureCollection in metres; see docs/floorplan.md).
+        /// The floor plan (GeoJSON FeatureCollection in metres; see docs/models.md).
         plan: PathBuf,
         /// Where to write the OBJ model.
         #[arg(long, value_name = "MODEL.obj")]

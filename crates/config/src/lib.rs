@@ -99,7 +99,7 @@ pub struct VisibilityConfig {
     pub node_heights_m: Vec<f64>,
     /// Model segments shorter than this (m) enter no visibility set, so the tracker never
     /// matches or scores them: the handles, sash profiles and tessellated curves of a detailed
-    /// model (README, "Models from IFC").
+    /// model (docs/models.md, "Models from IFC").
     pub min_segment_length_m: f64,
 }
 
@@ -247,7 +247,7 @@ impl Default for MaintenanceConfig {
 }
 
 /// The default [`VisibilityConfig::min_segment_length_m`] (m): measured on KIT's FZK-Haus
-/// converted from IFC (README, "Models from IFC").
+/// converted from IFC (docs/models.md, "Models from IFC").
 pub const MIN_SEGMENT_LENGTH_M: f64 = 0.1;
 
 impl Default for VisibilityConfig {

@@ -159,7 +159,7 @@ pub struct EdgeParams {
     /// gradient across the line within a pixel; 0: no check). Off by default: at 0.9 it raises
     /// YorkUrban precision from 17 to 30 % and recall from 63 to 68 %, and synthetic recall on
     /// most rows, but costs grey and very noisy frames 2–3 points and on the real ZInD
-    /// panoramas two hinted runs settled 0.3 and 0.8 m off instead of within 10 cm (README).
+    /// panoramas two hinted runs settled 0.3 and 0.8 m off instead of within 10 cm (docs/decisions.md).
     pub merge_gap_evidence: f64,
     /// Distance (px) from the edge to the first pixel of each hue strip.
     pub hue_strip_offset_px: f32,
@@ -171,7 +171,7 @@ pub struct EdgeParams {
     /// one plane leaves more residual than two by more than noise explains and by more than
     /// lines ~2 × this × `split_tolerance_rad` apart would (0.3: ~0.6 px at the default). It
     /// keeps a wall corner and a box edge continuing it a pixel or two aside from becoming one
-    /// tilted edge, and raises `lab` recall from 92.6 to 97.3 % (README). Below ~0.3 the pixel
+    /// tilted edge, and raises `lab` recall from 92.6 to 97.3 % (docs/edges.md). Below ~0.3 the pixel
     /// staircases of aliased images start to split single lines.
     pub two_line_excess: f64,
     /// Validate each piece of an edge (the CSV's `pieces`, [`Edge::shown`]) a contrario, as LSD

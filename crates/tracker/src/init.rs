@@ -52,7 +52,7 @@
 //! **Rotation from vanishing directions, translation by a grid** (modules `vanishing`; beyond
 //! the paper). On real photographs the strongest edges are mostly texture (blinds,
 //! floorboards, sun patches), and the triplets of the 40 strongest held the truth for 1 of the
-//! 32 real panoramas of the ZInD benchmark (README). But buildings are drawn in few directions,
+//! 32 real panoramas of the ZInD benchmark (docs/decisions.md). But buildings are drawn in few directions,
 //! and their lines (texture included) meet in few vanishing points: the frame's vertical and
 //! horizontal vanishing directions put onto the model's give a few rotations (a Manhattan
 //! building: four, a quarter turn apart), within a degree of the truth on all 32. Under each,
@@ -101,7 +101,7 @@
 //! there is often drawn across a plain wall or ceiling with no edge of any direction near it.
 //! The share of such *blank* sample points (`blank_radius_deg`) is what a wrong pose shows
 //! most plainly in a furnished room. Candidates rank by [`Candidate::merit`], explained ×
-//! support × (1 − blank). Measured on the ZInD panoramas from the 1.5 m hint (README): the
+//! support × (1 − blank). Measured on the ZInD panoramas from the 1.5 m hint (docs/decisions.md): the
 //! truth's margin over the best pose 0.6 m or 10° away became clear (ratio ≤ 0.8) on 28 of
 //! 32 against 27 with support over all edges alone and 22 before.
 //!

@@ -23,7 +23,7 @@
 //!    The fit weighs the lines by Cauchy's loss (`solver::refine::cauchy`, `robust_final_fit`; beyond
 //!    the papers) rather than least squares: lines a coarse model places a little wrong (trims,
 //!    walls drawn a few centimetres off) sit inside the inlier angle and pulled the pose with
-//!    their whole squared residual. Measured (README, "Tracker"): `lab` 1.62 → 1.26 cm,
+//!    their whole squared residual. Measured (docs/decisions.md, the robust final fit): `lab` 1.62 → 1.26 cm,
 //!    `corridor` 0.99 → 0.78 cm, `handheld` 1.25 → 1.00 cm; on the realistic world the worst
 //!    of six tracker seeds in `corridor` 28 → 9 cm, `lab` still cascading on some seeds.
 //! 6. Lines 12–13: VIS(T_{t+1}) updates S_{t+1}.
@@ -102,8 +102,8 @@ struct Standing {
 /// The relocalisation's choice, or None.
 ///
 /// Candidates compare by [`Candidate::merit`], as the initialisation's do (explained × support
-/// × (1 − blank)), not by the truncated ξ: on the realistic world (README, "A synthetic world
-/// that predicts the real one") casings beside every opening and one paint on every wall let
+/// × (1 − blank)), not by the truncated ξ: on the realistic world (docs/decisions.md, "the realistic
+/// world") casings beside every opening and one paint on every wall let
 /// poses 0.3–1 m off match the lines they predict as tightly as the truth, and ranking by ξ took
 /// them on 29 of 32 relocalisations of `lab` (252 cm RMSE); by merit, 1 of 19 over tracker seeds
 /// 1–3 (18 / 12 / 12 cm), the default world unchanged.

@@ -12,8 +12,8 @@
 //! (floorboards, blinds, tiles) whose edges outshine the walls' and defeat triplets of the
 //! strongest edges, but those textures run along the building's own directions: they reinforce
 //! the vanishing points instead of hiding them. Measured on the real panoramas of the ZInD
-//! benchmark, the triplet sampling's candidates held the truth for 1 of 32 panoramas; see the
-//! README for what this adds.
+//! benchmark, the triplet sampling's candidates held the truth for 1 of 32 panoramas; see
+//! docs/decisions.md ("initialisation on real photographs") for what this adds.
 //!
 //! How:
 //! 1. The vertical: each pair of the longest edges proposes the vector at right angles to both

@@ -3,7 +3,7 @@
 //!
 //! In: a GeoJSON `FeatureCollection` in metres (local planar x east, y north, no CRS) of walls
 //! (`LineString` axes), doors and windows (two-point `LineString`s on a wall axis) and rooms
-//! (`Polygon`s); `docs/floorplan.md` is the reference. Out: Wavefront OBJ text (metres, z up) of
+//! (`Polygon`s); `docs/models.md` ("Floor plans") is the reference. Out: Wavefront OBJ text (metres, z up) of
 //! planar faces, each under a `g` naming its feature (`wall_3`, `room_corridor_floor`) and a
 //! `usemtl` naming its kind (`wall`, `floor`, `ceiling`, `door_reveal`, `window_reveal`).
 //!

@@ -176,7 +176,7 @@ impl Appearance {
     }
 
     /// `Default` plus everything real furnished rooms show that the model lacks, at levels
-    /// meant to make a render as hard for the tracker as the real photos (issue 19; the README
+    /// meant to make a render as hard for the tracker as the real photos (issue 19; docs/real-photos.md
     /// has what it measures against them). Why each level:
     pub fn realistic() -> Self {
         Appearance {

@@ -18,7 +18,7 @@ const GAP_ACROSS_COS: f64 = 0.174;
 impl Workspace {
     /// Joins candidates of different chains that lie on one plane, end to end (a line broken by
     /// an occluder, a gap in the edgels or a junction). Polarity is not compared: an edge seen
-    /// against a background that turns from darker to brighter flips it halfway (README).
+    /// against a background that turns from darker to brighter flips it halfway (docs/decisions.md).
     #[inline(never)]
     pub(super) fn merge_across_chains(&mut self) {
         let cos_max = self.params.merge_angle_rad.cos();

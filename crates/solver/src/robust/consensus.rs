@@ -24,8 +24,8 @@
 //! on sharper edges (a 50° pinhole resolves 0.08° a pixel) a pose slid along a narrow view's
 //! loosely fixed direction keeps every right line near 0.5° and its few wrong ones inside the
 //! cap, and the truncated score prefers it to the true pose, where the right lines sit at
-//! 0.05° and the wrong ones fall out. The median has no cap. Measured (README, "Tracker" and
-//! "A one-sensor pinhole rig"): it stops that slide and tightens the default world (`lab`
+//! 0.05° and the wrong ones fall out. The median has no cap. Measured (docs/decisions.md, the
+//! median consensus and the one-sensor pinhole rig): it stops that slide and tightens the default world (`lab`
 //! 1.26 → 1.13 cm, `corridor` 0.78 → 0.67, `handheld` 1.00 → 0.87); on the realistic world it
 //! ends the cascades only together with the motion carried through relocalisations (the
 //! tracker's; alone, one run of six cascaded). The tracker's default. It needs the

@@ -149,7 +149,7 @@ impl Initialiser<'_> {
     /// All of them, not the longest few: on real photographs the longest edges are mostly
     /// texture (shelves, blinds, floorboards), so a share of a few dozen of them is a noisy
     /// sample that a wrong pose along the texture wins as often as the truth. Over the ZInD
-    /// panoramas' candidates (README, "Real photographs") the share over all edges gave the
+    /// panoramas' candidates (docs/decisions.md, real photographs) the share over all edges gave the
     /// truth a clear margin (merit ratio ≤ 0.8) over the best pose 0.6 m or 10° away on 27 of 32,
     /// against 22 with the 64 longest.
     pub fn edge_support(&mut self, pose: &Pose, edges: &[Edge]) -> f64 {
@@ -189,8 +189,8 @@ impl Initialiser<'_> {
     /// points, and at least the shortest edge long. What a frame there can match at best.
     ///
     /// Scores do not count this way (yet): judging candidates by the segments in view alone
-    /// made a one-pinhole rig commit wrong poses on real photographs (README, "Real photographs",
-    /// "Not there yet").
+    /// made a one-pinhole rig commit wrong poses on real photographs (docs/decisions.md, "a one-sensor
+    /// pinhole rig").
     pub fn segments_in_view(&mut self, pose: &Pose) -> usize {
         let seen = self
             .at_pose

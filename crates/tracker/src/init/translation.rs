@@ -321,7 +321,7 @@ impl Initialiser<'_> {
     /// that one of them explains within `gate`. `None` if fewer than six segments are that long.
     ///
     /// The support is over all the vote's edges rather than the few dozen longest, as the final
-    /// [`Candidate::support`] is over all edges: measured on the ZInD panoramas (README), the
+    /// [`Candidate::support`] is over all edges: measured on the ZInD panoramas (docs/decisions.md), the
     /// 64 longest let the grid drop the truth in favour of poses along texture (3 m hint: 20 of
     /// 32 within 10 cm with 64, 24 with all 256).
     pub(super) fn coarse_merit(&mut self, pose: &Pose, segments: &[u32], gate: &Gate, min_len: f64) -> Option<f64> {

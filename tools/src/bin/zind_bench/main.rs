@@ -6,7 +6,7 @@
 //! ```
 //!
 //! In: a local copy of one Zillow Indoor Dataset tour (its `zind_data.json` and `panos/`; the
-//! README says how to get the public sample tour; its terms are academic and non-commercial, so
+//! docs/real-photos.md says how to get the public sample tour; its terms are academic and non-commercial, so
 //! none of it is ever committed). Out (under `--out`, default `target/zind`): the coarse model
 //! built from the room layouts (`plan.geojson`, `model.obj`), one recording per rig and
 //! panorama (the layout of docs/interfaces.md, "Recording": every frame is the same instant,
