@@ -992,7 +992,7 @@ fn a_search_in_a_detailed_model_is_charged_for_its_rays_and_still_finds_the_trut
         "{report:?}"
     );
     assert!(report.plan_cells_scanned <= report.plan_cells_in_volume, "{report:?}");
-    assert!(finds_truth(&found, &truth), "{found:?}");
+    assert!(finds_truth(&found, &truth), "{found:?} truth {truth:?} {report:?}");
 }
 
 /// A volume too large for one search's budget is swept over several searches (issue 47): each

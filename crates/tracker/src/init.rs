@@ -222,8 +222,10 @@ const HEIGHT_STEP_M: f64 = 0.1;
 /// ±30 % from one hour to the next, which is why the budget is not the clock.
 pub mod work {
     /// [`Initialiser::coarse_merit`](super::Initialiser): per segment scored, per 100 edges
-    /// it is scored against (module `edge_index` makes the scoring cheaper than this on most
-    /// frames; the charge stays the plain pairs' so that the scan covers what it covered).
+    /// it is scored against. With module `edge_index` and one pass over the pairs it hands out
+    /// for both shares, a score took 130 µs for 44 segments on the ZInD panoramas from 3 m
+    /// (charged 111). With the support scored in a second pass, `pano_29`'s search from 3 m
+    /// took 1.34 s on the clock for its 0.95 s of work; in one pass, 0.71 s.
     pub const MERIT_PER_SEGMENT_100_EDGES: u64 = 1;
     /// The segments in sight from a position (ray cast against the model), at least.
     pub const SIGHT: u64 = 400;

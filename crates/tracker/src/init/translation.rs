@@ -16,7 +16,7 @@ use super::{
 use crate::edge_index::EdgeIndex;
 #[cfg(debug_assertions)]
 use crate::matching::best_edge_and_cover;
-use crate::matching::{gated_cover, overlap, Gate, Predicted};
+use crate::matching::{gated_cover, Gate, Predicted};
 use crate::vanishing::MAX_ROTATIONS;
 use crate::vote::{Grid, PEAKS};
 use nalgebra::{Point3, Translation3, UnitQuaternion, Vector3};
@@ -213,17 +213,9 @@ impl Initialiser<'_> {
             centre.x - grid.half + (ix as f64 + 0.5) * grid.step,
             centre.y - grid.half + (iy as f64 + 0.5) * grid.step,
         );
-        let (z_lo, z_hi) = match self.opts.upright_height_m {
-            Some(z) => (z, z),
-            None if self.floors.any() => match self.floors.band(x, y, grid.slab, grid.band, self.at_pose.solid()) {
-                Some(b) => b,
-                None => return,
-            },
-            None => (grid.slab[0], grid.slab[1]),
-        };
-        if z_hi < z_lo {
+        let Some((z_lo, z_hi)) = self.heights_at(x, y, grid) else {
             return;
-        }
+        };
         let inside = |p: &Point3<f64>| volume.diameter_m.is_none_or(|d| (p - volume.centre).norm() <= 0.5 * d);
         let plan = Point3::new(x, y, 0.5 * (z_lo + z_hi));
         let (lo, hi) = (Point3::new(x, y, z_lo), Point3::new(x, y, z_hi));
@@ -249,6 +241,18 @@ impl Initialiser<'_> {
             }
         }
         self.grid_segs = segs;
+    }
+
+    /// The lattice's heights at plan position (`x`, `y`): the band above the floor beneath (none
+    /// outside the building), the known height when upright, the table's slab in a model
+    /// without floors.
+    fn heights_at(&self, x: f64, y: f64, grid: &GridLattice) -> Option<(f64, f64)> {
+        let (lo, hi) = match self.opts.upright_height_m {
+            Some(z) => (z, z),
+            None if self.floors.any() => self.floors.band(x, y, grid.slab, grid.band, self.at_pose.solid())?,
+            None => (grid.slab[0], grid.slab[1]),
+        };
+        (lo <= hi).then_some((lo, hi))
     }
 
     /// Coordinate ascent of the coarse merit ([`Self::coarse_merit`]) from `start` in x, y and
@@ -326,6 +330,7 @@ impl Initialiser<'_> {
     /// 32 within 10 cm with 64, 24 with all 256).
     pub(super) fn coarse_merit(&mut self, pose: &Pose, segments: &[u32], gate: &Gate, min_len: f64) -> Option<f64> {
         let (mut explained, mut counted) = (0.0, 0usize);
+        self.vote_explained[..self.vote_edges.len()].fill(false);
         self.support_pred.clear();
         for &s in segments {
             let seg = &self.model.segments[s as usize];
@@ -334,7 +339,14 @@ impl Initialiser<'_> {
                 continue;
             }
             counted += 1;
-            let cover = cover_near(&pred, &self.centres, &self.vote_edges, &mut self.vote_index, gate);
+            let cover = cover_near(
+                &pred,
+                &self.centres,
+                &self.vote_edges,
+                &mut self.vote_index,
+                gate,
+                &mut self.vote_explained,
+            );
             if let Some(cover) = cover {
                 explained += (cover / FULL_COVER).min(1.0);
             }
@@ -342,12 +354,13 @@ impl Initialiser<'_> {
                 self.support_pred.push(pred);
             }
         }
-        let support = (counted >= 6).then(|| self.indexed_support(gate.cos_alpha));
+        let marks = &self.vote_explained[..self.vote_edges.len()];
+        let support = (counted >= 6).then(|| length_share(self.vote_edges.iter(), self.centres.len(), |k, _| marks[k]));
         // Debug builds (the tests) check one score in 16 against every pair, as the scores were
         // computed before the index.
         self.merit_calls = self.merit_calls.wrapping_add(1);
         #[cfg(debug_assertions)]
-        if let Some(support) = support.filter(|_| self.merit_calls % 16 == 1) {
+        if let Some(support) = support.filter(|_| self.merit_calls % 16 == 1 && self.support_pred.len() == counted) {
             let mut all = 0.0;
             for &s in segments {
                 let seg = &self.model.segments[s as usize];
@@ -371,39 +384,18 @@ impl Initialiser<'_> {
         self.spend(segments.len() as u64 * self.vote_edges.len() as u64 / 100 * work::MERIT_PER_SEGMENT_100_EDGES);
         Some(explained / counted as f64 * support?)
     }
-
-    /// [`Self::predicted_support`] over the vote's edges, by the index: the share (by angle) of
-    /// `self.vote_edges` that one of `self.support_pred` explains (plane within the gate,
-    /// overlapping by half). Each predicted plane marks the edges it explains among those its
-    /// gate can pass; the sum runs over the edges in order, as the plain one does.
-    fn indexed_support(&mut self, cos_gate: f64) -> f64 {
-        let n = self.vote_edges.len();
-        self.vote_explained[..n].fill(false);
-        for pred in &self.support_pred {
-            for (s, c) in self.centres.iter().enumerate() {
-                let nrm = &pred.normals[s];
-                let (edges, marks) = (&self.vote_edges, &mut self.vote_explained);
-                self.vote_index.near(s, nrm, cos_gate, |i| {
-                    if !marks[i] {
-                        let e = &edges[i];
-                        marks[i] = nrm.dot(&e.plane.normal).abs() >= cos_gate && overlap(pred, c, nrm, e) >= 0.5;
-                    }
-                });
-            }
-        }
-        let marks = &self.vote_explained[..n];
-        length_share(self.vote_edges.iter(), self.centres.len(), |k, _| marks[k])
-    }
 }
 
 /// [`best_edge_and_cover`]'s cover of `pred` over the edges of `index` (built from `edges`)
-/// that can pass the gate: `None` if no edge passes it.
+/// that can pass the gate: `None` if no edge passes it. Every edge that passes is marked in
+/// `explained`: the support's test (plane within the gate, overlapping by half) is the cover's.
 fn cover_near(
     pred: &Predicted,
     centres: &[Point3<f64>],
     edges: &[Edge],
     index: &mut EdgeIndex,
     gate: &Gate,
+    explained: &mut [bool],
 ) -> Option<f64> {
     let mut covered = 0.0;
     let mut any = false;
@@ -413,6 +405,7 @@ fn cover_near(
             if let Some((_, share)) = gated_cover(pred, c, n, &edges[i], gate) {
                 covered += share;
                 any = true;
+                explained[i] = true;
             }
         });
     }
