@@ -43,7 +43,7 @@ mod bench {
     use std::path::{Path, PathBuf};
     use std::time::Instant;
 
-    use omnitrack::desk::demo::percentile;
+    use omnitrack::desk::results::percentile;
 
     /// A run being collected: first and last ray, pixel length, last pixel.
     type Run = Option<(Vector3<f64>, Vector3<f64>, f64, nalgebra::Point2<f64>)>;

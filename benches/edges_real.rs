@@ -48,7 +48,7 @@ mod bench {
         std::process::exit(2);
     }
 
-    use omnitrack::desk::demo::percentile;
+    use omnitrack::desk::results::percentile;
 
     fn is_image(p: &Path) -> bool {
         matches!(

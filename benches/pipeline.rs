@@ -108,7 +108,7 @@ mod bench {
         }
     }
 
-    use omnitrack::desk::demo::percentile;
+    use omnitrack::desk::results::percentile;
 
     struct Run {
         name: &'static str,

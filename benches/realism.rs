@@ -41,7 +41,7 @@ mod bench {
         std::process::exit(2);
     }
 
-    use omnitrack::desk::demo::percentile;
+    use omnitrack::desk::results::percentile;
 
     fn appearance(spec: &str) -> Appearance {
         Appearance::from_spec(spec).unwrap_or_else(|e| fail(&format!("--appearance {e}")))

@@ -62,7 +62,7 @@ mod bench {
         (obj, faces)
     }
 
-    use omnitrack::desk::demo::percentile;
+    use omnitrack::desk::results::percentile;
 
     /// Renders `frames` frames walking through a room row; returns per-frame ms.
     fn run(renderer: &Renderer, traj: &[Stamped], frames: usize) -> Vec<f64> {

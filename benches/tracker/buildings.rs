@@ -13,7 +13,7 @@ use omnitrack::{Model, Rig};
 use crate::init_trials::{init_trials, TrialSummary};
 use crate::run::{hint_at_start, run_once, RunOutcome};
 use crate::{cache_root, Args};
-use omnitrack::desk::demo::percentile;
+use omnitrack::desk::results::percentile;
 
 /// The `--buildings` mode (module doc): per random building, a rendered walk, its visibility
 /// table's recall along the walk, one tracking run and initialisation trials; then the table

@@ -32,7 +32,7 @@ use std::path::Path;
 use std::time::Instant;
 
 use crate::{cache_root, Args};
-use omnitrack::desk::demo::percentile;
+use omnitrack::desk::results::percentile;
 
 /// Frames a trial waits for a pose (30 s: three whole-model search budgets), and frames after
 /// the commit it is judged at.

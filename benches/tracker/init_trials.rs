@@ -9,7 +9,7 @@ use omnitrack::trajectory::Stamped;
 use omnitrack::{Model, Rig};
 
 use crate::largest_sigma;
-use omnitrack::desk::demo::percentile;
+use omnitrack::desk::results::percentile;
 
 /// An initialisation trial gives up after this many frames without a commit…
 pub(crate) const TRIAL_WINDOW: usize = 25;

@@ -79,7 +79,7 @@ use omnitrack::trajectory::Stamped;
 use omnitrack::{Model, Rig};
 use std::path::{Path, PathBuf};
 
-use omnitrack::desk::demo::percentile;
+use omnitrack::desk::results::percentile;
 
 /// The largest standard deviation of a pose covariance's position (`block` 0, m) or rotation
 /// (`block` 3, rad) block.

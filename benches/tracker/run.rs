@@ -12,7 +12,7 @@ use std::path::Path;
 use std::time::Duration;
 
 use crate::largest_sigma;
-use omnitrack::desk::demo::percentile;
+use omnitrack::desk::results::percentile;
 
 /// What one tracking run over a recording gave.
 pub(crate) struct RunOutcome {

@@ -146,7 +146,7 @@ fn ping_pong(f: &Fixture, frames: usize) -> PathBuf {
         rows[frame].push((p[1].to_string(), p[2].parse().unwrap(), p[3].to_string()));
     }
     let period = rows[1][0].1 - rows[0][0].1;
-    let mut csv = String::from("frame,sensor,timestamp_ns,path\n");
+    let mut csv = format!("{}\n", omnitrack::capture::replay::FRAMES_HEADER);
     let cycle = 2 * (RENDERED - 1);
     for j in 0..frames {
         let c = j % cycle;

@@ -15,6 +15,7 @@
 use crate::eval::{self, EvalError, EvalOptions, Evaluation};
 use crate::pictures::{self, CorrespondenceState, ErrorTrace, OmniOptions, PictureError, PlanOptions, StateTrace};
 use crate::recording::{cached_scenario, RecordingError, RecordingOptions};
+use crate::results::percentile;
 use crate::scenario::{Scenario, ScenarioName};
 use indicatif::{ProgressBar, ProgressStyle};
 use nalgebra::{Point3, Vector3};
@@ -291,15 +292,6 @@ fn bar(show: bool, len: u64, template: &str) -> ProgressBar {
     let bar = ProgressBar::new(len);
     bar.set_style(ProgressStyle::with_template(template).unwrap_or_else(|_| ProgressStyle::default_bar()));
     bar
-}
-
-/// The nearest-rank `q` quantile (0..=1) of ascending `sorted` values; NaN when there are none.
-/// One definition for the demo's and the benchmarks' figures.
-pub fn percentile(sorted: &[f64], q: f64) -> f64 {
-    if sorted.is_empty() {
-        return f64::NAN;
-    }
-    sorted[((sorted.len() - 1) as f64 * q).round() as usize]
 }
 
 /// Per segment that was accepted at some point: its state on every frame (unknown when it was

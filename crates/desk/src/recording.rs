@@ -15,6 +15,7 @@ use nalgebra::Point3;
 use omnitrack_core::model::Model;
 use omnitrack_core::rig::Rig;
 use omnitrack_core::trajectory::{to_tum_string, Trajectory};
+use omnitrack_io::capture::replay::FRAMES_HEADER;
 use rayon::prelude::*;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -119,7 +120,7 @@ pub fn write_recording(
         .map(|s| Point3::from(s.pose.translation.vector))
         .collect();
     let renderer = Renderer::new(&model, rig, options.appearance.clone(), &keep_out);
-    let mut csv = String::from("frame,sensor,timestamp_ns,path\n");
+    let mut csv = format!("{FRAMES_HEADER}\n");
     let (mut render_seconds, mut write_seconds) = (0.0, 0.0);
     for (i, stamped) in trajectory.iter().enumerate() {
         let frame = FrameSpec {
@@ -261,14 +262,11 @@ pub fn join_sensors(src: &Path, out: &Path, device: &str) -> Result<bool, Record
             _ => None,
         };
         let Some((frame, sensor, ts, path)) = parsed else {
-            return Err(err(
-                &index_path,
-                format!("line {}: not frame,sensor,timestamp_ns,path", n + 1),
-            ));
+            return Err(err(&index_path, format!("line {}: not {FRAMES_HEADER}", n + 1)));
         };
         frames.entry(frame).or_default().push((sensor, ts, path));
     }
-    let mut csv = String::from("frame,sensor,timestamp_ns,path\n");
+    let mut csv = format!("{FRAMES_HEADER}\n");
     for (frame, rows) in &frames {
         let mut joined = RgbImage::new(width, height);
         for (sensor, _, path) in rows {

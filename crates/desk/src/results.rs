@@ -5,7 +5,8 @@
 //! under the repository, headed by the date and time, the commit (with `-dirty` when the work
 //! tree had changes) and the machine (processor and cores), so that a figure can be traced to
 //! the code and the machine that made it. A file of the same name that day is replaced: the
-//! latest run is the one the docs cite, and git keeps the earlier ones.
+//! latest run is the one the docs cite, and git keeps the earlier ones. [`percentile`] is the
+//! one definition of the quantiles those tables (and the demo) print.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -70,4 +71,12 @@ pub fn write(root: &Path, name: &str, title: &str, command: &str, table: &str) -
     );
     std::fs::write(&path, text).map_err(|e| format!("{}: {e}", path.display()))?;
     Ok(path)
+}
+
+/// The nearest-rank `q` quantile (0..=1) of ascending `sorted` values; NaN when there are none.
+pub fn percentile(sorted: &[f64], q: f64) -> f64 {
+    if sorted.is_empty() {
+        return f64::NAN;
+    }
+    sorted[((sorted.len() - 1) as f64 * q).round() as usize]
 }

@@ -17,15 +17,13 @@
 use crossbeam::channel::{bounded, Receiver, Sender, TrySendError};
 use image::codecs::png::{CompressionType, FilterType, PngEncoder};
 use image::{ExtendedColorType, ImageEncoder};
+use omnitrack_io::capture::replay::FRAMES_HEADER;
 use omnitrack_io::capture::{FrameSet, FrameSource, SourceError};
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
-
-/// The header of `frames.csv`.
-pub const FRAMES_HEADER: &str = "frame,sensor,timestamp_ns,path";
 
 /// How to record.
 #[derive(Debug, Clone)]

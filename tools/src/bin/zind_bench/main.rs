@@ -440,7 +440,7 @@ fn make_recording(
     }
     write(&dir.join("rig.toml"), rig.to_toml_string().as_bytes())?;
     // Every frame shows the same instant: its rows point at the same images, 1/30 s apart.
-    let mut csv = String::from("frame,sensor,timestamp_ns,path\n");
+    let mut csv = format!("{}\n", omnitrack::capture::replay::FRAMES_HEADER);
     let mut truth_track = Vec::new();
     for f in 0..frames {
         let ts = 1_000_000_000 + f as u64 * 33_333_333;
