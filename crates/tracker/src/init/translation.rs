@@ -350,7 +350,8 @@ impl Initialiser<'_> {
             if let Some(cover) = cover {
                 explained += (cover / FULL_COVER).min(1.0);
             }
-            if self.support_pred.len() < self.support_pred.capacity() {
+            // Kept only for the debug builds' check against all pairs below.
+            if cfg!(debug_assertions) && self.support_pred.len() < self.support_pred.capacity() {
                 self.support_pred.push(pred);
             }
         }
