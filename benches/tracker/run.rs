@@ -88,7 +88,7 @@ pub(crate) fn run_once(
             .find(|s| s.timestamp_ns.abs_diff(r.timestamp_ns) < 1_000_000);
         if verbose {
             if let Some(g) = gt {
-                for (p, score, frames, alive) in tracker.candidates() {
+                for omnitrack::tracker::Weighed { pose: p, merit: score, frames, alive } in tracker.candidates() {
                     eprintln!(
                         "    candidate {:6.1} cm {:6.2}° score {:.2e} over {frames} frames{}",
                         (p.translation.vector - g.pose.translation.vector).norm() * 100.0,

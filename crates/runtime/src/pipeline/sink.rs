@@ -238,7 +238,7 @@ mod tests {
                 pose: Some(Pose::translation(timestamp_ns as f64, 0.0, 1.5)),
                 covariance: Matrix6::identity(),
                 inliers: 10,
-                states: [0; 3],
+                states: Default::default(),
                 xi_rad2: 0.0,
                 explained: 1.0,
                 samples: 1,

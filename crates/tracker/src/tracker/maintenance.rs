@@ -34,12 +34,13 @@
 //!
 //! Nothing here allocates: all buffers belong to the [`Tracker`].
 
-use super::background::STARTS;
-use super::matching::{best_edge, Gate, Predicted};
+use super::search::PendingSearch;
 use super::Tracker;
-use super::{
-    Candidate, CorrespondenceState, FrameResult, HeldEdge, PendingSearch, SearchVolume, TrackerEvent, TrackerState,
-};
+use crate::background::STARTS;
+use crate::correspondence::{CorrespondenceState, HeldEdge};
+use crate::init::{Candidate, SearchVolume};
+use crate::matching::{best_edge, Gate, Predicted};
+use crate::report::{FrameResult, TrackerEvent, TrackerState};
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion};
 use omnitrack_config::SolverMethod;
 use omnitrack_core::geometry::{xi, Correspondence, Pose};

@@ -1,0 +1,522 @@
+//! The tracker's state machine (the crate's doc, "States") and its frame loop: a frame is
+//! searched for (module `search`), maintained (module `maintenance`, Figure 7), or, while a
+//! search runs off the frame path, kept and caught up on afterwards (module
+//! [`background`](crate::background)).
+//!
+//! In: per frame, the frame's [`Edge`]s and its capture time. Out: a [`FrameResult`], and the
+//! results of earlier kept frames through [`Tracker::late`].
+
+mod maintenance;
+mod search;
+
+use crate::background::{Backlog, SearchJob, SearchLink};
+use crate::correspondence::{CorrespondenceState, CorrespondenceTable, HeldEdge, Track};
+use crate::init::{Candidate, InitOptions, Initialiser, SearchVolume};
+use crate::matching::{best_edge, Gate, Predicted};
+use crate::report::{FrameResult, StateCounts, TrackerState, TrackerStats};
+use crate::visibility::VisibilityTable;
+use nalgebra::Point3;
+use omnitrack_config::TrackerConfig;
+use omnitrack_core::geometry::{Correspondence, Pose};
+use omnitrack_core::model::Model;
+use omnitrack_core::rig::Rig;
+use omnitrack_edges::Edge;
+use omnitrack_solver::{ConsensusSampler, SolverOptions};
+use rand::rngs::SmallRng;
+use rand::SeedableRng;
+use search::{Confirming, PendingSearch};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::Instant;
+
+/// A rig imaging less than this share of the sphere is narrow: a half-turn or a step along a
+/// symmetric corridor shows it the same lines (see `Tracker::narrow`). Four pinholes 90° wide
+/// round the horizon see 0.6 of it; one 50° pinhole a twentieth.
+const NARROW_VIEW_SHARE: f64 = 0.5;
+
+/// Frames kept while a search runs (module `background`): a 950 ms search at 30 Hz keeps all
+/// of its 29; a longer one (the whole model) keeps every other, every fourth… A slot holds the
+/// rig's most edges (the shipped rig: 1,536 of 248 bytes, 0.38 MB), so the backlog is about
+/// 12 MB, made at start-up.
+const BACKLOG_FRAMES: usize = 32;
+
+/// Kept frames tracked per arriving frame once a search is taken up: one more than arrive, so the
+/// backlog shrinks by two a frame, and each frame's time stays bounded by a few maintenance
+/// steps (a few milliseconds each) rather than the search's hundreds.
+pub const CATCH_UP_FRAMES: usize = 3;
+
+/// The tracker for one rig, model and visibility table.
+pub struct Tracker<'m> {
+    model: &'m Model,
+    table: &'m VisibilityTable,
+    cfg: TrackerConfig,
+    solver: SolverOptions,
+    centres: Vec<Point3<f64>>,
+    init: Initialiser<'m>,
+    tracks: CorrespondenceTable,
+    sampler: ConsensusSampler,
+    /// S̄ for the solver and, per entry, its track.
+    set: Vec<Correspondence>,
+    set_track: Vec<usize>,
+    /// Per track: the edge matched this frame and its α.
+    matched: Vec<Option<(u32, f64)>>,
+    /// The weights and residuals of the final robust fit (`solver::refine::cauchy`).
+    robust_scratch: Vec<f64>,
+    rng: SmallRng,
+    state: TrackerState,
+    hint: Option<SearchVolume>,
+    pose: Pose,
+    /// Previous tracked pose and its time, for the constant-velocity prior.
+    previous: Option<(Pose, u64)>,
+    last_time: u64,
+    last_good: Option<Pose>,
+    /// When `last_good` was seen (ns).
+    last_good_time: u64,
+    /// Post-loss searches double their volume after each widened attempt fails.
+    volume_level: u32,
+    confirming: [Confirming; 4],
+    confirm_count: usize,
+    search_attempts: u32,
+    bad_frames: u32,
+    /// Inliers of the last good frame.
+    last_inliers: u32,
+    /// The last search found no acceptable candidate: search more broadly.
+    widen: bool,
+    /// The rig images less than half the sphere: one view cannot tell a symmetric place from its
+    /// twin, so a commit needs `narrow_rig_searches` decided searches in a row to choose one
+    /// place.
+    narrow: bool,
+    /// The place the last decided searches chose (narrow rigs), and how many in a row chose it.
+    agreed: Option<(Pose, u32)>,
+    /// Running mean of the fraction of VIS(T) that good frames explain (NaN before the first
+    /// commit): a pose explaining much less is suspect (`maintenance.min_explained_ratio`).
+    explained_ref: f64,
+    stats: TrackerStats,
+    /// The search job while it is at home (module `background`), the worker it goes to, and
+    /// the search under way.
+    job: Option<Box<SearchJob<'m>>>,
+    link: Option<SearchLink<'m>>,
+    pending: Option<PendingSearch>,
+    /// The frames that arrive during a search, and the buffer a kept frame is tracked from.
+    backlog: Backlog,
+    scratch: Vec<Edge>,
+    /// A due search whose worker is not done is taken up on a later frame rather than waited
+    /// for ([`Tracker::defer_late_searches`]).
+    defer: bool,
+    /// Results of earlier frames worked out on this call (see [`Tracker::late`]).
+    late: Vec<(u64, FrameResult)>,
+    /// Stops a search on the worker when the tracker goes (no one will read it).
+    cancel: Arc<AtomicBool>,
+}
+
+impl Drop for Tracker<'_> {
+    /// A search still running on the worker stops at its next check: the worker's thread then
+    /// ends promptly with the tracker's side of the link.
+    fn drop(&mut self) {
+        self.cancel.store(true, Ordering::Relaxed);
+    }
+}
+
+impl<'m> Tracker<'m> {
+    /// A tracker that starts by searching `hint` (`None`: the whole model). `seed` drives the
+    /// random sampling (same seed and input, same output).
+    pub fn new(
+        rig: &Rig,
+        model: &'m Model,
+        table: &'m VisibilityTable,
+        cfg: &TrackerConfig,
+        hint: Option<SearchVolume>,
+        seed: u64,
+    ) -> Tracker<'m> {
+        let solver = cfg.solver_options();
+        let max_edges = rig.sensors.len() * cfg.edges.max_edges_per_sensor as usize;
+        let m = &cfg.maintenance;
+        let opts = InitOptions::from_config(cfg);
+        let init = Initialiser::new(rig, model, table, opts.clone(), solver.clone(), max_edges);
+        let cancel = Arc::new(AtomicBool::new(false));
+        let mut searcher = Initialiser::new(rig, model, table, opts, solver.clone(), max_edges);
+        searcher.set_cancel(cancel.clone());
+        let job = Box::new(SearchJob::new(searcher, max_edges));
+        let narrow = init.view_share() < NARROW_VIEW_SHARE;
+        let max_set = (0..table.node_count() as u32)
+            .map(|n| table.node_set(n).segments.len())
+            .max()
+            .unwrap_or(0);
+        // Twice the largest set: seen correspondences outlive their node's set (module doc of
+        // `correspondence`).
+        let capacity = (2 * max_set).max(16);
+        let lambda = (m.sample_size as usize).min(capacity);
+        Tracker {
+            model,
+            table,
+            cfg: cfg.clone(),
+            solver,
+            centres: rig.sensors.iter().map(|s| s.centre()).collect(),
+            init,
+            tracks: CorrespondenceTable::new(capacity),
+            sampler: ConsensusSampler::new(capacity, lambda, m.max_samples as u64),
+            set: Vec::with_capacity(capacity),
+            set_track: Vec::with_capacity(capacity),
+            matched: vec![None; capacity],
+            robust_scratch: vec![0.0; 2 * capacity],
+            rng: SmallRng::seed_from_u64(seed),
+            state: TrackerState::Initializing,
+            hint,
+            pose: Pose::identity(),
+            previous: None,
+            last_time: 0,
+            last_good: None,
+            last_good_time: 0,
+            volume_level: 0,
+            confirming: [Confirming {
+                pose: Pose::identity(),
+                merit_sum: 0.0,
+                frames: 0,
+                alive: false,
+            }; 4],
+            confirm_count: 0,
+            search_attempts: 0,
+            bad_frames: 0,
+            last_inliers: 0,
+            widen: false,
+            narrow,
+            agreed: None,
+            explained_ref: f64::NAN,
+            stats: TrackerStats::default(),
+            job: Some(job),
+            link: None,
+            pending: None,
+            backlog: Backlog::new(BACKLOG_FRAMES, max_edges),
+            scratch: Vec::with_capacity(max_edges),
+            late: Vec::with_capacity(BACKLOG_FRAMES + 1),
+            defer: false,
+            cancel,
+        }
+    }
+
+    /// Runs the searches on a worker from now on (module `background`): `link` sends jobs to a
+    /// thread running [`SearchWorker::run`](crate::background::SearchWorker::run) and takes them back. Without one, a search runs on the
+    /// frame that starts it; its result is taken up on the same later frame either way.
+    pub fn attach_search_worker(&mut self, link: SearchLink<'m>) {
+        self.link = Some(link);
+    }
+
+    /// With `on`, a frame on which a search is due but the worker is not done does not wait
+    /// for it: the search is taken up on a later frame (counted in
+    /// [`TrackerStats::search_deferrals`]), and the frames meanwhile come out late, with the same
+    /// poses, unless the backlog fills and is thinned meanwhile (counted in
+    /// [`TrackerStats::backlog_dropped`]). For a live source, where waiting costs dropped frames;
+    /// a lossless replay (the default, off) waits, and every frame is answered exactly as with
+    /// the search inline.
+    pub fn defer_late_searches(&mut self, on: bool) {
+        self.defer = on;
+    }
+
+    pub fn state(&self) -> TrackerState {
+        self.state
+    }
+
+    pub fn stats(&self) -> &TrackerStats {
+        &self.stats
+    }
+
+    /// S_t.
+    pub fn correspondences(&self) -> &[Track] {
+        self.tracks.tracks()
+    }
+
+    /// The search's own refinement and score of any pose (`Initialiser::polish`): for
+    /// diagnostics and benchmarks, e.g. how the true pose would have scored.
+    pub fn polish(&mut self, pose: &Pose, edges: &[Edge]) -> Option<Candidate> {
+        self.init.polish(pose, edges)
+    }
+
+    /// How many model segments the rig would see long enough to detect from `pose`
+    /// (`Initialiser::segments_in_view`): for benchmarks, e.g. whether a frame can be
+    /// initialised at all.
+    pub fn segments_in_view(&mut self, pose: &Pose) -> usize {
+        self.init.segments_in_view(pose)
+    }
+
+    /// The current pose estimate (meaningful when tracking).
+    pub fn pose(&self) -> &Pose {
+        &self.pose
+    }
+
+    /// One frame: initialisation or maintenance depending on the state; while a search is under
+    /// way, the frame is kept and, once the search is taken up, caught up on (module
+    /// `background`).
+    pub fn process(&mut self, edges: &[Edge], timestamp_ns: u64) -> FrameResult {
+        self.stats.frames += 1;
+        self.late.clear();
+        let result = if self.pending.is_none() && self.backlog.is_empty() {
+            self.step(edges, timestamp_ns)
+        } else {
+            self.behind(edges, timestamp_ns)
+        };
+        if result.pose.is_some() {
+            self.stats.tracked += 1;
+        }
+        result
+    }
+
+    /// One frame's work in the current state.
+    fn step(&mut self, edges: &[Edge], timestamp_ns: u64) -> FrameResult {
+        let result = match self.state {
+            TrackerState::Tracking => self.maintain(edges, timestamp_ns),
+            TrackerState::Initializing | TrackerState::Lost => self.initialise(edges, timestamp_ns),
+        };
+        self.last_time = timestamp_ns;
+        result
+    }
+
+    /// A frame that arrives while a search is under way, or while frames kept during one wait:
+    /// it joins the backlog; a search that is due is taken up on its own frame; then up to
+    /// [`CATCH_UP_FRAMES`] kept frames are tracked, oldest first. The frame gets a pose once
+    /// the backlog has been worked off up to it.
+    fn behind(&mut self, edges: &[Edge], timestamp_ns: u64) -> FrameResult {
+        let started = Instant::now();
+        self.backlog.push(edges, timestamp_ns);
+        if let Some(pending) = self.pending {
+            // Not due yet; or due, but the worker is not done (a machine slower than the
+            // reference, or loaded) and the frames do not wait for it. Taking a search up later
+            // changes no pose (the same search, judged on its own frame, then the same kept
+            // frames), only which of them are answered late; unless the backlog fills and is
+            // thinned meanwhile (counted in `backlog_dropped`): the last backstop under load.
+            let deferred = self.defer && timestamp_ns >= pending.due_ns && !self.search_done();
+            if timestamp_ns < pending.due_ns || deferred {
+                self.stats.search_deferrals += u64::from(deferred);
+                let mut result = FrameResult::empty(self.state);
+                result.match_time = started.elapsed();
+                return result;
+            }
+            self.pending = None;
+            let r = self.take_up(pending);
+            self.note_late(pending.started_ns, r);
+        }
+        let mut result = None;
+        for _ in 0..CATCH_UP_FRAMES {
+            if self.pending.is_some() || self.backlog.is_empty() {
+                break;
+            }
+            match self.catch_up_one() {
+                Some((_, r)) if self.backlog.is_empty() => result = Some(r),
+                Some((t, r)) => self.note_late(t, r),
+                None => break,
+            }
+        }
+        let mut result = result.unwrap_or_else(|| FrameResult::empty(self.state));
+        result.match_time = started.elapsed();
+        result
+    }
+
+    /// Tracks the oldest kept frame; a fresh search starts from it too. Not from the newest: a
+    /// search that failed is followed by one on the next frame, as inline, so that the searches
+    /// after a start stay near the hint's time (searching from the newest, the corridor's
+    /// searches fell 1 s apart, the rig walked out of the hint's reach between them, and the
+    /// sixth search committed the next doorway, 4 m off).
+    fn catch_up_one(&mut self) -> Option<(u64, FrameResult)> {
+        // ... unless the kept frames span more than two search budgets (a worker slower than the
+        // frames, searching again and again): then from the newest, so the lag stays bounded.
+        if self.state != TrackerState::Tracking && self.confirm_count == 0 {
+            let budget_ns = u64::try_from(self.search_budget().as_nanos()).unwrap_or(u64::MAX);
+            if self.backlog.span_ns() > budget_ns.saturating_mul(2) {
+                let before = self.backlog.dropped;
+                self.backlog.keep_newest();
+                self.stats.backlog_dropped += self.backlog.dropped - before;
+            }
+        }
+        let mut buf = std::mem::take(&mut self.scratch);
+        let t = self.backlog.pop_into(&mut buf);
+        let r = t.map(|t| (t, self.step(&buf, t)));
+        self.scratch = buf;
+        self.stats.caught_up += u64::from(r.is_some());
+        r
+    }
+
+    /// Keeps an earlier frame's result for [`Tracker::late`] when it has a pose or an event.
+    fn note_late(&mut self, timestamp_ns: u64, r: FrameResult) {
+        if (r.pose.is_some() || r.event.is_some()) && self.late.len() < self.late.capacity() {
+            self.stats.late_poses += u64::from(r.pose.is_some());
+            self.late.push((timestamp_ns, r));
+        }
+    }
+
+    /// The results of earlier frames worked out on the last call of [`Tracker::process`] or
+    /// [`Tracker::finish`], oldest first, with their timestamps: the search frame's once its search
+    /// is taken up, and the kept frames' as they are caught up on (only those with a pose or an
+    /// event). They are older than the frames already answered, so a live subscriber does not
+    /// want them; a trajectory does.
+    pub fn late(&self) -> &[(u64, FrameResult)] {
+        &self.late
+    }
+
+    /// The frames have ended: a search under way is taken up now (waiting for it) and every kept
+    /// frame is tracked, their results in [`Tracker::late`], so that a recording's last second
+    /// is not lost. Kept frames that would need a fresh search are dropped (counted).
+    pub fn finish(&mut self) {
+        self.late.clear();
+        if let Some(pending) = self.pending.take() {
+            let r = self.take_up(pending);
+            self.note_late(pending.started_ns, r);
+        }
+        while !self.backlog.is_empty() {
+            if self.state != TrackerState::Tracking && self.confirm_count == 0 {
+                break;
+            }
+            match self.catch_up_one() {
+                Some((t, r)) => self.note_late(t, r),
+                None => break,
+            }
+        }
+        let before = self.backlog.dropped;
+        while self.backlog.pop_into(&mut self.scratch).is_some() {
+            self.backlog.dropped += 1;
+        }
+        self.stats.backlog_dropped += self.backlog.dropped - before;
+    }
+
+    /// The least fraction of VIS(T) a pose must explain: `min_explained_ratio` of the running
+    /// mean, relaxed by a fifth for each of `relax` failed attempts (0 before the first commit).
+    fn explained_floor(&self, relax: u32) -> f64 {
+        let ratio = self.cfg.maintenance.min_explained_ratio;
+        if ratio <= 0.0 || !self.explained_ref.is_finite() {
+            return 0.0;
+        }
+        ratio * self.explained_ref * 0.8f64.powi(relax.min(32) as i32)
+    }
+
+    /// Folds a good frame's explained fraction into the running mean (about ten frames).
+    fn note_explained(&mut self, explained: f64) {
+        self.explained_ref = if self.explained_ref.is_finite() {
+            0.9 * self.explained_ref + 0.1 * explained
+        } else {
+            explained
+        };
+    }
+
+    /// The largest turn since the last good frame that is still plausible at `timestamp_ns`.
+    fn max_turn_rad(&self, timestamp_ns: u64) -> f64 {
+        let elapsed_s = timestamp_ns.saturating_sub(self.last_good_time) as f64 * 1e-9;
+        self.cfg.maintenance.max_jump_deg.to_radians() + self.cfg.motion.max_turn_rate_deg_s.to_radians() * elapsed_s
+    }
+
+    /// Starts tracking at a known `pose`, as if a search had committed it: what maintenance
+    /// makes of a right start, apart from whether a search finds it (benchmarks, tests).
+    pub fn start_at(&mut self, pose: &Pose, edges: &[Edge], timestamp_ns: u64) -> FrameResult {
+        self.stats.frames += 1;
+        self.stats.tracked += 1;
+        self.confirm_count = 0;
+        self.agreed = None;
+        let result = self.commit(pose, edges, timestamp_ns);
+        self.last_time = timestamp_ns;
+        result
+    }
+
+    /// Tracking starts at `pose`: S_0 is VIS(pose), the matched ones accepted.
+    fn commit(&mut self, pose: &Pose, edges: &[Edge], timestamp_ns: u64) -> FrameResult {
+        self.state = TrackerState::Tracking;
+        self.search_attempts = 0;
+        self.bad_frames = 0;
+        self.pose = *pose;
+        self.previous = None;
+        self.last_good = Some(*pose);
+        self.last_good_time = timestamp_ns;
+        self.volume_level = 0;
+        let gate = Gate::geometric(self.cfg.maintenance.inlier_angle_deg.to_radians());
+        let min_len = self.cfg.edges.min_edge_length_deg.to_radians();
+        self.tracks.clear();
+        let (mut eligible, mut seen) = (0u32, 0u32);
+        if let Some(set) = self.table.query(&Point3::from(pose.translation.vector)) {
+            let (model, centres) = (self.model, &self.centres);
+            self.tracks.reset_with(set.segments.iter().map(|&s| {
+                let seg = &model.segments[s as usize];
+                let pred = Predicted::new(&[seg.a, seg.b], pose, centres);
+                eligible += (pred.length_rad >= min_len) as u32;
+                match (pred.length_rad >= min_len)
+                    .then(|| best_edge(&pred, centres, edges, &gate))
+                    .flatten()
+                {
+                    Some((e, _)) => {
+                        seen += 1;
+                        Track::accepted(s, HeldEdge::from(&edges[e]))
+                    }
+                    None => Track::unknown(s),
+                }
+            }));
+        }
+        // The committed pose passed the search's own tests: where it explains less than the
+        // running mean, the rig has come somewhere seen less well, and that is the new norm.
+        let explained = seen as f64 / eligible.max(1) as f64;
+        // (`f64::min` takes the number over NaN: the first commit sets the mean.)
+        self.explained_ref = self.explained_ref.min(explained);
+        let mut result = FrameResult::empty(TrackerState::Tracking);
+        self.collect_accepted_set(edges, pose, true);
+        result.inliers = self.set.len() as u32;
+        self.last_inliers = result.inliers;
+        result.covariance = omnitrack_solver::covariance(&self.set, pose, &self.solver);
+        result.xi_rad2 = omnitrack_core::geometry::xi(&self.set, pose);
+        result.explained = explained as f32;
+        result.pose = Some(*pose);
+        result.states = self.state_counts();
+        self.previous = Some((*pose, timestamp_ns));
+        result
+    }
+
+    fn state_counts(&self) -> StateCounts {
+        let mut n = StateCounts::default();
+        for t in self.tracks.tracks() {
+            match t.state {
+                CorrespondenceState::Unknown => n.unknown += 1,
+                CorrespondenceState::Pending => n.pending += 1,
+                CorrespondenceState::Accepted => n.accepted += 1,
+            }
+        }
+        n
+    }
+
+    /// `set` ← the accepted tracks' held edges with their segments (used right after a commit,
+    /// where the held edges are this frame's).
+    fn collect_accepted_set(&mut self, _edges: &[Edge], _pose: &Pose, accepted_only: bool) {
+        self.set.clear();
+        self.set_track.clear();
+        for (i, t) in self.tracks.tracks().iter().enumerate() {
+            if accepted_only && t.state != CorrespondenceState::Accepted {
+                continue;
+            }
+            if let Some(e) = &t.edge {
+                let seg = &self.model.segments[t.segment as usize];
+                self.set.push(Correspondence {
+                    edge: e.plane,
+                    segment: [seg.a, seg.b],
+                });
+                self.set_track.push(i);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::NARROW_VIEW_SHARE;
+    use omnitrack_core::rig::{Rig, ViewMap};
+    use std::path::Path;
+
+    /// Only the one-pinhole example waits for searches to agree: the shipped rig and the other
+    /// examples see enough of the sphere to tell twins apart on one frame.
+    #[test]
+    fn only_a_rig_seeing_less_than_half_the_sphere_is_narrow() {
+        let share = |path: &str| {
+            let rig = Rig::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../..").join(path)).expect("rig");
+            ViewMap::new(&rig).share()
+        };
+        for wide in [
+            "firmware_config/ladybug2.toml",
+            "tools/rigs/pinhole4.toml",
+            "tools/rigs/dual_fisheye.toml",
+        ] {
+            assert!(share(wide) >= NARROW_VIEW_SHARE, "{wide}: {}", share(wide));
+        }
+        assert!(share("tools/rigs/pinhole1.toml") < NARROW_VIEW_SHARE);
+    }
+}

@@ -1,0 +1,463 @@
+//! The searches' scheduling and the commit decision (the crate's doc, "States": Initializing
+//! and Lost): which volume a search covers and with what budget and breadth, when its result is
+//! taken up (module [`background`](crate::background)), which of its candidates pass the
+//! acceptance test, and when the candidates weighed over the next frames are told apart well
+//! enough to commit one.
+//!
+//! In: a frame's [`Edge`]s while not tracking, a finished search's candidates. Out: a committed
+//! pose (tracking starts at it) or none yet.
+
+use super::maintenance::Relocalisation;
+use super::Tracker;
+use crate::background::SearchJob;
+use crate::init::{self, Candidate, SearchVolume};
+use crate::report::{FrameResult, SearchKind, TrackerEvent, TrackerState, Weighed};
+use nalgebra::{Point3, UnitQuaternion};
+use omnitrack_config::TrackerConfig;
+use omnitrack_core::geometry::Pose;
+use omnitrack_edges::Edge;
+use rand::rngs::SmallRng;
+use rand::{Rng, SeedableRng};
+use std::time::{Duration, Instant};
+
+/// A search under way off the frame path: when its result is due (the search frame's timestamp
+/// plus its budget, ns) and what its acceptance needs from the search frame.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct PendingSearch {
+    pub(super) started_ns: u64,
+    pub(super) due_ns: u64,
+    pub(super) volume: SearchVolume,
+    pub(super) turn_limit: Option<(UnitQuaternion<f64>, f64)>,
+    pub(super) floor: f64,
+    /// Set for a relocalisation (module `maintenance`): what its frame concludes either way.
+    pub(super) relocalisation: Option<Relocalisation>,
+}
+
+/// The search's acceptance test: enough inliers, and the pose and the frame explaining each
+/// other well enough both ways (`accept_explained_fraction` of the segments it predicts,
+/// `accept_support_fraction` of the frame's longest edges).
+fn acceptable(cfg: &TrackerConfig, c: &Candidate) -> bool {
+    let i = &cfg.initialisation;
+    c.inliers >= cfg.maintenance.min_inliers as usize
+        && c.explained >= i.accept_explained_fraction
+        && c.support >= i.accept_support_fraction
+}
+
+/// Candidates this close to each other are one basin (m, rad): the margin of a clear winner
+/// is over the others.
+const BASIN_M: f64 = 0.6;
+const BASIN_RAD: f64 = 0.175;
+
+/// A committed pose may lie this far outside the search volume (m): the truth at the volume's
+/// edge polishes a few centimetres either way.
+const VOLUME_SLACK_M: f64 = 0.1;
+
+/// Whether `pose` lies in `volume` (within [`VOLUME_SLACK_M`] of it).
+fn within(volume: &SearchVolume, pose: &Pose) -> bool {
+    volume
+        .diameter_m
+        .is_none_or(|d| (pose.translation.vector - volume.centre.coords).norm() <= 0.5 * d + VOLUME_SLACK_M)
+}
+
+/// A candidate under confirmation.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Confirming {
+    pub(super) pose: Pose,
+    pub(super) merit_sum: f64,
+    pub(super) frames: u32,
+    pub(super) alive: bool,
+}
+
+impl<'m> Tracker<'m> {
+    /// Whether a search is under way.
+    pub fn searching(&self) -> bool {
+        self.pending.is_some()
+    }
+
+    /// The search under way, if any: why frames are not being tracked just now.
+    pub fn search_under_way(&self) -> Option<SearchKind> {
+        let pending = self.pending.as_ref()?;
+        Some(if pending.relocalisation.is_some() {
+            SearchKind::Relocalisation
+        } else if self.state == TrackerState::Initializing {
+            SearchKind::Initialisation
+        } else {
+            SearchKind::Reinitialisation
+        })
+    }
+
+    /// Starts a search of the current state's volume on this frame's `edges` (module
+    /// `background`).
+    pub(super) fn start_search(&mut self, edges: &[Edge], timestamp_ns: u64) {
+        let Some(mut job) = self.job.take() else {
+            return;
+        };
+        let volume = self.search_volume();
+        let budget = self.search_budget();
+        let i = &self.cfg.initialisation;
+        let breadth = if self.widen {
+            (
+                i.wide_edges_considered as usize,
+                i.wide_segments_considered as usize,
+                i.wide_samples_per_cell as usize,
+            )
+        } else {
+            (
+                i.edges_considered as usize,
+                i.segments_considered as usize,
+                i.samples_per_cell as usize,
+            )
+        };
+        // After a loss the rig cannot have turned further than its turn rate allows since
+        // the last good frame: the mirror twin of a symmetric room is refused.
+        let turn_limit = match (self.state, self.last_good) {
+            (TrackerState::Lost, Some(p)) => Some((p.rotation, self.max_turn_rad(timestamp_ns))),
+            _ => None,
+        };
+        // After a loss, a candidate must also explain about as much as the frames before
+        // it did; the requirement relaxes with every failed attempt, since the rig may
+        // have walked somewhere that is seen less well.
+        let floor = match self.state {
+            TrackerState::Lost => self.explained_floor(self.search_attempts),
+            _ => 0.0,
+        };
+        // Quarter-turn twins are worth searching only where any heading is plausible.
+        let yaw_twins = turn_limit.is_none_or(|(_, limit)| limit >= std::f64::consts::PI);
+        let rng = SmallRng::seed_from_u64(self.rng.random());
+        job.prepare(edges, volume, budget, breadth, yaw_twins, turn_limit, rng);
+        let pending = PendingSearch {
+            started_ns: timestamp_ns,
+            due_ns: timestamp_ns.saturating_add(u64::try_from(budget.as_nanos()).unwrap_or(u64::MAX)),
+            volume,
+            turn_limit,
+            floor,
+            relocalisation: None,
+        };
+        self.launch(job, pending);
+    }
+
+    /// The budget of the search the current state would start: the whole model's or a volume's.
+    pub(super) fn search_budget(&self) -> Duration {
+        let budget_ms = if self.search_volume().diameter_m.is_none() {
+            self.cfg.initialisation.whole_model_time_budget_ms
+        } else {
+            self.cfg.initialisation.time_budget_ms
+        };
+        Duration::from_secs_f64(budget_ms.max(0.0) / 1e3)
+    }
+
+    /// Sends a prepared job to the worker (or runs it here without one) and marks it under way.
+    pub(super) fn launch(&mut self, mut job: Box<SearchJob<'m>>, pending: PendingSearch) {
+        self.pending = Some(pending);
+        match &self.link {
+            Some(link) => {
+                if let Err(e) = link.jobs.send(job) {
+                    // The worker is gone: search here.
+                    self.link = None;
+                    let mut job = e.into_inner();
+                    job.run();
+                    self.job = Some(job);
+                }
+            }
+            None => {
+                job.run();
+                self.job = Some(job);
+            }
+        }
+    }
+
+    /// Whether the search under way is done (its job at home, or back from the worker now).
+    pub(super) fn search_done(&mut self) -> bool {
+        if self.job.is_some() {
+            return true;
+        }
+        let Some(link) = self.link.as_ref() else {
+            return true;
+        };
+        match link.done.try_recv() {
+            Ok(job) => {
+                self.job = Some(job);
+                true
+            }
+            Err(crossbeam::channel::TryRecvError::Empty) => false,
+            // The worker is gone: `collect_search` says so.
+            Err(crossbeam::channel::TryRecvError::Disconnected) => true,
+        }
+    }
+
+    /// The finished job of the search under way: at home already, or back from the worker
+    /// (waiting for it, counted, if it is not done).
+    pub(super) fn collect_search(&mut self) -> Option<Box<SearchJob<'m>>> {
+        if let Some(job) = self.job.take() {
+            return Some(job);
+        }
+        let link = self.link.as_ref()?;
+        if let Ok(job) = link.done.try_recv() {
+            return Some(job);
+        }
+        let waited = Instant::now();
+        let job = link.done.recv().ok();
+        self.stats.search_waits += 1;
+        self.stats.search_wait_time += waited.elapsed();
+        if job.is_none() {
+            self.link = None;
+        }
+        job
+    }
+
+    /// The candidates being weighed while initialising: pose, mean merit so far
+    /// ([`Candidate::merit`], higher is better), frames scored, and whether it is still in the
+    /// running.
+    pub fn candidates(&self) -> impl Iterator<Item = Weighed> + '_ {
+        self.confirming[..self.confirm_count].iter().map(|c| Weighed {
+            pose: c.pose,
+            merit: c.merit_sum / c.frames.max(1) as f64,
+            frames: c.frames,
+            alive: c.alive,
+        })
+    }
+
+    /// Figure 5 (started here, run off the frame path and taken up by [`Tracker::adopt`]) plus
+    /// the confirmation of candidates over the next frames.
+    pub(super) fn initialise(&mut self, edges: &[Edge], timestamp_ns: u64) -> FrameResult {
+        let started = Instant::now();
+        let mut result = FrameResult::empty(self.state);
+        if self.confirm_count == 0 {
+            self.start_search(edges, timestamp_ns);
+            result.match_time = started.elapsed();
+            return result;
+        }
+        // Each confirmation frame applies the search's acceptance test again: a candidate that
+        // explains less than `accept_explained_fraction` of what it predicts here is dropped,
+        // and when none is left the next frame searches afresh. (The wrong commits in `lab`'s
+        // initialisation trials were candidates that barely passed on the search frame and
+        // failed it on the next while the truth was never found.)
+        for k in 0..self.confirm_count {
+            if !self.confirming[k].alive {
+                continue;
+            }
+            match self.init.polish(&self.confirming[k].pose, edges) {
+                Some(c) if acceptable(&self.cfg, &c) => {
+                    let slot = &mut self.confirming[k];
+                    slot.pose = c.pose;
+                    slot.merit_sum += c.merit();
+                    slot.frames += 1;
+                }
+                _ => self.confirming[k].alive = false,
+            }
+        }
+        let mut result = self.decide(edges, timestamp_ns, result);
+        result.match_time = started.elapsed();
+        result
+    }
+
+    /// Takes up a finished search on its own frame: an initialisation's or a relocalisation's.
+    pub(super) fn take_up(&mut self, pending: PendingSearch) -> FrameResult {
+        let result = match pending.relocalisation {
+            Some(r) => self.conclude_relocalisation(r, pending.started_ns),
+            None => self.adopt(pending),
+        };
+        self.last_time = pending.started_ns;
+        result
+    }
+
+    /// Takes up a finished initialisation search on its own frame (the job holds that frame's edges): its
+    /// acceptable candidates go to confirmation, and a clear decision commits there and then.
+    fn adopt(&mut self, pending: PendingSearch) -> FrameResult {
+        let mut result = FrameResult::empty(self.state);
+        let Some(job) = self.collect_search() else {
+            return result;
+        };
+        let PendingSearch {
+            volume,
+            turn_limit,
+            floor,
+            started_ns,
+            ..
+        } = pending;
+        let (candidates, report) = job.result();
+        let report = *report;
+        // A volume without a valid node was searched out to the nearest ones.
+        let volume = SearchVolume {
+            diameter_m: report.widened_to_m.or(volume.diameter_m),
+            ..volume
+        };
+        let plausible = |c: &Candidate| turn_limit.is_none_or(|(r, limit)| c.pose.rotation.angle_to(&r) <= limit);
+        // And it must be a clear winner: every other candidate of the search that is not in
+        // its basin (the same place turned, or a step away) explains at most
+        // `clear_winner_ratio` of what it explains. Repeated structure (the twin turned a
+        // half or quarter round, the next door along) is refused by evidence; "no pose yet"
+        // is better than a wrong one.
+        let ratio = self.cfg.initialisation.clear_winner_ratio;
+        let clear = |c: &Candidate| {
+            candidates
+                .iter()
+                .filter(|o| !init::same_pose(&o.pose, &c.pose, BASIN_M, BASIN_RAD))
+                .all(|o| o.merit() <= ratio * c.merit())
+        };
+        // And it must lie in the volume searched (the polish may carry a start beyond it): a
+        // hint says where the rig is. Candidates outside still count as rivals above.
+        let inside = |c: &Candidate| within(&volume, &c.pose);
+        let accepted =
+            |c: &&Candidate| acceptable(&self.cfg, c) && plausible(c) && c.explained >= floor && inside(c) && clear(c);
+        // A failed search is repeated once more broadly on the same volume; if that fails
+        // too, the volume doubles and the breadth is normal again (widening a large volume
+        // only lets the time budget cover fewer cells).
+        let failed = !candidates.iter().any(|c| accepted(&c));
+        if failed && self.widen {
+            self.volume_level += 1;
+        }
+        self.widen = failed && !self.widen;
+        let mut n = 0;
+        for c in candidates.iter().filter(accepted).take(self.confirming.len()) {
+            self.confirming[n] = Confirming {
+                pose: c.pose,
+                merit_sum: c.merit(),
+                frames: 1,
+                alive: true,
+            };
+            n += 1;
+        }
+        self.confirm_count = n;
+        if self.search_attempts > 0 || self.stats.first_search.is_some() {
+            self.stats.reinitialisations += 1;
+        }
+        self.search_attempts += 1;
+        self.stats.search_time += report.elapsed;
+        self.stats.plan_cells_in_volume += report.plan_cells_in_volume as u64;
+        self.stats.plan_cells_scanned += report.plan_cells_scanned as u64;
+        self.stats.search_backstops += u64::from(report.backstop);
+        self.stats.first_search.get_or_insert(report.elapsed);
+        result.event = Some(TrackerEvent::Searched(report));
+        if n > 0 {
+            result = self.decide(job.edges(), started_ns, result);
+        }
+        self.job = Some(job);
+        self.last_time = started_ns;
+        result
+    }
+
+    /// Whether the candidates under confirmation are told apart (and, for a narrow rig, agreed
+    /// on): the winner is committed on this frame, or, when they cannot be told apart, the next
+    /// frame searches afresh. `result` is this frame's answer so far.
+    pub(super) fn decide(&mut self, edges: &[Edge], timestamp_ns: u64, mut result: FrameResult) -> FrameResult {
+        let alive = self.confirming[..self.confirm_count].iter().filter(|c| c.alive).count();
+        let frames = self.confirming[..self.confirm_count]
+            .iter()
+            .filter(|c| c.alive)
+            .map(|c| c.frames)
+            .max()
+            .unwrap_or(0);
+        let decided = alive == 1 || self.clear_winner();
+        // A narrow rig's search that decided counts towards agreement: it commits only once
+        // `narrow_rig_searches` decided searches in a row chose the same place.
+        let agreement = match (decided, self.narrow) {
+            (true, true) => {
+                let best = self.best_confirming().map(|(_, c)| c.pose);
+                let n = match (self.agreed, best) {
+                    (Some((place, n)), Some(p)) if init::same_pose(&p, &place, BASIN_M, BASIN_RAD) => n + 1,
+                    _ => 1,
+                };
+                self.agreed = best.map(|p| (p, n));
+                n
+            }
+            _ => u32::MAX,
+        };
+        if alive == 0 || (frames >= self.cfg.initialisation.confirm_frames && !decided) {
+            // Nothing left, or the frames did not tell the candidates apart: search afresh. Two
+            // places that stayed alike are the ambiguity a narrow rig's agreement waits out.
+            if alive > 1 {
+                self.agreed = None;
+            }
+            self.confirm_count = 0;
+        } else if decided && agreement < self.cfg.initialisation.narrow_rig_searches {
+            // Not yet agreed: search afresh.
+            self.confirm_count = 0;
+        } else if decided {
+            self.agreed = None;
+            let (k, winner) = self.best_confirming().expect("one candidate is alive");
+            let changed_mind = k != 0;
+            if changed_mind {
+                self.stats.changed_mind += 1;
+            }
+            let candidates = self.confirm_count;
+            self.confirm_count = 0;
+            result = self.commit(&winner.pose, edges, timestamp_ns);
+            result.event = Some(TrackerEvent::Committed {
+                candidates,
+                changed_mind,
+            });
+        }
+        result
+    }
+
+    /// The live candidate with the best mean merit, and its index (0: the search's own best).
+    fn best_confirming(&self) -> Option<(usize, Confirming)> {
+        self.confirming[..self.confirm_count]
+            .iter()
+            .enumerate()
+            .filter(|(_, c)| c.alive)
+            .max_by(|a, b| (a.1.merit_sum / a.1.frames as f64).total_cmp(&(b.1.merit_sum / b.1.frames as f64)))
+            .map(|(k, c)| (k, *c))
+    }
+
+    /// Whether the best candidate so far beats every other outside its basin by the configured
+    /// margin (their mean merit at most `clear_winner_ratio` × its): no further frames are needed
+    /// to decide. Candidates in its basin (the same place a few centimetres or a degree apart,
+    /// as the search's own clear-winner test counts them) are the same answer, not rivals: they
+    /// score alike on every frame, and counting them kept the tracker searching afresh forever
+    /// where the search had found nothing but the truth (ZInD `pano_33`).
+    fn clear_winner(&self) -> bool {
+        let live = || self.confirming[..self.confirm_count].iter().filter(|c| c.alive);
+        let mean = |c: &Confirming| c.merit_sum / c.frames.max(1) as f64;
+        let Some(best) = live().max_by(|a, b| mean(a).total_cmp(&mean(b))) else {
+            return false;
+        };
+        let ratio = self.cfg.initialisation.clear_winner_ratio;
+        live()
+            .filter(|c| !init::same_pose(&c.pose, &best.pose, BASIN_M, BASIN_RAD))
+            .all(|c| mean(c) <= ratio * mean(best))
+    }
+
+    /// Where to search now: the hint or the whole model at first; after a loss, around the
+    /// last good pose, the volume doubling in diameter with every failed attempt.
+    pub(super) fn search_volume(&self) -> SearchVolume {
+        match (self.state, self.last_good) {
+            (TrackerState::Lost, Some(p)) => {
+                let base = self.cfg.initialisation.search_diameter_m;
+                let grow = 2f64.powi(self.volume_level.min(6) as i32);
+                SearchVolume {
+                    centre: Point3::from(p.translation.vector),
+                    diameter_m: Some(base * grow).filter(|d| *d < 64.0 * base),
+                }
+            }
+            _ => self.hint.unwrap_or(SearchVolume {
+                centre: Point3::origin(),
+                diameter_m: None,
+            }),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{within, SearchVolume, VOLUME_SLACK_M};
+    use nalgebra::Point3;
+    use omnitrack_core::geometry::Pose;
+
+    #[test]
+    fn a_pose_is_within_a_volume_up_to_the_slack_and_always_within_the_whole_model() {
+        let volume = SearchVolume {
+            centre: Point3::new(1.0, 2.0, 1.5),
+            diameter_m: Some(3.0),
+        };
+        let at = |x: f64| Pose::from_parts(nalgebra::Translation3::new(1.0 + x, 2.0, 1.5), Default::default());
+        assert!(within(&volume, &at(1.5 + 0.5 * VOLUME_SLACK_M)));
+        assert!(!within(&volume, &at(1.5 + 2.0 * VOLUME_SLACK_M)));
+        let whole = SearchVolume {
+            diameter_m: None,
+            ..volume
+        };
+        assert!(within(&whole, &at(1e3)));
+    }
+}
