@@ -7,6 +7,7 @@
 //! results of earlier kept frames through [`Tracker::late`].
 
 mod maintenance;
+mod relocalise;
 mod search;
 
 use crate::background::{Backlog, SearchJob, SearchLink};
@@ -15,7 +16,7 @@ use crate::init::{Candidate, InitOptions, Initialiser, SearchVolume};
 use crate::matching::{best_edge, Gate, Predicted};
 use crate::report::{FrameResult, StateCounts, TrackerState, TrackerStats};
 use crate::visibility::VisibilityTable;
-use nalgebra::Point3;
+use nalgebra::{Point3, UnitQuaternion};
 use omnitrack_config::TrackerConfig;
 use omnitrack_core::geometry::{Correspondence, Pose};
 use omnitrack_core::model::Model;
@@ -24,7 +25,6 @@ use omnitrack_edges::Edge;
 use omnitrack_solver::{ConsensusSampler, SolverOptions};
 use rand::rngs::SmallRng;
 use rand::SeedableRng;
-use search::{Confirming, PendingSearch};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
@@ -44,6 +44,54 @@ const BACKLOG_FRAMES: usize = 32;
 /// backlog shrinks by two a frame, and each frame's time stays bounded by a few maintenance
 /// steps (a few milliseconds each) rather than the search's hundreds.
 pub const CATCH_UP_FRAMES: usize = 3;
+
+/// A search under way off the frame path: when its result is due (the search frame's timestamp
+/// plus its budget, ns) and what its acceptance needs from the search frame.
+#[derive(Debug, Clone, Copy)]
+struct PendingSearch {
+    started_ns: u64,
+    due_ns: u64,
+    volume: SearchVolume,
+    turn_limit: Option<(UnitQuaternion<f64>, f64)>,
+    floor: f64,
+    /// Set for a relocalisation (module `maintenance`): what its frame concludes either way.
+    relocalisation: Option<Relocalisation>,
+}
+
+/// A candidate under confirmation.
+#[derive(Debug, Clone, Copy)]
+struct Confirming {
+    pose: Pose,
+    merit_sum: f64,
+    frames: u32,
+    alive: bool,
+}
+
+/// A relocalisation under way (module `background`): what its candidates are judged by, and
+/// what its frame concludes when none wins.
+#[derive(Debug, Clone, Copy)]
+struct Relocalisation {
+    predicted: Pose,
+    /// The last good rotation and the turn the rig can have made since.
+    turned_from: UnitQuaternion<f64>,
+    turn_limit: f64,
+    /// The least share of VIS(T) a candidate must explain (0 on a bad frame).
+    floor: f64,
+    diameter_m: f64,
+    /// The tracker's `last_time` when the frame came (the previous frame's).
+    last_time: u64,
+    tail: Tail,
+}
+
+/// A maintenance frame's result so far and what it concludes without a relocalisation.
+#[derive(Debug, Clone, Copy)]
+struct Tail {
+    result: FrameResult,
+    pose: Option<Pose>,
+    good: bool,
+    predicted: Pose,
+    timestamp_ns: u64,
+}
 
 /// The tracker for one rig, model and visibility table.
 pub struct Tracker<'m> {

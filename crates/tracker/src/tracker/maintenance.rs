@@ -30,15 +30,15 @@
 //!
 //! Step 3 scores samples by `maintenance.consensus_score` (the median α² by default,
 //! `solver::robust::consensus`), and a relocalisation keeps the last interval's motion for the next
-//! prediction (`relocalise`).
+//! prediction (module `relocalise`, where a failed motion prior leads).
 //!
 //! Nothing here allocates: all buffers belong to the [`Tracker`].
 
-use super::search::PendingSearch;
+use super::relocalise::turned;
+use super::Tail;
 use super::Tracker;
-use crate::background::STARTS;
 use crate::correspondence::{CorrespondenceState, HeldEdge};
-use crate::init::{Candidate, SearchVolume};
+use crate::init::Candidate;
 use crate::matching::{best_edge, Gate, Predicted};
 use crate::report::{FrameResult, TrackerEvent, TrackerState};
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion};
@@ -48,8 +48,6 @@ use omnitrack_edges::Edge;
 use omnitrack_solver::{
     covariance, minimise_xi, r_and_t_refine, refine_upright, sample_count, SamplingBudget, SimplexOptions,
 };
-use rand::rngs::SmallRng;
-use rand::{Rng, SeedableRng};
 use std::time::{Duration, Instant};
 
 /// A relocalised pose replaces a suspect maintenance pose only when it explains this many times
@@ -64,82 +62,6 @@ const SMALLEST_SAMPLE: usize = 4;
 const SECOND_OPINION_M: f64 = 0.05;
 const SECOND_OPINION_RAD: f64 = 0.035;
 
-/// A relocalisation under way (module `background`): what its candidates are judged by, and
-/// what its frame concludes when none wins.
-#[derive(Debug, Clone, Copy)]
-pub(super) struct Relocalisation {
-    predicted: Pose,
-    /// The last good rotation and the turn the rig can have made since.
-    turned_from: UnitQuaternion<f64>,
-    turn_limit: f64,
-    /// The least share of VIS(T) a candidate must explain (0 on a bad frame).
-    floor: f64,
-    diameter_m: f64,
-    /// The tracker's `last_time` when the frame came (the previous frame's).
-    last_time: u64,
-    tail: Tail,
-}
-
-/// A maintenance frame's result so far and what it concludes without a relocalisation.
-#[derive(Debug, Clone, Copy)]
-pub(super) struct Tail {
-    result: FrameResult,
-    pose: Option<Pose>,
-    good: bool,
-    predicted: Pose,
-    timestamp_ns: u64,
-}
-
-/// Where a relocalisation candidate stands: `plausible` (enough inliers, within reach of the
-/// prediction and of the turns the rig can have made), `acceptable` (plausible and explaining
-/// enough of VIS(T)), `jumps` (turned further than `max_jump_deg` from the prediction).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-struct Standing {
-    plausible: bool,
-    acceptable: bool,
-    jumps: bool,
-}
-
-/// The relocalisation's choice, or None.
-///
-/// Candidates compare by [`Candidate::merit`], as the initialisation's do (explained × support
-/// × (1 − blank)), not by the truncated ξ: on the realistic world (docs/decisions.md, "the realistic
-/// world") casings beside every opening and one paint on every wall let
-/// poses 0.3–1 m off match the lines they predict as tightly as the truth, and ranking by ξ took
-/// them on 29 of 32 relocalisations of `lab` (252 cm RMSE); by merit, 1 of 19 over tracker seeds
-/// 1–3 (18 / 12 / 12 cm), the default world unchanged.
-///
-/// The merit is a share of VIS(pose), and a place that sees few segments can match its few
-/// about as well as the true place matches its many (`corridor`, frame 5076: a pose 73 cm off
-/// with 22 inliers scored 4 % better than the polished prediction with 64). So on each side of
-/// the turn limit the best merit wins over the best-supported candidate (most inliers, among
-/// all plausible ones) only by `ratio` (its merit × `ratio` above the other's); otherwise the
-/// best-supported wins, or, when it does not explain enough (a suspect frame's own pose),
-/// nothing does. A candidate that turns beyond the limit must then beat one that does not by
-/// `ratio` too (a symmetric corridor's quarter-turn twin explains about as much as the truth on
-/// one frame).
-fn choose(candidates: &[Option<(Candidate, Standing)>], ratio: f64) -> Option<Candidate> {
-    let pick = |jumping: bool| -> Option<Candidate> {
-        let side = || candidates.iter().flatten().filter(move |(_, s)| s.jumps == jumping);
-        let (fit, _) = side()
-            .filter(|(_, s)| s.acceptable)
-            .max_by(|a, b| a.0.merit().total_cmp(&b.0.merit()))?;
-        let (support, standing) = side()
-            .filter(|(_, s)| s.plausible)
-            .max_by(|a, b| a.0.inliers.cmp(&b.0.inliers).then(a.0.merit().total_cmp(&b.0.merit())))?;
-        if fit.inliers < support.inliers && ratio * fit.merit() <= support.merit() {
-            standing.acceptable.then_some(*support)
-        } else {
-            Some(*fit)
-        }
-    };
-    match (pick(false), pick(true)) {
-        (Some(k), Some(j)) if ratio * j.merit() > k.merit() => Some(j),
-        (Some(k), _) => Some(k),
-        (None, j) => j,
-    }
-}
-
 /// The pose and S_t the next frame will be predicted from.
 fn constant_velocity(previous: &Pose, previous_t: u64, current: &Pose, current_t: u64, next_t: u64) -> Pose {
     let dt_prev = current_t.saturating_sub(previous_t) as f64;
@@ -153,15 +75,6 @@ fn constant_velocity(previous: &Pose, previous_t: u64, current: &Pose, current_t
     let rot = UnitQuaternion::from_scaled_axis(delta.rotation.scaled_axis() * f);
     let step = Isometry3::from_parts(Translation3::from(delta.translation.vector * f), rot);
     current * step
-}
-
-/// `pose` turned by `angle` (rad) about the world vertical through its position.
-fn turned(pose: &Pose, angle: f64) -> Pose {
-    if angle == 0.0 {
-        return *pose;
-    }
-    let r = UnitQuaternion::from_axis_angle(&nalgebra::Vector3::z_axis(), angle);
-    Pose::from_parts(pose.translation, r * pose.rotation)
 }
 
 /// Refits `c` from `start` with the configured solver.
@@ -189,161 +102,6 @@ fn fit(
 }
 
 impl Tracker<'_> {
-    /// A local search around `predicted` (diameter `relocalise_diameter_m`); on success (a
-    /// candidate explaining at least `min_explained` of VIS(T)) the tracker continues from the
-    /// found pose with a fresh S_t, as after initialisation. A bad frame takes any plausible
-    /// candidate (`min_explained` 0): a view poorer than before, such as sensors covered, must
-    /// not stop the tracker from finding its place again. The search keeps to the turns the rig
-    /// can have made since the last good frame; the prediction, the last pose, the frame's
-    /// `solved` pose, its rotation at the predicted position and the prediction turned by ± one
-    /// gate width, each polished, compete with its candidates, and [`choose`] decides
-    /// ([`Tracker::conclude_relocalisation`]).
-    ///
-    /// The search and the polishes run off the frame path (module `background`), and are taken
-    /// up `relocalise_time_budget_ms` later on the frames' clock; `tail` is what the frame
-    /// concludes when no candidate wins. Returns false when relocalisation is off.
-    fn start_relocalise(
-        &mut self,
-        edges: &[Edge],
-        predicted: &Pose,
-        solved: Option<&Pose>,
-        timestamp_ns: u64,
-        min_explained: f64,
-        tail: Tail,
-    ) -> bool {
-        let d = self.cfg.maintenance.relocalise_diameter_m;
-        if d <= 0.0 {
-            return false;
-        }
-        let Some(mut job) = self.job.take() else {
-            return false;
-        };
-        let volume = SearchVolume {
-            centre: Point3::from(predicted.translation.vector),
-            diameter_m: Some(d),
-        };
-        let budget = Duration::from_secs_f64(self.cfg.maintenance.relocalise_time_budget_ms.max(0.0) / 1e3);
-        let turn_limit = self.max_turn_rad(timestamp_ns);
-        let turned_from = self.last_good.map_or(predicted.rotation, |p| p.rotation);
-        let i = &self.cfg.initialisation;
-        let breadth = (
-            i.edges_considered as usize,
-            i.segments_considered as usize,
-            i.samples_per_cell as usize,
-        );
-        // The heading is near the prediction's: its quarter-turn twins are not searched.
-        let rng = SmallRng::seed_from_u64(self.rng.random());
-        job.prepare(
-            edges,
-            volume,
-            budget,
-            breadth,
-            false,
-            Some((turned_from, turn_limit)),
-            rng,
-        );
-        // Besides the search's best few (the tracker asks for three), polished: the prediction,
-        // the last pose, this frame's solved pose and the starts below. The search may find
-        // only a twin of the place (a symmetric corridor seen a quarter turn away), and where a
-        // turn stopped short the prediction overshoots into a local minimum a few degrees off
-        // that the last pose does not fall into.
-        // Lines fix the rotation by their directions alone (R_then_T), while a repeated
-        // structure leaves the translation along it free: a solve that slid to a neighbouring
-        // doorway often has the turn right, so its rotation is also tried at the predicted
-        // position.
-        let reseated = solved.map(|s| Pose::from_parts(predicted.translation, s.rotation));
-        // A turn faster than the motion model expects leaves the prediction a gate width or
-        // more off, where polishing stays in a local minimum: the prediction turned by ± one
-        // gate width is polished too.
-        let gate = self.cfg.maintenance.angular_gate_deg.to_radians();
-        job.set_starts([
-            Some(*predicted),
-            Some(self.pose),
-            solved.copied(),
-            reseated,
-            Some(turned(predicted, gate)),
-            Some(turned(predicted, -gate)),
-        ]);
-        let pending = PendingSearch {
-            started_ns: timestamp_ns,
-            due_ns: timestamp_ns.saturating_add(u64::try_from(budget.as_nanos()).unwrap_or(u64::MAX)),
-            volume,
-            turn_limit: Some((turned_from, turn_limit)),
-            floor: min_explained,
-            relocalisation: Some(Relocalisation {
-                predicted: *predicted,
-                turned_from,
-                turn_limit,
-                floor: min_explained,
-                diameter_m: d,
-                last_time: self.last_time,
-                tail,
-            }),
-        };
-        self.launch(job, pending);
-        true
-    }
-
-    /// Takes up a relocalisation on its own frame (stamped `timestamp_ns`): the candidate
-    /// [`choose`] picks is committed there, or the frame concludes as it would have without one.
-    pub(super) fn conclude_relocalisation(&mut self, reloc: Relocalisation, timestamp_ns: u64) -> FrameResult {
-        // The frame's own view of time, as when the search was started.
-        self.last_time = reloc.last_time;
-        let Some(job) = self.collect_search() else {
-            return self.conclude(reloc.tail);
-        };
-        let (found, report) = job.result();
-        self.stats.search_backstops += u64::from(report.backstop);
-        let mut candidates = [None; 3 + STARTS];
-        for (slot, c) in candidates[..3].iter_mut().zip(found) {
-            *slot = Some(*c);
-        }
-        candidates[3..].copy_from_slice(job.polished());
-        let m = &self.cfg.maintenance;
-        let predicted = &reloc.predicted;
-        let reach = 0.5 * reloc.diameter_m + m.max_jump_m;
-        let jump_rad = m.max_jump_deg.to_radians();
-        let standings = candidates.map(|c| {
-            c.map(|c| {
-                let plausible = c.inliers >= m.min_inliers as usize
-                    && (c.pose.translation.vector - predicted.translation.vector).norm() <= reach
-                    && c.pose.rotation.angle_to(&reloc.turned_from) <= reloc.turn_limit;
-                let standing = Standing {
-                    plausible,
-                    acceptable: plausible && c.explained >= reloc.floor,
-                    jumps: c.pose.rotation.angle_to(&predicted.rotation) > jump_rad,
-                };
-                (c, standing)
-            })
-        });
-        let Some(best) = choose(&standings, self.cfg.initialisation.clear_winner_ratio) else {
-            self.job = Some(job);
-            return self.conclude(reloc.tail);
-        };
-        self.stats.relocalisations += 1;
-        // The rig moves on through a relocalisation: the motion from the last good pose to the
-        // found one continues, so that the next frame is predicted where the rig will be, not
-        // where it was (at 5 Hz a walking rig is 20 cm on, and the gates matched the wrong
-        // edges there). Carrying over the interval before instead, as this did until
-        // 2026-11-27, keeps a rig that turned back (or stopped) predicted the old way: every
-        // following frame failed and relocalised in turn (`tests/pipeline`, a recording played
-        // back and forth).
-        let since = self
-            .last_good
-            .map(|p| (p, self.last_good_time))
-            .filter(|(_, t)| *t < timestamp_ns);
-        let mut r = self.commit(&best.pose, job.edges(), timestamp_ns);
-        self.job = Some(job);
-        if since.is_some() {
-            self.previous = since;
-        }
-        r.event = Some(TrackerEvent::Relocalised);
-        r.match_time += reloc.tail.result.match_time;
-        r.solve_time = reloc.tail.result.solve_time;
-        r.samples += reloc.tail.result.samples;
-        r
-    }
-
     /// Fig. 7 lines 3–10 from the prediction `predicted`: the correspondence update (angular and
     /// hue gates) and the robust pose of S̄. Returns the pose and the samples drawn.
     fn match_and_solve(&mut self, edges: &[Edge], predicted: &Pose) -> (Option<Pose>, u64, Duration) {
@@ -680,7 +438,7 @@ impl Tracker<'_> {
     /// Fig. 7's end for a frame whose pose is `good` or not: S_{t+1}, the pose and its
     /// covariance, or a bad frame coasting on the prediction (and, after `lost_after_frames`
     /// of them, the loss).
-    fn conclude(&mut self, tail: Tail) -> FrameResult {
+    pub(super) fn conclude(&mut self, tail: Tail) -> FrameResult {
         let Tail {
             mut result,
             pose,
@@ -723,79 +481,5 @@ impl Tracker<'_> {
             }
         }
         result
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// A candidate whose merit is `merit`.
-    fn cand(x: f64, merit: f64, inliers: usize) -> Candidate {
-        Candidate {
-            pose: Pose::from_parts(Translation3::new(x, 0.0, 0.0), UnitQuaternion::identity()),
-            score: 1e-4,
-            inliers,
-            xi_rad2: 1e-4,
-            explained: merit,
-            support: 1.0,
-            blank: 0.0,
-        }
-    }
-
-    const OK: Standing = Standing {
-        plausible: true,
-        acceptable: true,
-        jumps: false,
-    };
-
-    fn winner(c: &[Option<(Candidate, Standing)>]) -> Option<f64> {
-        choose(c, 0.8).map(|c| c.pose.translation.x)
-    }
-
-    #[test]
-    fn a_few_segments_matched_slightly_better_lose_to_many() {
-        // The corridor's failure: 22 inliers explaining 4 % more than the prediction's 64.
-        let c = [Some((cand(0.0, 0.50, 64), OK)), Some((cand(0.73, 0.52, 22), OK)), None];
-        assert_eq!(winner(&c), Some(0.0));
-        // Clearly more (0.8 × its merit above the other's), fewer inliers still win.
-        let c = [Some((cand(0.0, 0.50, 64), OK)), Some((cand(0.73, 0.65, 22), OK))];
-        assert_eq!(winner(&c), Some(0.73));
-        // More inliers and more merit: no contest.
-        let c = [Some((cand(0.0, 0.50, 64), OK)), Some((cand(0.73, 0.51, 70), OK))];
-        assert_eq!(winner(&c), Some(0.73));
-    }
-
-    #[test]
-    fn a_better_supported_pose_that_explains_too_little_vetoes_the_replacement() {
-        // A suspect frame: its own pose (70 inliers) does not explain enough to be taken, and
-        // a place seeing few segments (29) is not clearly better: nothing replaces the frame.
-        let own = Standing {
-            acceptable: false,
-            ..OK
-        };
-        let c = [Some((cand(0.0, 0.50, 70), own)), Some((cand(0.55, 0.55, 29), OK))];
-        assert_eq!(winner(&c), None);
-        // Implausible candidates neither win nor veto.
-        let far = Standing {
-            plausible: false,
-            acceptable: false,
-            jumps: false,
-        };
-        let c = [Some((cand(0.0, 0.50, 70), far)), Some((cand(0.55, 0.55, 29), OK))];
-        assert_eq!(winner(&c), Some(0.55));
-    }
-
-    #[test]
-    fn a_turn_beyond_the_limit_must_win_clearly() {
-        let jump = Standing { jumps: true, ..OK };
-        let c = [Some((cand(0.0, 0.50, 60), OK)), Some((cand(0.4, 0.56, 60), jump))];
-        assert_eq!(winner(&c), Some(0.0));
-        let c = [Some((cand(0.0, 0.50, 60), OK)), Some((cand(0.4, 0.66, 60), jump))];
-        assert_eq!(winner(&c), Some(0.4));
-        // With nothing that continues the motion, the best jump is taken.
-        let c = [None, Some((cand(0.4, 0.56, 60), jump))];
-        assert_eq!(winner(&c), Some(0.4));
-        assert_eq!(winner(&[None, None]), None);
     }
 }

@@ -7,31 +7,17 @@
 //! In: a frame's [`Edge`]s while not tracking, a finished search's candidates. Out: a committed
 //! pose (tracking starts at it) or none yet.
 
-use super::maintenance::Relocalisation;
-use super::Tracker;
+use super::{Confirming, PendingSearch, Tracker};
 use crate::background::SearchJob;
 use crate::init::{self, Candidate, SearchVolume};
 use crate::report::{FrameResult, SearchKind, TrackerEvent, TrackerState, Weighed};
-use nalgebra::{Point3, UnitQuaternion};
+use nalgebra::Point3;
 use omnitrack_config::TrackerConfig;
 use omnitrack_core::geometry::Pose;
 use omnitrack_edges::Edge;
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 use std::time::{Duration, Instant};
-
-/// A search under way off the frame path: when its result is due (the search frame's timestamp
-/// plus its budget, ns) and what its acceptance needs from the search frame.
-#[derive(Debug, Clone, Copy)]
-pub(super) struct PendingSearch {
-    pub(super) started_ns: u64,
-    pub(super) due_ns: u64,
-    pub(super) volume: SearchVolume,
-    pub(super) turn_limit: Option<(UnitQuaternion<f64>, f64)>,
-    pub(super) floor: f64,
-    /// Set for a relocalisation (module `maintenance`): what its frame concludes either way.
-    pub(super) relocalisation: Option<Relocalisation>,
-}
 
 /// The search's acceptance test: enough inliers, and the pose and the frame explaining each
 /// other well enough both ways (`accept_explained_fraction` of the segments it predicts,
@@ -57,15 +43,6 @@ fn within(volume: &SearchVolume, pose: &Pose) -> bool {
     volume
         .diameter_m
         .is_none_or(|d| (pose.translation.vector - volume.centre.coords).norm() <= 0.5 * d + VOLUME_SLACK_M)
-}
-
-/// A candidate under confirmation.
-#[derive(Debug, Clone, Copy)]
-pub(super) struct Confirming {
-    pub(super) pose: Pose,
-    pub(super) merit_sum: f64,
-    pub(super) frames: u32,
-    pub(super) alive: bool,
 }
 
 impl<'m> Tracker<'m> {
