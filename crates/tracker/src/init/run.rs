@@ -1,0 +1,223 @@
+//! The search itself ([`Initialiser::run`]): the stages of the parent module's doc in their
+//! order — the vanishing directions' rotations, the grid and its climbs (module `translation`),
+//! INIT-SEGMENT-EDGE over the volume's cells (module `triplets`, on lanes for the whole model),
+//! the polish of their best samples, the translation vote — each within what is left of the
+//! work budget.
+//!
+//! In: a frame's edges, a [`SearchVolume`], a generator. Out: the best distinct [`Candidate`]s
+//! and an [`InitReport`].
+
+use super::*;
+
+impl Initialiser<'_> {
+    /// The grid search under the rotations of the vanishing directions, INIT-SEGMENT-EDGE over
+    /// the cells meeting `volume`, the polish of the best samples, and the translation vote.
+    /// Returns the distinct candidates, best [`Candidate::merit`] first (empty if nothing was
+    /// found).
+    pub fn run(&mut self, edges: &[Edge], volume: &SearchVolume, rng: &mut SmallRng) -> (&[Candidate], InitReport) {
+        let started = Instant::now();
+        let limit = self.work_limit();
+        self.work = 0;
+        self.rays_charged = self.at_pose.rays_cast();
+        self.backstop_hit = false;
+        self.backstop = started + self.opts.time_budget.saturating_mul(self.backstop_factor);
+        let mut report = InitReport::default();
+        self.candidates.clear();
+        self.pool.clear();
+        self.prepare_edges(edges);
+        self.select_cells(volume);
+        // A volume that holds no valid node (a hint outside the building, in a wall, or in a
+        // part of the model with no room to stand) is widened about its centre to the nearest
+        // valid nodes, and the report says so: a search of nothing would repeat forever.
+        // The hint's own extent is kept beyond the gap: it says how far off the rig may be.
+        let widened = match (self.cells.is_empty(), volume.diameter_m) {
+            (true, Some(d)) => self.nearest_node_gap(&volume.centre).map(|gap| SearchVolume {
+                centre: volume.centre,
+                diameter_m: Some(2.0 * gap + d.max(self.table.header.spacing_m)),
+            }),
+            _ => None,
+        };
+        let volume = match &widened {
+            Some(w) => {
+                self.select_cells(w);
+                report.widened_to_m = w.diameter_m;
+                w
+            }
+            None => volume,
+        };
+        report.cells_in_volume = self.cells.len();
+        report.diameter_m = volume.diameter_m;
+        // A sweep's later searches leave the cells the earlier ones looked at (the triplets'
+        // cells by the same plan distance as the grid's).
+        if self.sweep_from_m > 0.0 {
+            let (centre, from) = (volume.centre, self.sweep_from_m);
+            let table = self.table;
+            self.cells.retain(|&(_, node)| {
+                let p = table.node_position(node);
+                (p.x - centre.x).hypot(p.y - centre.y) >= from
+            });
+        }
+        let mut rotations = [UnitQuaternion::identity(); MAX_ROTATIONS];
+        let found = self.vanishing.rotations(edges, self.opts.max_tilt_rad, &mut rotations);
+        self.vanishing_count = 0;
+        for r in &rotations[..found] {
+            if self.rotation_prior.is_none_or(|(p, limit)| r.angle_to(&p) <= limit) {
+                self.vanishing_rot[self.vanishing_count] = *r;
+                self.vanishing_count += 1;
+            }
+        }
+        // The grid search under the vanishing directions first: on real photographs it finds
+        // what the triplets miss, and the triplets then have what is left of the time budget.
+        let sweep = self.grid_search(edges, volume, limit);
+        report.plan_cells_in_volume = sweep.in_volume;
+        report.plan_cells_scanned = sweep.scanned;
+        report.plan_cells_skipped = sweep.skipped;
+        report.swept_to_m = sweep.next_m;
+        report.grid_elapsed = started.elapsed();
+        report.rotations = self.vanishing_count;
+        // The triplets leave twice what polishing their best samples costs: a cell's sampling
+        // overshoots its check.
+        let reserve = 2 * POLISHED as u64 * work::POLISH;
+        let sampling_limit = limit.saturating_sub(reserve);
+        if self.top.len() >= 3 && !self.spent(sampling_limit) {
+            // A bounded volume is searched on this thread, nearest cell first, from `rng`. The
+            // whole model (start-up without a hint: over a thousand cells) is dealt out to
+            // `LANES` lanes in turn, each with an equal share of the work left; each cell then
+            // draws from its own seeded generator, so the result depends neither on the
+            // threads nor on their timing.
+            let mut scratch = std::mem::take(&mut self.scratch);
+            let lanes = if volume.diameter_m.is_none() { scratch.len() } else { 1 };
+            let lane_limit = (sampling_limit - self.work) / lanes as u64;
+            let backstop = self.backstop;
+            let me = &*self;
+            let search = |w: &mut CellScratch, first: usize, rng: Option<&mut SmallRng>, base: u64| {
+                let mut own = None;
+                let rng = rng.unwrap_or_else(|| own.insert(SmallRng::seed_from_u64(base)));
+                let mut done = InitReport::default();
+                w.pool.clear();
+                for ci in (first..me.cells.len()).step_by(lanes) {
+                    if done.work >= lane_limit {
+                        done.timed_out = true;
+                        break;
+                    }
+                    if Instant::now() >= backstop || me.cancelled() {
+                        done.timed_out = true;
+                        done.backstop = true;
+                        break;
+                    }
+                    let node = me.cells[ci].1;
+                    if lanes > 1 {
+                        *rng = SmallRng::seed_from_u64(base ^ u64::from(node).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+                    }
+                    done.cells_searched += 1;
+                    let matches = me.score_cell(w, node);
+                    done.triplet_matches += matches;
+                    let (drawn, tilted) = me.sample_cell(w, node, volume, rng);
+                    done.samples += drawn;
+                    done.tilted += tilted;
+                    done.work += work::CELL + matches / 50 * work::CELL_PER_50_MATCHES + drawn * work::CELL_PER_SAMPLE;
+                }
+                done
+            };
+            let mut add = |part: InitReport| {
+                report.cells_searched += part.cells_searched;
+                report.triplet_matches += part.triplet_matches;
+                report.samples += part.samples;
+                report.tilted += part.tilted;
+                report.timed_out |= part.timed_out;
+                report.backstop |= part.backstop;
+                report.work += part.work;
+            };
+            if lanes > 1 {
+                // Threads only here, at start-up: a bounded search allocates nothing. Thread t
+                // runs lanes t, t + threads, …
+                let base: u64 = rng.random();
+                let threads = std::thread::available_parallelism()
+                    .map_or(1, |n| n.get())
+                    .clamp(1, lanes);
+                let mut parts = [InitReport::default(); LANES];
+                let mut by_thread: Vec<Vec<(usize, &mut CellScratch)>> = (0..threads).map(|_| Vec::new()).collect();
+                for (k, w) in scratch.iter_mut().enumerate() {
+                    by_thread[k % threads].push((k, w));
+                }
+                std::thread::scope(|scope| {
+                    let handles: Vec<_> = by_thread
+                        .into_iter()
+                        .map(|lanes_of| {
+                            scope.spawn(move || {
+                                lanes_of
+                                    .into_iter()
+                                    .map(|(k, w)| (k, search(w, k, None, base)))
+                                    .collect::<Vec<_>>()
+                            })
+                        })
+                        .collect();
+                    for h in handles {
+                        for (k, part) in h.join().unwrap_or_default() {
+                            parts[k] = part;
+                        }
+                    }
+                });
+                // In lane order, so that the sums and the pool do not depend on the threads.
+                for part in parts {
+                    add(part);
+                }
+            } else {
+                add(search(&mut scratch[0], 0, Some(rng), 0));
+            }
+            for w in &scratch {
+                for &entry in &w.pool {
+                    keep_best(&mut self.pool, entry);
+                }
+            }
+            self.scratch = scratch;
+        }
+        self.pool.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+        self.spend(report.work);
+        let mut polished = 0;
+        for pi in 0..self.pool.len() {
+            if polished >= POLISHED || self.spent(limit) {
+                report.timed_out |= polished < POLISHED;
+                break;
+            }
+            let start = self.pool[pi].1;
+            if self.pool[..pi]
+                .iter()
+                .any(|p| same_pose(&p.1, &start, 2.0 * SAME_POSITION_M, 2.0 * SAME_ROTATION_RAD))
+            {
+                continue;
+            }
+            polished += 1;
+            if let Some(c) = self.polish(&start, edges) {
+                self.offer(c);
+            }
+        }
+        self.candidates.sort_unstable_by(|a, b| b.merit().total_cmp(&a.merit()));
+        if let Some(d) = volume.diameter_m {
+            self.vote_translations(edges, &volume.centre, d, limit);
+        }
+        self.candidates.sort_unstable_by(|a, b| b.merit().total_cmp(&a.merit()));
+        self.candidates.truncate(self.opts.candidates);
+        report.elapsed = started.elapsed();
+        report.work = self.work;
+        report.backstop |= self.backstop_hit;
+        report.timed_out |= self.work >= limit || report.backstop;
+        (&self.candidates, report)
+    }
+
+    /// Adds a polished candidate, or replaces the one in its place (the same pose within
+    /// [`SAME_POSITION_M`] and [`SAME_ROTATION_RAD`]) if it fits the frame better (lower
+    /// truncated ξ): starts from different searches settle a few centimetres apart.
+    pub(super) fn offer(&mut self, c: Candidate) {
+        let same = self
+            .candidates
+            .iter()
+            .position(|o| same_pose(&o.pose, &c.pose, SAME_POSITION_M, SAME_ROTATION_RAD));
+        match same {
+            Some(k) if c.score < self.candidates[k].score => self.candidates[k] = c,
+            Some(_) => {}
+            None if self.candidates.len() < self.candidates.capacity() => self.candidates.push(c),
+            None => {}
+        }
+    }
+}
