@@ -18,8 +18,18 @@
 //!
 //! `Equirectangular` sees the whole sphere (a consumer 360° camera's panorama):
 //! u = cx + fx·atan2(x, z), v = cy + fy·asin(y/ρ).
+//!
+//! Files: the lens type, projection, unprojection and the Jacobian here; `kb4.rs` and `radtan.rs`
+//! the two distorted models' construction, inverses and monotonic domains.
 
 use nalgebra::{Matrix2x3, Point2, Unit, Vector2, Vector3};
+
+mod kb4;
+mod radtan;
+
+use kb4::{distort_derivative, kb4_scale};
+use radtan::radtan_normalised;
+pub use radtan::RADTAN_MAX_RADIUS;
 
 /// An ideal perspective lens: u = fx·x/z + cx, v = fy·y/z + cy.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -115,187 +125,6 @@ impl Pinhole {
     }
 }
 
-/// Smallest angle a KB4 lens must cover before its polynomial may turn: below this a lens is
-/// useless, and a fold this early means the coefficients are wrong.
-const KB4_MIN_DOMAIN: f64 = 0.35; // 20°
-
-impl Kb4 {
-    pub fn new(fx: f64, fy: f64, cx: f64, cy: f64, k: [f64; 4]) -> Result<Self, LensError> {
-        check_intrinsics(fx, fy, cx, cy)?;
-        if k.iter().any(|c| !c.is_finite()) {
-            return Err(LensError::BadDistortion { k: k.to_vec() });
-        }
-        let theta_max = monotonic_limit(&k);
-        if theta_max < KB4_MIN_DOMAIN {
-            return Err(LensError::Folds {
-                k: k.to_vec(),
-                theta_deg: theta_max.to_degrees(),
-            });
-        }
-        let theta_d_max = distort(&k, theta_max);
-        Ok(Self {
-            fx,
-            fy,
-            cx,
-            cy,
-            k,
-            theta_max,
-            theta_d_max,
-        })
-    }
-
-    /// The largest off-axis angle (rad) the model can represent; rays beyond it do not project.
-    pub fn max_theta(&self) -> f64 {
-        self.theta_max
-    }
-
-    /// θ from θd by Newton's method kept inside a shrinking bracket [lo, hi] ⊂ [0, θmax], where
-    /// θd(θ) is strictly increasing, so the root is unique and the iteration cannot escape.
-    fn undistort(&self, theta_d: f64) -> Option<f64> {
-        if !(0.0..=self.theta_d_max).contains(&theta_d) {
-            return None;
-        }
-        let (mut lo, mut hi) = (0.0, self.theta_max);
-        let mut theta = theta_d.min(hi);
-        for _ in 0..100 {
-            let f = distort(&self.k, theta) - theta_d;
-            if f > 0.0 {
-                hi = theta;
-            } else {
-                lo = theta;
-            }
-            let df = distort_derivative(&self.k, theta);
-            let mut next = theta - f / df;
-            if !(next > lo && next < hi && next.is_finite()) {
-                next = 0.5 * (lo + hi);
-            }
-            let step = (next - theta).abs();
-            theta = next;
-            if step < 1e-15 || hi - lo < 1e-15 {
-                break;
-            }
-        }
-        Some(theta)
-    }
-}
-
-/// Largest normalised radius a radtan lens is taken to image (r = tan θ: 84°). OpenCV's model is
-/// a pinhole's and meant for lenses well under 180°; its polynomial says nothing reliable so far
-/// out, and the radius would otherwise be unbounded for a lens without distortion.
-pub const RADTAN_MAX_RADIUS: f64 = 10.0;
-
-/// Smallest normalised radius a radtan lens must cover before its polynomial may turn (tan 20°),
-/// as for KB4: a fold this early means the coefficients are wrong.
-const RADTAN_MIN_RADIUS: f64 = 0.364;
-
-impl Radtan {
-    /// From OpenCV's coefficients k1, k2, p1, p2 and, if given, k3.
-    pub fn new(fx: f64, fy: f64, cx: f64, cy: f64, d: &[f64]) -> Result<Self, LensError> {
-        check_intrinsics(fx, fy, cx, cy)?;
-        if !(d.len() == 4 || d.len() == 5) || d.iter().any(|c| !c.is_finite()) {
-            return Err(LensError::BadDistortion { k: d.to_vec() });
-        }
-        let mut c = [0.0; 5];
-        c[..d.len()].copy_from_slice(d);
-        let r_max = radtan_monotonic_limit(&c);
-        if r_max < RADTAN_MIN_RADIUS {
-            return Err(LensError::Folds {
-                k: d.to_vec(),
-                theta_deg: r_max.atan().to_degrees(),
-            });
-        }
-        Ok(Self {
-            fx,
-            fy,
-            cx,
-            cy,
-            d: c,
-            r_max,
-        })
-    }
-
-    /// The largest off-axis angle (rad) the model is taken to represent.
-    pub fn max_theta(&self) -> f64 {
-        self.r_max.atan()
-    }
-
-    /// (x'', y'') of normalised (x', y'), with d(x'', y'')/d(x', y') (rows x'', y'').
-    #[inline]
-    fn distort(&self, m: Vector2<f64>) -> (Vector2<f64>, nalgebra::Matrix2<f64>) {
-        let [k1, k2, p1, p2, k3] = self.d;
-        let (x, y) = (m.x, m.y);
-        let r2 = x * x + y * y;
-        let radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3));
-        // d(radial)/dx = x·dr, d(radial)/dy = y·dr.
-        let dr = 2.0 * k1 + r2 * (4.0 * k2 + 6.0 * k3 * r2);
-        let out = Vector2::new(
-            x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x),
-            y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y,
-        );
-        let cross = dr * x * y + 2.0 * p1 * x + 2.0 * p2 * y;
-        let jac = nalgebra::Matrix2::new(
-            radial + dr * x * x + 2.0 * p1 * y + 6.0 * p2 * x,
-            cross,
-            cross,
-            radial + dr * y * y + 6.0 * p1 * y + 2.0 * p2 * x,
-        );
-        (out, jac)
-    }
-
-    /// Normalised (x', y') with `distort` = `target`, by Newton's method from the target itself,
-    /// inside the model's radius; `None` if it does not converge there.
-    fn undistort(&self, target: Vector2<f64>) -> Option<Vector2<f64>> {
-        let mut m = target;
-        for _ in 0..50 {
-            let (f, j) = self.distort(m);
-            let err = f - target;
-            if err.norm() <= 1e-14 * (1.0 + target.norm()) {
-                break;
-            }
-            let step = j.lu().solve(&err)?;
-            let mut next = m - step;
-            // Keep the iterate inside the domain, where the map is one-to-one.
-            let r = next.norm();
-            if r > self.r_max {
-                next *= 0.5 * (m.norm() + self.r_max) / r;
-            }
-            m = next;
-        }
-        let (f, _) = self.distort(m);
-        (m.norm() <= self.r_max && (f - target).norm() <= 1e-9 * (1.0 + target.norm())).then_some(m)
-    }
-}
-
-/// First r in (0, RADTAN_MAX_RADIUS] where d/dr [r(1 + k1r² + k2r⁴ + k3r⁶)] = 1 + 3k1r² + 5k2r⁴
-/// + 7k3r⁶ reaches zero, or RADTAN_MAX_RADIUS: a scan, then bisection.
-fn radtan_monotonic_limit(d: &[f64; 5]) -> f64 {
-    let [k1, k2, _, _, k3] = *d;
-    let slope = |r: f64| {
-        let r2 = r * r;
-        1.0 + r2 * (3.0 * k1 + r2 * (5.0 * k2 + r2 * 7.0 * k3))
-    };
-    let n = 4000;
-    let step = RADTAN_MAX_RADIUS / n as f64;
-    let mut prev = 0.0;
-    for i in 1..=n {
-        let r = i as f64 * step;
-        if slope(r) <= 0.0 {
-            let (mut lo, mut hi) = (prev, r);
-            for _ in 0..200 {
-                let mid = 0.5 * (lo + hi);
-                if slope(mid) > 0.0 {
-                    lo = mid;
-                } else {
-                    hi = mid;
-                }
-            }
-            return lo;
-        }
-        prev = r;
-    }
-    RADTAN_MAX_RADIUS
-}
-
 impl Equirectangular {
     pub fn new(fx: f64, fy: f64, cx: f64, cy: f64) -> Result<Self, LensError> {
         check_intrinsics(fx, fy, cx, cy)?;
@@ -311,46 +140,6 @@ impl Equirectangular {
             cy: (height as f64 - 1.0) / 2.0,
         }
     }
-}
-
-/// θd(θ) = θ(1 + k1θ² + k2θ⁴ + k3θ⁶ + k4θ⁸).
-#[inline]
-fn distort(k: &[f64; 4], theta: f64) -> f64 {
-    let t2 = theta * theta;
-    theta * (1.0 + t2 * (k[0] + t2 * (k[1] + t2 * (k[2] + t2 * k[3]))))
-}
-
-/// dθd/dθ = 1 + 3k1θ² + 5k2θ⁴ + 7k3θ⁶ + 9k4θ⁸.
-#[inline]
-fn distort_derivative(k: &[f64; 4], theta: f64) -> f64 {
-    let t2 = theta * theta;
-    1.0 + t2 * (3.0 * k[0] + t2 * (5.0 * k[1] + t2 * (7.0 * k[2] + t2 * 9.0 * k[3])))
-}
-
-/// First θ in (0, π] where dθd/dθ reaches zero (or π if it never does), by a fine scan and then
-/// bisection. The scan step (0.1°) is far below the spacing of the derivative's roots for any
-/// physical lens.
-fn monotonic_limit(k: &[f64; 4]) -> f64 {
-    let n = 1800;
-    let step = std::f64::consts::PI / n as f64;
-    let mut prev = 0.0;
-    for i in 1..=n {
-        let theta = i as f64 * step;
-        if distort_derivative(k, theta) <= 0.0 {
-            let (mut lo, mut hi) = (prev, theta);
-            for _ in 0..200 {
-                let mid = 0.5 * (lo + hi);
-                if distort_derivative(k, mid) > 0.0 {
-                    lo = mid;
-                } else {
-                    hi = mid;
-                }
-            }
-            return lo;
-        }
-        prev = theta;
-    }
-    std::f64::consts::PI
 }
 
 impl Lens {
@@ -584,38 +373,6 @@ impl Lens {
             }
         }
     }
-}
-
-/// (x/z, y/z) of a point a radtan lens images: in front, within the model's radius.
-#[inline]
-fn radtan_normalised(l: &Radtan, p: &Vector3<f64>) -> Option<Vector2<f64>> {
-    if !(p.z > 0.0 && p.z.is_finite()) {
-        return None;
-    }
-    let m = Vector2::new(p.x / p.z, p.y / p.z);
-    (m.norm() <= l.r_max).then_some(m)
-}
-
-/// s = θd/r, the factor taking (x, y) to normalised distorted coordinates, with its on-axis limit.
-#[inline]
-fn kb4_scale(l: &Kb4, p: &Vector3<f64>) -> Option<f64> {
-    let r = (p.x * p.x + p.y * p.y).sqrt();
-    if !(r.is_finite() && p.z.is_finite()) {
-        return None;
-    }
-    let rho = (r * r + p.z * p.z).sqrt();
-    if rho == 0.0 {
-        return None;
-    }
-    if r < 1e-9 * rho {
-        // θ ≈ r/z near the axis; straight behind the lens there is no direction to image.
-        return (p.z > 0.0).then(|| 1.0 / p.z);
-    }
-    let theta = r.atan2(p.z);
-    if theta > l.theta_max {
-        return None;
-    }
-    Some(distort(&l.k, theta) / r)
 }
 
 #[cfg(test)]
