@@ -1,6 +1,7 @@
 //! Med_R_and_T against scenes with known answers: the closed-form three-line rotations, the
 //! F-test's quantiles and leave-one-out residuals, and outlier rejection on noisy lines.
 
+use super::finish::truncation_consistency;
 use super::*;
 use nalgebra::{Point3, Unit};
 use omnitrack_core::geometry::EdgePlane;
