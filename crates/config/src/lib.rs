@@ -6,6 +6,20 @@
 //!
 //! The defaults here and the shipped `tracker.toml` are the same numbers (a test checks it); the
 //! comments in the TOML file cite the paper section each value comes from.
+//!
+//! ```
+//! use omnitrack_config::TrackerConfig;
+//!
+//! // Every key is optional: the rest keep the papers' values.
+//! let cfg = TrackerConfig::from_toml_str("[maintenance]\ninlier_angle_deg = 2.0\n", "inline.toml")?;
+//! assert_eq!(cfg.maintenance.inlier_angle_deg, 2.0);
+//! assert_eq!(cfg.initialisation, TrackerConfig::default().initialisation);
+//! // A typo is an error naming the file and the key, never a silent default.
+//! let typo = TrackerConfig::from_toml_str("[maintenance]\ninlier_angel_deg = 2.0\n", "inline.toml");
+//! let message = typo.unwrap_err().to_string();
+//! assert!(message.starts_with("inline.toml: ") && message.contains("inlier_angel_deg"), "{message}");
+//! # Ok::<(), omnitrack_config::ConfigError>(())
+//! ```
 
 mod validate;
 

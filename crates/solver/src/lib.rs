@@ -18,6 +18,43 @@
 //! Internally the unknown is `T_rig_world = (Q, s)`, so that an end point P of a segment seen by
 //! a sensor centred at c gives Kumar–Hanson's residual `n · (Q P + s − c)`, linear in s — their
 //! `N · (R p + T)` with the sensor offset added; a single camera at the rig origin is c = 0.
+//!
+//! A pose from the twelve edges of a 6 × 4 × 2.7 m room seen by one sensor at the rig's centre,
+//! without a starting guess (`examples/solve_pose.rs` adds wrong matches):
+//!
+//! ```
+//! use nalgebra::{Point3, Translation3, UnitQuaternion, Vector3};
+//! use omnitrack_core::geometry::Pose;
+//! use omnitrack_solver::{med_r_and_t, Correspondence, EdgePlane, SolverOptions};
+//!
+//! let corner = |x: f64, y: f64, z: f64| Point3::new(6.0 * x, 4.0 * y, 2.7 * z);
+//! let floor = [(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)];
+//! let mut segments = Vec::new();
+//! for i in 0..4 {
+//!     let ((ax, ay), (bx, by)) = (floor[i], floor[(i + 1) % 4]);
+//!     segments.push([corner(ax, ay, 0.0), corner(bx, by, 0.0)]);
+//!     segments.push([corner(ax, ay, 1.0), corner(bx, by, 1.0)]);
+//!     segments.push([corner(ax, ay, 0.0), corner(ax, ay, 1.0)]);
+//! }
+//! let truth = Pose::from_parts(
+//!     Translation3::new(2.0, 1.5, 1.5),
+//!     UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 0.5),
+//! );
+//! // Each edge: the plane through the sensor's centre and the segment, in the rig frame.
+//! let lines: Vec<Correspondence> = segments
+//!     .iter()
+//!     .map(|s| {
+//!         let (a, b) = (truth.inverse_transform_point(&s[0]), truth.inverse_transform_point(&s[1]));
+//!         let edge = EdgePlane::from_rays(Point3::origin(), &a.coords, &b.coords).unwrap();
+//!         Correspondence { edge, segment: *s }
+//!     })
+//!     .collect();
+//! let solution = med_r_and_t(&lines, None, &SolverOptions::default(), 1)?;
+//! assert!((solution.pose.translation.vector - truth.translation.vector).norm() < 1e-6);
+//! assert!(solution.pose.rotation.angle_to(&truth.rotation) < 1e-6);
+//! assert_eq!(solution.inliers.len(), 12);
+//! # Ok::<(), omnitrack_solver::SolveError>(())
+//! ```
 
 use nalgebra::Matrix6;
 use omnitrack_core::geometry::Pose;

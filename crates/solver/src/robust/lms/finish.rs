@@ -88,13 +88,7 @@ pub(super) fn truncation_consistency(p: f64) -> f64 {
 impl Search<'_> {
     /// Indices of the `h` lines with the smallest errors at `(q, s)` (into `order`), and the sum
     /// of those errors (the least-trimmed-squares objective).
-    fn smallest(
-        &mut self,
-        q: &UnitQuaternion<f64>,
-        s: &Vector3<f64>,
-        h: usize,
-        order: &mut Vec<usize>,
-    ) -> f64 {
+    fn smallest(&mut self, q: &UnitQuaternion<f64>, s: &Vector3<f64>, h: usize, order: &mut Vec<usize>) -> f64 {
         for (e, l) in self.errors.iter_mut().zip(self.all) {
             *e = ranked_error(l, q, s, self.o.error);
         }
@@ -198,11 +192,7 @@ impl Search<'_> {
     /// h-set's errors over their degrees of freedom, made consistent for the truncation the
     /// caller's outlier fraction implies ([`start_gate`]), and is re-estimated from each new set.
     /// A set is never let shrink below h lines, or it could fit itself. Returns the fit and its set.
-    fn reweight(
-        &mut self,
-        c: &Concentrated,
-        kept: &mut Vec<Correspondence>,
-    ) -> Option<(Solution, Vec<usize>)> {
+    fn reweight(&mut self, c: &Concentrated, kept: &mut Vec<Correspondence>) -> Option<(Solution, Vec<usize>)> {
         let o = self.o;
         let n = self.all.len();
         let h = c.set.len();
