@@ -32,6 +32,7 @@ pub mod geometry;
 pub mod lines;
 pub mod model;
 pub mod rig;
+pub mod status;
 pub mod text_file;
 pub mod trajectory;
 
