@@ -160,7 +160,13 @@ pub(crate) fn init_trials(
             }
             if verbose {
                 if let Some(g) = &g {
-                    for omnitrack::tracker::Weighed { pose: p, merit: score, frames: n, alive } in tracker.candidates() {
+                    for omnitrack::tracker::Weighed {
+                        pose: p,
+                        merit: score,
+                        frames: n,
+                        alive,
+                    } in tracker.candidates()
+                    {
                         eprintln!(
                             "    frame {}: candidate {:6.1} cm {:6.2}° score {:.2e} over {n} frames{}",
                             start + k,
