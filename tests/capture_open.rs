@@ -4,10 +4,8 @@
 use image::{Rgb, RgbImage};
 use omnitrack::capture::device::CaptureDevice;
 use omnitrack::capture::open::{FailureDetail, LiveCamera, ReadFailure, USB_DISABLED, V4L_DISABLED};
-use omnitrack::capture::{
-    open_source, open_source_with, FrameSet, FrameSource, ImageFault, LiveSource, Pacing, SensorImage, SourceError,
-    SourceOptions,
-};
+use omnitrack::capture::{open_source, open_source_with, FrameSource, LiveSource, Pacing, SourceError, SourceOptions};
+use omnitrack::frame::{FrameSet, ImageFault, SensorImage};
 use omnitrack::rig::{Rig, UsbRig};
 use std::fmt::Write as _;
 use std::sync::{Arc, Mutex};

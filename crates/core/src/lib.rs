@@ -3,8 +3,10 @@
 //! In: rig files (TOML), building models (OBJ), trajectories (TUM), lines files (CSV). Out: the
 //! types every layer above speaks — [`Pose`], [`geometry::Correspondence`] and
 //! [`geometry::EdgePlane`], the lenses, [`Rig`], [`Model`] with its segments and spatial index,
-//! and timestamped poses.
+//! timestamped poses, and the rig's frames ([`FrameSet`] of [`SensorImage`]s, plain data that
+//! capture fills and the edge stage reads).
 
+pub mod frame;
 pub mod geometry;
 pub mod lines;
 pub mod model;
@@ -12,6 +14,7 @@ pub mod rig;
 pub mod text_file;
 pub mod trajectory;
 
+pub use frame::{FrameSet, ImageFault, SensorImage};
 pub use geometry::Pose;
 pub use model::{Face, Model, Segment};
 pub use rig::{Rig, Sensor};

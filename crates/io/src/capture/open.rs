@@ -27,8 +27,9 @@
 //! time since the first call in this process (also monotonic, but another origin).
 
 use super::device::{capture_devices, copy_window, CaptureDevice};
-use super::{FrameSet, FrameSource, ImageFault, Pacing, ReplaySource, SensorImage, SourceError, SourceStats};
+use super::{FrameSource, Pacing, ReplaySource, SourceError, SourceStats};
 use super::{WarningKind, WarningLimiter};
+use omnitrack_core::frame::{FrameSet, ImageFault, SensorImage};
 use omnitrack_core::rig::Rig;
 use std::fmt;
 use std::path::Path;

@@ -37,7 +37,8 @@
 use super::device::CaptureDevice;
 use super::open::{host_time_ns, FailureDetail, LiveCamera, LiveSource, ReadFailure, SourceOptions};
 use super::u3v::{U3vEvent, U3vStream};
-use super::{ImageFault, SensorImage, SourceError};
+use super::SourceError;
+use omnitrack_core::frame::{ImageFault, SensorImage};
 use omnitrack_core::rig::{Rig, UsbRig};
 use rusb::{Context, Device, DeviceHandle, Direction, TransferType, UsbContext};
 use std::time::{Duration, Instant};

@@ -38,7 +38,8 @@
 use super::convert::{self, BayerPattern, ConvertError, YuvOrder, YuvRange};
 use super::device::CaptureDevice;
 use super::open::{host_time_ns, FailureDetail, LiveCamera, LiveSource, ReadFailure, SourceOptions};
-use super::{ImageFault, SensorImage, SourceError};
+use super::SourceError;
+use omnitrack_core::frame::{ImageFault, SensorImage};
 use omnitrack_core::rig::Rig;
 use std::io;
 use v4l::buffer::{Flags, Type};

@@ -15,7 +15,7 @@ use super::pool::{Handover, Pool};
 use super::shared::{lock, Shared};
 use crate::pipeline::stats::SensorCounters;
 use crossbeam::channel::{Receiver, RecvTimeoutError};
-use omnitrack_io::capture::ImageFault;
+use omnitrack_core::frame::ImageFault;
 use std::time::{Duration, Instant};
 
 pub(super) struct Assembler<'a, 'o> {
