@@ -3,7 +3,8 @@
 
 use image::{Rgb, RgbImage};
 use omnitrack::capture::device::CaptureDevice;
-use omnitrack::capture::open::{FailureDetail, LiveCamera, ReadFailure, USB_DISABLED, V4L_DISABLED};
+use omnitrack::capture::live::{FailureDetail, LiveCamera, ReadFailure};
+use omnitrack::capture::open::{USB_DISABLED, V4L_DISABLED};
 use omnitrack::capture::{open_source, open_source_with, FrameSource, LiveSource, Pacing, SourceError, SourceOptions};
 use omnitrack::frame::{FrameSet, ImageFault, SensorImage};
 use omnitrack::rig::{Rig, UsbRig};

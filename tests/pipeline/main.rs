@@ -16,7 +16,7 @@ mod per_sensor;
 
 use nalgebra::Point3;
 use omnitrack::capture::device::CaptureDevice;
-use omnitrack::capture::open::{FailureDetail, LiveCamera, ReadFailure};
+use omnitrack::capture::live::{FailureDetail, LiveCamera, ReadFailure};
 use omnitrack::capture::{FrameSource, Pacing, ReplaySource, SourceError, SourceOptions, SourceStats};
 use omnitrack::config::TrackerConfig;
 use omnitrack::frame::{FrameSet, ImageFault, SensorImage};

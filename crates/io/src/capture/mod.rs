@@ -5,9 +5,11 @@
 //! or USB3 Vision cameras (`usb`, cargo feature `usb`, over the always-compiled stream parser
 //! [`u3v`]). [`open_source`] picks one from a `--source` spec (`replay:DIR`, `v4l`, `usb`) and
 //! answers a live source left out of the build with the cargo command that enables it. The live
-//! sources share [`LiveSource`] (one camera per capture device, a lost one reopened every second while
-//! the others go on), the split of the rig into capture devices of [`device`] (several sensors
-//! may be windows of one device's frame) and the pixel conversions of [`convert`].
+//! sources share [`LiveSource`] ([`live`]: one camera per capture device, a lost one reopened
+//! every second while the others go on), the split of the rig into capture devices of [`device`]
+//! (several sensors may be windows of one device's frame) and the pixel conversions of
+//! [`convert`]. Files import one way: `open` → the drivers → `live` → `device`, `spec`
+//! ([`SourceOptions`]), `convert`.
 //! Out: [`FrameSet`]s — one RGB8 image per rig sensor, with its capture time and whether the
 //! sensor delivered for this frame — plus [`SourceStats`] counting everything that went wrong.
 //! The frame types themselves are plain data of `omnitrack-core` ([`omnitrack_core::frame`]),
@@ -28,17 +30,21 @@
 
 pub mod convert;
 pub mod device;
+pub mod live;
 pub mod open;
 pub mod replay;
+pub mod spec;
 pub mod u3v;
 #[cfg(feature = "usb")]
 pub mod usb;
 #[cfg(feature = "v4l")]
 pub mod v4l2;
 
+pub use live::LiveSource;
 pub use omnitrack_core::frame::{FrameSet, ImageFault, SensorImage};
-pub use open::{open_source, open_source_with, LiveSource, SourceOptions};
+pub use open::{open_source, open_source_with};
 pub use replay::{Pacing, ReplaySource};
+pub use spec::SourceOptions;
 
 use omnitrack_core::rig::{Rig, RigError};
 use omnitrack_core::trajectory::TumError;

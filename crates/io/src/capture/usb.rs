@@ -35,7 +35,8 @@
 //! transfer structure with C `malloc` on each call, outside Rust's allocator.
 
 use super::device::CaptureDevice;
-use super::open::{host_time_ns, FailureDetail, LiveCamera, LiveSource, ReadFailure, SourceOptions};
+use super::live::{host_time_ns, FailureDetail, LiveCamera, LiveSource, ReadFailure};
+use super::spec::SourceOptions;
 use super::u3v::{U3vEvent, U3vStream};
 use super::SourceError;
 use omnitrack_core::frame::{ImageFault, SensorImage};

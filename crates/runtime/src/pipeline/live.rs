@@ -14,7 +14,7 @@ use super::PipelineSource;
 use omnitrack_core::frame::{ImageFault, SensorImage};
 use omnitrack_core::rig::Rig;
 use omnitrack_io::capture::device::{capture_devices, copy_window, CaptureDevice};
-use omnitrack_io::capture::open::{open_device, FailureDetail, LiveCamera, LOST_AFTER_TIMEOUTS};
+use omnitrack_io::capture::live::{open_device, FailureDetail, LiveCamera, LOST_AFTER_TIMEOUTS};
 use omnitrack_io::capture::{open_source_with, FrameSource, SourceError, SourceOptions};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
