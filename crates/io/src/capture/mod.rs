@@ -3,13 +3,13 @@
 //! In: a camera rig ([`Rig`]) and a source of images, all behind the [`FrameSource`] trait: a
 //! recording on disk ([`replay`], the mock camera), V4L2 devices (`v4l2`, cargo feature `v4l`)
 //! or USB3 Vision cameras (`usb`, cargo feature `usb`, over the always-compiled stream parser
-//! [`u3v`]). [`open_source`] picks one from a `--source` spec (`replay:DIR`, `v4l`, `usb`) and
-//! answers a live source left out of the build with the cargo command that enables it. The live
-//! sources share [`LiveSource`] ([`live`]: one camera per capture device, a lost one reopened
-//! every second while the others go on), the split of the rig into capture devices of [`device`]
-//! (several sensors may be windows of one device's frame) and the pixel conversions of
-//! [`convert`]. Files import one way: `open` → the drivers → `live` → `device`, `spec`
-//! ([`SourceOptions`]), `convert`.
+//! [`u3v`]). [`open_source`] opens the one a [`SourceSpec`] names (`--source replay:DIR`, `v4l`,
+//! `usb`, parsed by [`spec`]) and answers a live source left out of the build with the cargo
+//! command that enables it. The live sources share [`LiveSource`] ([`live`]: one camera per
+//! capture device, a lost one reopened every second while the others go on), the split of the
+//! rig into capture devices of [`device`] (several sensors may be windows of one device's frame)
+//! and the pixel conversions of [`convert`]. Files import one way: `open` → the drivers →
+//! `live` → `device`, `spec`, `convert`.
 //! Out: [`FrameSet`]s — one RGB8 image per rig sensor, with its capture time and whether the
 //! sensor delivered for this frame — plus [`SourceStats`] counting everything that went wrong.
 //! The frame types themselves are plain data of `omnitrack-core` ([`omnitrack_core::frame`]),
@@ -44,7 +44,7 @@ pub use live::LiveSource;
 pub use omnitrack_core::frame::{FrameSet, ImageFault, SensorImage};
 pub use open::{open_source, open_source_with};
 pub use replay::{Pacing, ReplaySource};
-pub use spec::SourceOptions;
+pub use spec::{SourceOptions, SourceSpec, SourceSpecError};
 
 use omnitrack_core::rig::{Rig, RigError};
 use omnitrack_core::trajectory::TumError;

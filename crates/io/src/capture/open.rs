@@ -1,10 +1,9 @@
-//! Choosing the frame source from the command line.
+//! Opening the frame source the command line chose.
 //!
-//! In: a `--source` spec (docs/interfaces.md, "Command line": `replay:DIR`, `v4l` or `usb`) and
-//! the rig given with `--rig`, if any. Out: a boxed [`FrameSource`] ([`open_source`]), or one
-//! line saying what is wrong: an unknown spec, a live source without a rig, a live source this
-//! binary was built without (with the cargo command that enables it), or the device error of
-//! the source itself.
+//! In: a [`SourceSpec`] (parsed from `--source`, see [`super::spec`]) and the rig given with
+//! `--rig`, if any. Out: a boxed [`FrameSource`] ([`open_source`]), or one line saying what is
+//! wrong: a live source without a rig, a live source this binary was built without (with the
+//! cargo command that enables it), or the error of the source itself.
 //!
 //! A recording carries its own rig, so `replay:DIR` needs none; when `--rig` is given as well its
 //! sensors must have the recording's sizes. `v4l` and `usb` need the rig: it names each sensor's
@@ -14,7 +13,7 @@
 //! [`super::live`]); none of them uses it.
 
 use super::replay::ReplaySource;
-use super::spec::SourceOptions;
+use super::spec::{SourceOptions, SourceSpec};
 use super::{FrameSource, SourceError};
 use omnitrack_core::rig::Rig;
 use std::path::Path;
@@ -28,50 +27,35 @@ pub const USB_DISABLED: &str = "live USB3 Vision capture is not in this build: r
      `cargo build --release --features usb`";
 
 /// Opens the source named by `spec` with [`SourceOptions::default`]. See the module doc.
-pub fn open_source(spec: &str, rig: Option<&Rig>) -> Result<Box<dyn FrameSource + Send>, SourceError> {
+pub fn open_source(spec: &SourceSpec, rig: Option<&Rig>) -> Result<Box<dyn FrameSource + Send>, SourceError> {
     open_source_with(spec, rig, &SourceOptions::default())
 }
 
 /// [`open_source`] with explicit options.
 pub fn open_source_with(
-    spec: &str,
+    spec: &SourceSpec,
     rig: Option<&Rig>,
     options: &SourceOptions,
 ) -> Result<Box<dyn FrameSource + Send>, SourceError> {
-    let spec_error = |message: String| SourceError::Device {
-        device: spec.to_string(),
-        message,
-    };
-    let spec = spec.trim();
-    if let Some(dir) = spec.strip_prefix("replay:") {
-        if dir.is_empty() {
-            return Err(spec_error(
-                "replay needs a recording directory: --source replay:DIR".into(),
-            ));
-        }
-        let source = ReplaySource::open(Path::new(dir), options.pacing)?;
-        if let Some(rig) = rig {
-            check_same_sensors(source.rig(), rig, dir)?;
-        }
-        return Ok(Box::new(source));
-    }
-    let need_rig = |what: &str| {
-        rig.ok_or_else(|| spec_error(format!("needs the rig (--rig RIG.toml) to know each sensor's {what}")))
-    };
     match spec {
-        "v4l" => {
-            let rig = need_rig("V4L2 device")?;
-            open_v4l(rig, options)
+        SourceSpec::Replay(dir) => {
+            let source = ReplaySource::open(dir, options.pacing)?;
+            if let Some(rig) = rig {
+                check_same_sensors(source.rig(), rig, dir)?;
+            }
+            Ok(Box::new(source))
         }
-        "usb" => {
-            let rig = need_rig("USB3 Vision camera")?;
-            open_usb(rig, options)
-        }
-        "replay" => Err(spec_error(
-            "replay needs a recording directory: --source replay:DIR".into(),
-        )),
-        _ => Err(spec_error("unknown source (expected replay:DIR, v4l or usb)".into())),
+        SourceSpec::V4l => open_v4l(need_rig(spec, rig, "V4L2 device")?, options),
+        SourceSpec::Usb => open_usb(need_rig(spec, rig, "USB3 Vision camera")?, options),
     }
+}
+
+/// The rig a live source needs to know its devices, or one line saying so.
+pub fn need_rig<'r>(spec: &SourceSpec, rig: Option<&'r Rig>, what: &str) -> Result<&'r Rig, SourceError> {
+    rig.ok_or_else(|| SourceError::Device {
+        device: spec.to_string(),
+        message: format!("needs the rig (--rig RIG.toml) to know each sensor's {what}"),
+    })
 }
 
 #[cfg(feature = "v4l")]
@@ -101,13 +85,13 @@ fn open_usb(_rig: &Rig, _options: &SourceOptions) -> Result<Box<dyn FrameSource 
 }
 
 /// A `--rig` given with a recording must have the recording's sensors (count and sizes).
-fn check_same_sensors(recorded: &Rig, given: &Rig, dir: &str) -> Result<(), SourceError> {
+fn check_same_sensors(recorded: &Rig, given: &Rig, dir: &Path) -> Result<(), SourceError> {
     let sizes = |r: &Rig| r.sensors.iter().map(|s| (s.width, s.height)).collect::<Vec<_>>();
     if sizes(recorded) == sizes(given) {
         return Ok(());
     }
     Err(SourceError::Format {
-        path: Path::new(dir).join("rig.toml"),
+        path: dir.join("rig.toml"),
         line: None,
         message: format!(
             "the recording's rig '{}' ({} sensors) does not match --rig '{}' ({} sensors) in sensor count or sizes",

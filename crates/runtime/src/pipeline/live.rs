@@ -15,7 +15,7 @@ use omnitrack_core::frame::{ImageFault, SensorImage};
 use omnitrack_core::rig::Rig;
 use omnitrack_io::capture::device::{capture_devices, copy_window, CaptureDevice};
 use omnitrack_io::capture::live::{open_device, FailureDetail, LiveCamera, LOST_AFTER_TIMEOUTS};
-use omnitrack_io::capture::{open_source_with, FrameSource, SourceError, SourceOptions};
+use omnitrack_io::capture::{open_source_with, FrameSource, SourceError, SourceOptions, SourceSpec};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
@@ -205,21 +205,21 @@ where
     })
 }
 
-/// Opens the source named by `spec` (`replay:DIR`, `v4l`, `usb`) for the pipeline: live drivers
+/// Opens the source `spec` names (`replay:DIR`, `v4l`, `usb`) for the pipeline: live drivers
 /// built into this binary as one [`SensorCapture`] per capture device (one capture thread each), anything
 /// else as the whole-rig source of [`open_source_with`] (one capture thread), whose errors —
 /// including a live source left out of the build, with the cargo command that enables it — are
 /// one line each.
 pub fn open_pipeline_source(
-    spec: &str,
+    spec: &SourceSpec,
     rig: Option<&Rig>,
     options: &SourceOptions,
 ) -> Result<PipelineSource, SourceError> {
-    match (spec.trim(), rig) {
+    match (spec, rig) {
         #[cfg(feature = "v4l")]
-        ("v4l", Some(rig)) => live_sensors::<omnitrack_io::capture::v4l2::V4l2Camera>(rig, (), options),
+        (SourceSpec::V4l, Some(rig)) => live_sensors::<omnitrack_io::capture::v4l2::V4l2Camera>(rig, (), options),
         #[cfg(feature = "usb")]
-        ("usb", Some(rig)) => {
+        (SourceSpec::Usb, Some(rig)) => {
             let env = omnitrack_io::capture::usb::UsbEnv::new(rig)?;
             live_sensors::<omnitrack_io::capture::usb::UsbCamera>(rig, env, options)
         }
