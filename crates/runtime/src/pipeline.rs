@@ -68,6 +68,7 @@
 
 mod assembly;
 mod capture;
+mod images;
 mod live;
 mod logging;
 mod options;
@@ -95,8 +96,8 @@ pub use stats::{stage_budget, Histogram, SensorSummary, StageClock, StageSummary
 pub use summary::{PipelineSummary, RunEnd};
 
 use super::{FrameRecord, RunError};
-use capture::SensorImages;
 use crossbeam::channel::bounded;
+use images::SensorImages;
 use omnitrack_config::TrackerConfig;
 use omnitrack_core::model::Model;
 use omnitrack_io::capture::SourceError;
