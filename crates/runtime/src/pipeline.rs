@@ -88,7 +88,7 @@ pub use omnitrack_io::publish::Stage;
 pub use options::{PipelineOptions, PipelineSource, PipelineThread};
 #[cfg(unix)]
 pub use priority::current_thread_policy;
-pub use priority::{upstream_priority, Realtime};
+pub use priority::{upstream_priority, Realtime, ThreadPolicy};
 pub use publishing::inside_publish;
 pub use signals::{stop_on_signals, SignalGuard};
 pub use sink::{FrameSink, TrajectoryFileError, TumSink};
