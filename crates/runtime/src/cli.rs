@@ -58,10 +58,11 @@ pub fn usage_error_line(program: &str, no_command: &str, e: &clap::Error) -> Str
             choices.join(", ")
         );
     }
-    // The report's lines before the usage: the problem, the missing arguments, a tip.
+    // The report's lines before the usage: the problem, the missing arguments, a tip. clap's
+    // pointer to `--help` is left out: the line ends with its own.
     let mut problem = String::new();
     for line in text.lines().map(str::trim).take_while(|l| !l.starts_with("Usage:")) {
-        if !line.is_empty() {
+        if !line.is_empty() && !line.starts_with("For more information") {
             if !problem.is_empty() {
                 problem.push_str(if problem.ends_with(':') { " " } else { "; " });
             }
@@ -249,6 +250,13 @@ mod tests {
         assert!(missing.ends_with("(see prog --help)"), "{missing}");
         let unknown = line(&["prog", "pose", "--rig", "r", "--lines", "l", "--bogus"]);
         assert!(!unknown.contains('\n') && unknown.contains("'--bogus'"), "{unknown}");
+        let value = line(&["prog", "table", "build", "--spacing-m", "wide"]);
+        assert!(
+            value.starts_with("prog: invalid value 'wide' for '--spacing-m <SPACING_M>': ")
+                && value.ends_with("(see prog --help)")
+                && !value.contains("For more information"),
+            "{value}"
+        );
         let none = line(&["prog"]);
         assert_eq!(none, "prog: no command given (try: prog pose --rig R --lines L)");
         let group = line(&["prog", "table"]);
