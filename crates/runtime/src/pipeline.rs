@@ -82,10 +82,10 @@ mod sink;
 mod stats;
 mod summary;
 
-pub use live::{live_sensors, open_pipeline_source, LiveDevice, SensorCapture};
+pub use live::{live_sensors, open_pipeline_source, LiveDevice};
 pub use logging::init_logging;
 pub use omnitrack_io::publish::Stage;
-pub use options::{PipelineOptions, PipelineSource, PipelineThread};
+pub use options::{PipelineOptions, PipelineSource, PipelineThread, SensorCapture};
 #[cfg(unix)]
 pub use priority::current_thread_policy;
 pub use priority::{upstream_priority, Realtime, ThreadPolicy};

@@ -10,7 +10,7 @@
 
 use super::assembly;
 use super::images::{Arrival, SensorImages, IMAGES_PER_SENSOR};
-use super::live::SensorCapture;
+use super::options::SensorCapture;
 use super::pool::{Handover, Pool};
 use super::shared::Shared;
 use super::stats::SensorCounters;

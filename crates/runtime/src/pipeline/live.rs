@@ -9,8 +9,11 @@
 //! What every (re)opening shares (e.g. the USB context) sits behind a mutex, taken only to open.
 //! A device split into windows reads into a frame buffer sized at (re)opening and copies each
 //! window into its sensor's image.
+//!
+//! Imports run one way: the [`SensorCapture`] trait and the [`PipelineSource`] that holds its
+//! implementations are `options`'s; this file implements and builds them.
 
-use super::PipelineSource;
+use super::options::{PipelineSource, SensorCapture};
 use omnitrack_core::frame::{ImageFault, SensorImage};
 use omnitrack_core::rig::Rig;
 use omnitrack_io::capture::device::{capture_devices, copy_window, CaptureDevice};
@@ -21,19 +24,6 @@ use std::time::Instant;
 
 /// Warnings of one fault kind per device logged at `warn` before the rest go to `debug`.
 const WARN_LIMIT: u32 = 5;
-
-/// The images of one capture device's sensors, read on a thread of its own.
-pub trait SensorCapture: Send {
-    /// The sensor ids it delivers (indices in the rig), in order; at most
-    /// [`MAX_WINDOWS_PER_DEVICE`](omnitrack_io::capture::device::MAX_WINDOWS_PER_DEVICE).
-    fn sensors(&self) -> &[usize];
-
-    /// Reads the next images into `imgs` (one per sensor of [`SensorCapture::sensors`], in that
-    /// order, each sized for its sensor) and marks each: valid with its capture time (ns, a clock
-    /// shared by all sensors of the rig), or invalid with its fault. `Ok(false)`: this device's
-    /// stream has ended. A per-image failure is never an `Err`.
-    fn capture(&mut self, imgs: &mut [&mut SensorImage]) -> Result<bool, SourceError>;
-}
 
 /// The [`SensorCapture`] of one [`LiveCamera`]. See the module doc.
 pub struct LiveDevice<C: LiveCamera> {
