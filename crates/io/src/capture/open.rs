@@ -51,7 +51,7 @@ pub fn open_source_with(
 }
 
 /// The rig a live source needs to know its devices, or one line saying so.
-pub fn need_rig<'r>(spec: &SourceSpec, rig: Option<&'r Rig>, what: &str) -> Result<&'r Rig, SourceError> {
+fn need_rig<'r>(spec: &SourceSpec, rig: Option<&'r Rig>, what: &str) -> Result<&'r Rig, SourceError> {
     rig.ok_or_else(|| SourceError::Device {
         device: spec.to_string(),
         message: format!("needs the rig (--rig RIG.toml) to know each sensor's {what}"),
