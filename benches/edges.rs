@@ -33,11 +33,11 @@
 #[cfg(feature = "desk")]
 mod bench {
     use nalgebra::{Point3, Vector3};
-    use omnitrack::capture::FrameSet;
     use omnitrack::config::EdgeConfig;
     use omnitrack::desk::render::{Appearance, FrameSpec, Ray, Renderer};
     use omnitrack::desk::scenario::{Scenario, ScenarioName};
     use omnitrack::edges::{Edge, EdgeDetector, EdgeParams, Smoothing};
+    use omnitrack::frame::FrameSet;
     use omnitrack::geometry::Pose;
     use omnitrack::{Model, Rig};
     use std::path::{Path, PathBuf};

@@ -30,9 +30,9 @@
 
 #[cfg(feature = "desk")]
 mod bench {
-    use omnitrack::capture::SensorImage;
     use omnitrack::config::EdgeConfig;
     use omnitrack::edges::{edges_csv, EdgeDetector, EdgeParams};
+    use omnitrack::frame::SensorImage;
     use omnitrack::Rig;
     use std::collections::HashMap;
     use std::path::{Path, PathBuf};

@@ -26,11 +26,12 @@
 #[cfg(feature = "desk")]
 mod bench {
     use nalgebra::Point3;
-    use omnitrack::capture::{FrameSet, FrameSource, Pacing, ReplaySource, SourceError, SourceStats};
+    use omnitrack::capture::{FrameSource, Pacing, ReplaySource, SourceError, SourceStats};
     use omnitrack::config::TrackerConfig;
     use omnitrack::desk::recording::{cached_building, cached_scenario, RecordingOptions};
     use omnitrack::desk::scenario::random::RandomBuilding;
     use omnitrack::desk::scenario::{Scenario, ScenarioName};
+    use omnitrack::frame::FrameSet;
     use omnitrack::publish::{PoseStatus, PoseSubscriber};
     use omnitrack::runtime::pipeline::{run_pipeline, PipelineOptions, PipelineSummary, Stage};
     use omnitrack::runtime::{load_or_build_table, FrameRecord, RunOptions};

@@ -20,11 +20,11 @@
 #[cfg(feature = "desk")]
 mod bench {
     use nalgebra::{Point3, Vector3};
-    use omnitrack::capture::FrameSet;
     use omnitrack::config::TrackerConfig;
     use omnitrack::desk::render::{Appearance, FrameSpec, Renderer};
     use omnitrack::desk::scenario::{Scenario, ScenarioName};
     use omnitrack::edges::{Edge, EdgeDetector};
+    use omnitrack::frame::FrameSet;
     use omnitrack::geometry::Pose;
     use omnitrack::runtime::load_or_build_table;
     use omnitrack::tracker::{InitOptions, Initialiser};

@@ -135,9 +135,9 @@ mod bench {
         println!(
             "render: scene + ray tables built in {:.0} ms (default: {} furniture, {} shelves, {} posters, {} people)",
             t.elapsed().as_secs_f64() * 1e3,
-            s.clutter_counts[0],
-            s.clutter_counts[1],
-            s.clutter_counts[2],
+            s.clutter_counts.furniture,
+            s.clutter_counts.shelves,
+            s.clutter_counts.posters,
             s.people.len()
         );
         let _ = run(&plain, &traj, 2); // warm-up

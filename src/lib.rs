@@ -8,7 +8,7 @@
 //!
 //! | module | crate | what |
 //! | --- | --- | --- |
-//! | `geometry`, `rig`, `model`, `trajectory`, `lines` | `omnitrack-core` | the shared vocabulary |
+//! | `geometry`, `rig`, `model`, `trajectory`, `lines`, `frame` | `omnitrack-core` | the shared vocabulary |
 //! | `solver` | `omnitrack-solver` | Kumar–Hanson and Koch–Teller pose solvers |
 //! | `config` | `omnitrack-config` | tracker.toml |
 //! | `capture`, `publish` | `omnitrack-io` | frames in, poses out |
@@ -18,7 +18,7 @@
 //! | `desk` (feature `desk`) | `omnitrack-desk` | offline work: plans, renders, evaluation, demo |
 
 pub use omnitrack_config as config;
-pub use omnitrack_core::{geometry, lines, model, rig, trajectory};
+pub use omnitrack_core::{frame, geometry, lines, model, rig, trajectory};
 pub use omnitrack_edges as edges;
 pub use omnitrack_io::{capture, publish};
 pub use omnitrack_runtime as runtime;

@@ -3,11 +3,13 @@
 
 use image::{Rgb, RgbImage};
 use omnitrack::capture::device::CaptureDevice;
-use omnitrack::capture::open::{FailureDetail, LiveCamera, ReadFailure, USB_DISABLED, V4L_DISABLED};
+use omnitrack::capture::live::{FailureDetail, LiveCamera, ReadFailure};
+use omnitrack::capture::open::{USB_DISABLED, V4L_DISABLED};
 use omnitrack::capture::{
-    open_source, open_source_with, FrameSet, FrameSource, ImageFault, LiveSource, Pacing, SensorImage, SourceError,
-    SourceOptions,
+    open_source, open_source_with, FrameSource, LiveSource, Pacing, SourceError, SourceOptions, SourceSpec,
+    SourceSpecError,
 };
+use omnitrack::frame::{FrameSet, ImageFault, SensorImage};
 use omnitrack::rig::{Rig, UsbRig};
 use std::fmt::Write as _;
 use std::sync::{Arc, Mutex};
@@ -35,8 +37,14 @@ fn rig(sizes: &[(u32, u32)], head: &str, extra: &dyn Fn(usize) -> String) -> Rig
     Rig::from_toml_str(&rig_toml(sizes, head, extra), "rig.toml").unwrap()
 }
 
-fn open_err(spec: &str, rig: Option<&Rig>) -> String {
-    match open_source(spec, rig) {
+/// The spec `text`, which must parse.
+fn spec(text: &str) -> SourceSpec {
+    text.parse().unwrap_or_else(|e| panic!("{text}: {e}"))
+}
+
+fn open_err(text: &str, rig: Option<&Rig>) -> String {
+    let spec = spec(text);
+    match open_source(&spec, rig) {
         Ok(_) => panic!("{spec} opened"),
         Err(e) => {
             let s = e.to_string();
@@ -70,7 +78,7 @@ fn recording(sizes: &[(u32, u32)]) -> tempfile::TempDir {
 fn replay_needs_no_rig_and_checks_a_given_one() {
     let sizes = [(8, 6), (10, 4)];
     let dir = recording(&sizes);
-    let spec = format!("replay:{}", dir.path().display());
+    let spec = spec(&format!("replay:{}", dir.path().display()));
     let options = SourceOptions {
         pacing: Pacing::AsFastAsPossible,
         ..SourceOptions::default()
@@ -94,15 +102,33 @@ fn replay_needs_no_rig_and_checks_a_given_one() {
 
 #[test]
 fn bad_specs_are_one_line_each() {
-    let e = open_err("webcam", None);
-    assert!(
-        e.contains("webcam") && e.contains("expected replay:DIR, v4l or usb"),
-        "{e}"
-    );
-    let e = open_err("replay", None);
-    assert!(e.contains("replay:DIR"), "{e}");
-    let e = open_err("replay:", None);
-    assert!(e.contains("replay:DIR"), "{e}");
+    // Refused where the text is parsed (clap names the option and the value before the line).
+    let parse_err = |text: &str| {
+        let e = text.parse::<SourceSpec>().expect_err(text);
+        assert_eq!(e.text(), text);
+        let s = e.to_string();
+        assert!(!s.contains('\n'), "one line: {s}");
+        (e, s)
+    };
+    let (e, s) = parse_err("webcam");
+    assert!(matches!(e, SourceSpecError::Unknown(_)), "{e:?}");
+    assert!(s.contains("expected replay:DIR, v4l or usb"), "{s}");
+    for text in ["replay", "replay:", " replay: "] {
+        let (e, s) = parse_err(text);
+        assert!(matches!(e, SourceSpecError::ReplayWithoutDir(_)), "{e:?}");
+        assert!(s.contains("replay:DIR"), "{s}");
+    }
+    // What parses, and back: the command line's own spelling.
+    for (text, parsed) in [
+        ("v4l", SourceSpec::V4l),
+        (" usb ", SourceSpec::Usb),
+        ("replay:rec/lab", SourceSpec::Replay("rec/lab".into())),
+        ("replay:/a b", SourceSpec::Replay("/a b".into())),
+    ] {
+        assert_eq!(spec(text), parsed, "{text}");
+        assert_eq!(spec(&parsed.to_string()), parsed);
+    }
+    // Refused when opened: a recording that is not there, a live source without its rig.
     let e = open_err("replay:/no/such/recording_xyz", None);
     assert!(
         e.contains("/no/such/recording_xyz") && e.contains("does not exist"),

@@ -5,9 +5,9 @@
 //! heap allocations per frame after warm-up (counting allocator).
 
 use nalgebra::{Point2, Vector3};
-use omnitrack::capture::{FrameSet, SensorImage};
 use omnitrack::config::EdgeConfig;
 use omnitrack::edges::{edges_csv, Edge, EdgeDetector, EdgeParams, EDGES_CSV_HEADER};
+use omnitrack::frame::{FrameSet, SensorImage};
 use omnitrack::Rig;
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::path::Path;
@@ -571,7 +571,7 @@ fn zero_allocations_per_frame_after_warm_up() {
     // One sensor missing from a frame: still no allocation.
     frames[1]
         .sensor_mut(3)
-        .set_invalid(omnitrack::capture::ImageFault::Dropped, 0);
+        .set_invalid(omnitrack::frame::ImageFault::Dropped, 0);
     // The two-line test's cuts and refused merges take the same pre-sized buffers.
     for (threads, two_line_excess) in [(2, 0.0), (1, 0.0), (2, 0.3)] {
         let params = EdgeParams {

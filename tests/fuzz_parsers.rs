@@ -14,9 +14,10 @@
 //! skipped an image or a row of it (and went on).
 #![cfg(feature = "desk")]
 
-use omnitrack::capture::{FrameSet, FrameSource, Pacing, ReplaySource};
+use omnitrack::capture::{FrameSource, Pacing, ReplaySource};
 use omnitrack::config::TrackerConfig;
 use omnitrack::desk::opencv_calib::{rig_from_opencv, OpenCvModel};
+use omnitrack::frame::FrameSet;
 use omnitrack::visibility::build::{build_table, BuildOptions};
 use omnitrack::visibility::VisibilityTable;
 use omnitrack::{Model, Rig};

@@ -4,7 +4,8 @@
 //! real-time pacing keeps the recorded spacing; and the steady state's allocations are counted.
 
 use image::{GrayAlphaImage, GrayImage, ImageBuffer, Rgb, RgbImage, RgbaImage};
-use omnitrack::capture::{FrameSet, FrameSource, ImageFault, Pacing, ReplaySource, SourceError};
+use omnitrack::capture::{FrameSource, Pacing, ReplaySource, SourceError};
+use omnitrack::frame::{FrameSet, ImageFault};
 use omnitrack::rig::Rig;
 use std::fmt::Write as _;
 use std::path::Path;

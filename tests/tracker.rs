@@ -5,9 +5,10 @@
 #![cfg(feature = "desk")]
 
 use nalgebra::{Point3, Vector3};
-use omnitrack::capture::{FrameSet, FrameSource, Pacing, ReplaySource, SourceError, SourceStats};
+use omnitrack::capture::{FrameSource, Pacing, ReplaySource, SourceError, SourceStats};
 use omnitrack::config::TrackerConfig;
 use omnitrack::edges::EdgeDetector;
+use omnitrack::frame::FrameSet;
 use omnitrack::runtime::{track, FrameRecord, RunOptions};
 use omnitrack::tracker::{SearchKind, SearchVolume, Tracker, TrackerEvent, TrackerState, TrackerStats};
 use omnitrack::Rig;

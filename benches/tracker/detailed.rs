@@ -19,10 +19,11 @@
 //! A wrong commit is any pose more than 1 m or 10° off on any frame of the trial.
 
 use nalgebra::{Point3, Translation3, UnitQuaternion, Vector3};
-use omnitrack::capture::{FrameSet, FrameSource, Pacing, ReplaySource};
+use omnitrack::capture::{FrameSource, Pacing, ReplaySource};
 use omnitrack::config::TrackerConfig;
 use omnitrack::desk::recording::{write_recording, RecordingOptions};
 use omnitrack::edges::EdgeDetector;
+use omnitrack::frame::FrameSet;
 use omnitrack::geometry::Pose;
 use omnitrack::runtime::load_or_build_table;
 use omnitrack::tracker::{SearchVolume, Tracker};

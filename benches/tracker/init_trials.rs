@@ -47,8 +47,9 @@ pub(crate) fn init_trials(
     still: bool,
     min_spacing: usize,
 ) -> TrialSummary {
-    use omnitrack::capture::{FrameSet, FrameSource};
+    use omnitrack::capture::FrameSource;
     use omnitrack::edges::EdgeDetector;
+    use omnitrack::frame::FrameSet;
     use omnitrack::tracker::{Tracker, TrackerState};
     use std::time::Instant;
     const WINDOW: usize = TRIAL_WINDOW;

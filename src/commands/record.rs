@@ -1,7 +1,7 @@
 //! `omnitrack record`: what a source delivers, in the recording layout `run` replays.
 
 use super::CommandResult;
-use omnitrack::capture::{open_source_with, Pacing, SourceOptions};
+use omnitrack::capture::{open_source_with, Pacing, SourceOptions, SourceSpec};
 use omnitrack::runtime::pipeline::stop_on_signals;
 use omnitrack::runtime::record::{record, RecordOptions};
 use omnitrack::Rig;
@@ -15,7 +15,7 @@ pub struct Args {
     rig: Option<PathBuf>,
     /// replay:DIR, v4l or usb.
     #[arg(long, value_name = "replay:DIR|v4l|usb")]
-    source: String,
+    source: SourceSpec,
     /// The recording directory to create (it must not exist, or be empty).
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
@@ -26,7 +26,7 @@ pub struct Args {
 
 pub fn run(a: Args) -> CommandResult {
     let rig = a.rig.as_deref().map(Rig::load).transpose()?;
-    let replay = a.source.trim().starts_with("replay:");
+    let replay = a.source.is_replay();
     // A replay is re-recorded whole and as fast as the disk takes it; cameras are never made
     // to wait.
     let options = SourceOptions {

@@ -3,6 +3,7 @@
 //! the summary on standard error.
 
 use super::CommandResult;
+use omnitrack::capture::SourceSpec;
 use omnitrack::config::TrackerConfig;
 use omnitrack::{Model, Rig};
 use std::path::{Path, PathBuf};
@@ -21,7 +22,7 @@ pub struct Args {
     visibility: Option<PathBuf>,
     /// replay:DIR, v4l or usb.
     #[arg(long, value_name = "replay:DIR|v4l|usb")]
-    source: String,
+    source: SourceSpec,
     /// Initial search volume: centre x,y,z and optionally its radius in metres (default: half
     /// of [initialisation] search_diameter_m of tracker.toml, i.e. a 3 m volume).
     #[arg(long, value_name = "x,y,z[,radius_m]", allow_hyphen_values = true)]
@@ -201,7 +202,7 @@ pub fn run(a: Args) -> CommandResult {
         pose_service: publish.map(|_| pose_service),
         status_service: publish.map(|_| status_service),
         // A replay not paced in real time would otherwise race ahead while the tracker works.
-        lossless: !a.realtime && a.source.starts_with("replay:"),
+        lossless: !a.realtime && a.source.is_replay(),
         ..PipelineOptions::default()
     };
     let summary = run_pipeline(source, &model, &table, &cfg, &opts, &mut sink)?;

@@ -7,8 +7,9 @@ use crate::common::omnitrack;
 #[cfg(feature = "desk")]
 #[test]
 fn a_replay_recorded_again_replays_to_the_same_frames_and_trajectory() {
-    use omnitrack::capture::{FrameSet, FrameSource, Pacing, ReplaySource};
+    use omnitrack::capture::{FrameSource, Pacing, ReplaySource};
     use omnitrack::config::TrackerConfig;
+    use omnitrack::frame::FrameSet;
     use omnitrack::runtime::{track, RunOptions};
     use omnitrack::tracker::SearchVolume;
 

@@ -63,6 +63,10 @@ fn usage_errors_are_one_line() {
         (vec!["run"], "--model"),
         (vec!["pose"], "--lines"),
         (vec!["visibility"], "build, query"),
+        (
+            vec!["run", "--model", "m.obj", "--source", "webcam"],
+            "invalid value 'webcam' for '--source <replay:DIR|v4l|usb>': unknown source (expected replay:DIR, v4l or usb) (see omnitrack --help)",
+        ),
         (vec![], "no command given"),
     ] {
         let (code, stdout, stderr) = omnitrack(&args);

@@ -216,7 +216,7 @@ fn omni_view_draws_the_model_in_green_where_it_projects() {
     );
 
     // A frame's images go through frame_images; a wrong count is an error naming the file.
-    let frame = omnitrack::capture::FrameSet::for_rig(&rig);
+    let frame = omnitrack::frame::FrameSet::for_rig(&rig);
     let grey = frame_images(&frame);
     assert_eq!(grey.len(), rig.sensors.len());
     let e = omni_view(&path, &rig, &grey[..2], &model, &pose, &options).unwrap_err();

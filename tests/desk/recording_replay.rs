@@ -4,10 +4,11 @@
 #![cfg(feature = "desk")]
 
 use nalgebra::{Point2, Vector3};
-use omnitrack::capture::{FrameSet, FrameSource, Pacing, ReplaySource};
+use omnitrack::capture::{FrameSource, Pacing, ReplaySource};
 use omnitrack::desk::recording::{write_recording, RecordingOptions};
 use omnitrack::desk::render::{Appearance, Renderer};
 use omnitrack::desk::scenario::{Scenario, ScenarioName};
+use omnitrack::frame::FrameSet;
 use omnitrack::{Model, Rig};
 use std::path::Path;
 

@@ -16,11 +16,10 @@ mod per_sensor;
 
 use nalgebra::Point3;
 use omnitrack::capture::device::CaptureDevice;
-use omnitrack::capture::open::{FailureDetail, LiveCamera, ReadFailure};
-use omnitrack::capture::{
-    FrameSet, FrameSource, ImageFault, Pacing, ReplaySource, SensorImage, SourceError, SourceOptions, SourceStats,
-};
+use omnitrack::capture::live::{FailureDetail, LiveCamera, ReadFailure};
+use omnitrack::capture::{FrameSource, Pacing, ReplaySource, SourceError, SourceOptions, SourceStats};
 use omnitrack::config::TrackerConfig;
+use omnitrack::frame::{FrameSet, ImageFault, SensorImage};
 use omnitrack::publish::{PoseStatus, PoseSubscriber, SearchState, StatusSample, StatusSubscriber};
 use omnitrack::runtime::pipeline::{
     inside_publish, live_sensors, run_pipeline, upstream_priority, FrameSink, PipelineOptions, PipelineThread,

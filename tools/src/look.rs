@@ -10,11 +10,12 @@
 //! - plot: the trajectory over the floor plan, coloured by its position error when the ground
 //!   truth is given (Figures 1, 10, 11), and the position and rotation error over time.
 
-use omnitrack::capture::{FrameSet, FrameSource, Pacing, ReplaySource};
+use omnitrack::capture::{FrameSource, Pacing, ReplaySource};
 use omnitrack::desk::eval::{evaluate, EvalOptions};
 use omnitrack::desk::pictures::{
     error_over_time, frame_images, omni_view, plan_view, ErrorTrace, OmniOptions, PlanOptions,
 };
+use omnitrack::frame::FrameSet;
 use omnitrack::trajectory::{load_tum, Stamped};
 use omnitrack::Model;
 use std::path::Path;

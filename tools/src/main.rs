@@ -509,3 +509,20 @@ fn run(command: Command) -> Result<(), String> {
         }
     }
 }
+#[cfg(test)]
+mod tests {
+    /// docs/interfaces.md, "`omnitrack-desk`", is the contract: every command and long option of
+    /// `omnitrack-desk` is in its table, and everything the table names exists.
+    #[test]
+    fn the_command_line_is_the_one_the_contract_documents() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../docs/interfaces.md");
+        let doc = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{path}: {e}"));
+        let command = <super::Cli as clap::CommandFactory>::command();
+        let problems = omnitrack::runtime::cli::undocumented(&command, "omnitrack-desk", &doc);
+        assert!(
+            problems.is_empty(),
+            "{path} and the command line differ:\n{}",
+            problems.join("\n")
+        );
+    }
+}

@@ -3,7 +3,8 @@
 //! In: rig files (TOML), building models (OBJ), trajectories (TUM), lines files (CSV). Out: the
 //! types every layer above speaks — [`Pose`], [`geometry::Correspondence`] and
 //! [`geometry::EdgePlane`], the lenses, [`Rig`], [`Model`] with its segments and spatial index,
-//! and timestamped poses.
+//! timestamped poses, and the rig's frames ([`FrameSet`] of [`SensorImage`]s, plain data that
+//! capture fills and the edge stage reads).
 //!
 //! A rig of one 50° pinhole looking along the rig's x axis, and where a point 3 m ahead lands:
 //!
@@ -28,6 +29,7 @@
 //! # Ok::<(), omnitrack_core::rig::RigError>(())
 //! ```
 
+pub mod frame;
 pub mod geometry;
 pub mod lines;
 pub mod model;
@@ -36,6 +38,7 @@ pub mod status;
 pub mod text_file;
 pub mod trajectory;
 
+pub use frame::{FrameSet, ImageFault, SensorImage};
 pub use geometry::Pose;
 pub use model::{Face, Model, Segment};
 pub use rig::{Rig, Sensor};

@@ -8,7 +8,7 @@
 //! for it (`Appearance::jpeg_quality`), then stored losslessly; `model.obj` is the model as
 //! given, whatever the appearance displaced or added in the images.
 
-use crate::render::{Appearance, FrameSpec, Renderer};
+use crate::render::{Appearance, ClutterCounts, FrameSpec, Renderer};
 use image::codecs::png::{CompressionType, FilterType, PngEncoder};
 use image::{ImageEncoder, RgbImage};
 use nalgebra::Point3;
@@ -46,7 +46,7 @@ pub struct RecordingSummary {
     pub frames: usize,
     pub images: usize,
     /// Furniture boxes, shelves and posters placed (images only, not in model.obj).
-    pub clutter: [usize; 3],
+    pub clutter: ClutterCounts,
     pub people: usize,
     /// Wall time spent ray casting and encoding/writing images.
     pub render_seconds: f64,

@@ -53,15 +53,19 @@ impl HueAcc {
         self.total += other.total;
     }
 
-    /// (mean, variance, kept fraction).
-    pub fn stats(&self) -> (f32, f32, f32) {
+    /// The strip's hue mean, circular variance and kept fraction.
+    pub fn stats(&self) -> HueStats {
         let kept = if self.total > 0 {
             self.kept as f32 / self.total as f32
         } else {
             0.0
         };
         if self.kept == 0 {
-            return (f32::NAN, f32::NAN, kept);
+            return HueStats {
+                mean: f32::NAN,
+                variance: f32::NAN,
+                kept,
+            };
         }
         let tau = std::f32::consts::TAU;
         let mut mean = self.sin.atan2(self.cos) / tau;
@@ -73,8 +77,23 @@ impl HueAcc {
         }
         let r = ((self.cos * self.cos + self.sin * self.sin).sqrt() / self.kept as f32).clamp(1e-12, 1.0);
         let var = -2.0 * r.ln() / (tau * tau);
-        (mean, var.max(0.0), kept)
+        HueStats {
+            mean,
+            variance: var.max(0.0),
+            kept,
+        }
     }
+}
+
+/// One hue strip summed up ([`HueAcc::stats`]), as a side of a [`HueSignature`] holds it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct HueStats {
+    /// Mean hue in [0, 1); NaN when no pixel had usable hue.
+    pub mean: f32,
+    /// Circular variance, −2 ln R̄ / (2π)²; NaN when no pixel had usable hue.
+    pub variance: f32,
+    /// Fraction of the strip's pixels with usable hue.
+    pub kept: f32,
 }
 
 /// Converts RGB to a hue index in [0, HUE_STEPS) when the pixel is bright and saturated enough.

@@ -18,9 +18,10 @@ pub mod pipeline;
 pub mod record;
 
 use omnitrack_config::TrackerConfig;
+use omnitrack_core::frame::FrameSet;
 use omnitrack_core::model::Model;
 use omnitrack_edges::EdgeDetector;
-use omnitrack_io::capture::{FrameSet, FrameSource, SourceError};
+use omnitrack_io::capture::{FrameSource, SourceError};
 use omnitrack_tracker::visibility::{VisibilityError, VisibilityTable};
 use omnitrack_tracker::{FrameResult, SearchVolume, Tracker, TrackerStats};
 use std::path::{Path, PathBuf};

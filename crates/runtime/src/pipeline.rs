@@ -68,6 +68,7 @@
 
 mod assembly;
 mod capture;
+mod images;
 mod live;
 mod logging;
 mod options;
@@ -81,13 +82,13 @@ mod sink;
 mod stats;
 mod summary;
 
-pub use live::{live_sensors, open_pipeline_source, LiveDevice, SensorCapture};
+pub use live::{live_sensors, open_pipeline_source, LiveDevice};
 pub use logging::init_logging;
 pub use omnitrack_io::publish::Stage;
-pub use options::{PipelineOptions, PipelineSource, PipelineThread};
+pub use options::{PipelineOptions, PipelineSource, PipelineThread, SensorCapture};
 #[cfg(unix)]
 pub use priority::current_thread_policy;
-pub use priority::{upstream_priority, Realtime};
+pub use priority::{upstream_priority, Realtime, ThreadPolicy};
 pub use publishing::inside_publish;
 pub use signals::{stop_on_signals, SignalGuard};
 pub use sink::{FrameSink, TrajectoryFileError, TumSink};
@@ -95,8 +96,8 @@ pub use stats::{stage_budget, Histogram, SensorSummary, StageClock, StageSummary
 pub use summary::{PipelineSummary, RunEnd};
 
 use super::{FrameRecord, RunError};
-use capture::SensorImages;
 use crossbeam::channel::bounded;
+use images::SensorImages;
 use omnitrack_config::TrackerConfig;
 use omnitrack_core::model::Model;
 use omnitrack_io::capture::SourceError;

@@ -17,8 +17,9 @@
 use crossbeam::channel::{bounded, Receiver, Sender, TrySendError};
 use image::codecs::png::{CompressionType, FilterType, PngEncoder};
 use image::{ExtendedColorType, ImageEncoder};
+use omnitrack_core::frame::FrameSet;
 use omnitrack_io::capture::replay::FRAMES_HEADER;
-use omnitrack_io::capture::{FrameSet, FrameSource, SourceError};
+use omnitrack_io::capture::{FrameSource, SourceError};
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};

@@ -6,9 +6,9 @@ use super::canvas::{bold_1x, render_png};
 use super::{picture_error, PictureError};
 use image::RgbImage;
 use nalgebra::Point3;
+use omnitrack_core::frame::FrameSet;
 use omnitrack_core::geometry::{Lens, Pose};
 use omnitrack_core::{Model, Rig};
-use omnitrack_io::capture::FrameSet;
 use plotters::prelude::*;
 use std::path::Path;
 

@@ -22,7 +22,7 @@ pub mod scene;
 pub use appearance::{Appearance, SpecError};
 pub use omnitrack_core::model::bvh::{brute_force_closest, model_triangles, Aabb, Bvh, Ray, Triangle, TriangleBvh};
 pub use omnitrack_core::model::triangulate::{ear_clip, triangulate_polygon};
-pub use scene::{Pattern, Person, Scene, Surface, SurfaceKind};
+pub use scene::{ClutterCounts, Pattern, Person, Scene, Surface, SurfaceKind};
 
 use appearance::{gaussian_from_hash, hash64, value_noise};
 use image::RgbImage;
@@ -294,13 +294,7 @@ impl Renderer {
             let pt = ray.at(t);
             let person = &self.scene.people[p.index as usize];
             let z = (pt[2] - p.floor) / person.height;
-            let colour = person.colours[if z < 0.47 {
-                0
-            } else if z < 0.86 {
-                1
-            } else {
-                2
-            }];
+            let colour = person.colours.at_height(z);
             (t, colour, p.normal(pt), 0xFFFF_0000 ^ p.index, Pattern::None)
         } else if let Some((slot, t)) = hit {
             let tri = &geo.triangles[slot as usize];

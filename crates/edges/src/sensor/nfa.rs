@@ -243,7 +243,7 @@ mod tests {
     use crate::sensor::ray_table;
     use crate::EdgeParams;
     use nalgebra::Point2;
-    use omnitrack_io::capture::SensorImage;
+    use omnitrack_core::frame::SensorImage;
     use rand::rngs::SmallRng;
     use rand::{Rng, SeedableRng};
     use std::sync::Arc;

@@ -35,8 +35,7 @@ impl Workspace {
             let (Some(p1), Some(p2)) = (self.lens.project(&c.r1), self.lens.project(&c.r2)) else {
                 continue;
             };
-            let (lm, lv, lk) = c.left.stats();
-            let (rm, rv, rk) = c.right.stats();
+            let (left, right) = (c.left.stats(), c.right.stats());
             let n_rig = rot * c.n;
             let plane = EdgePlane {
                 normal: Unit::new_normalize(n_rig),
@@ -86,12 +85,12 @@ impl Workspace {
                 length_rad,
                 strength: c.strength,
                 hue: HueSignature {
-                    left_mean: lm,
-                    left_var: lv,
-                    right_mean: rm,
-                    right_var: rv,
-                    left_kept: lk,
-                    right_kept: rk,
+                    left_mean: left.mean,
+                    left_var: left.variance,
+                    right_mean: right.mean,
+                    right_var: right.variance,
+                    left_kept: left.kept,
+                    right_kept: right.kept,
                 },
                 polarity: if 4 * c.bright_left.unsigned_abs() >= 2 * c.count {
                     c.bright_left.signum() as i8

@@ -5,7 +5,7 @@
 //! JPEG (MJPEG) frame — with its width, height and row stride (bytes from one row to the next,
 //! at least the packed row size; drivers and cameras pad rows).
 //! Out: the image written into a caller-owned RGB8 buffer of exactly `width * height * 3` bytes
-//! (a [`SensorImage`](super::SensorImage)'s pixels), row-major, no padding.
+//! (a [`SensorImage`](omnitrack_core::frame::SensorImage)'s pixels), row-major, no padding.
 //!
 //! These are pure functions, compiled with every feature set so that they are always tested; the
 //! live sources (`v4l2` behind the cargo feature `v4l`, `usb` behind `usb`, and the
@@ -24,9 +24,9 @@
 //! Allocation: none, except inside the `image` crate's JPEG decoder, which copies the compressed
 //! frame into a buffer of its own and allocates its decoding state per frame (it offers no reuse).
 
-use super::ImageFault;
 use image::codecs::jpeg::JpegDecoder;
 use image::{ColorType, ImageDecoder};
+use omnitrack_core::frame::ImageFault;
 use std::fmt;
 use std::io::Cursor;
 

@@ -18,7 +18,8 @@
 //! a driver that offers only a larger one is accepted (the windows still lie inside it), a smaller
 //! one is refused in one line naming the window that does not fit ([`CaptureDevice::check_fits`]).
 
-use super::{SensorImage, SourceError};
+use super::SourceError;
+use omnitrack_core::frame::SensorImage;
 use omnitrack_core::rig::Rig;
 use std::fmt::Write as _;
 

@@ -1,66 +1,22 @@
-//! Choosing the frame source from the command line, and what the live sources share.
+//! Opening the frame source the command line chose.
 //!
-//! In: a `--source` spec (docs/interfaces.md, "Command line": `replay:DIR`, `v4l` or `usb`) and
-//! the rig given with `--rig`, if any. Out: a boxed [`FrameSource`] ([`open_source`]), or one
-//! line saying what is wrong: an unknown spec, a live source without a rig, a live source this
-//! binary was built without (with the cargo command that enables it), or the device error of
-//! the source itself.
+//! In: a [`SourceSpec`] (parsed from `--source`, see [`super::spec`]) and the rig given with
+//! `--rig`, if any. Out: a boxed [`FrameSource`] ([`open_source`]), or one line saying what is
+//! wrong: a live source without a rig, a live source this binary was built without (with the
+//! cargo command that enables it), or the error of the source itself.
 //!
 //! A recording carries its own rig, so `replay:DIR` needs none; when `--rig` is given as well its
 //! sensors must have the recording's sizes. `v4l` and `usb` need the rig: it names each sensor's
 //! device (`device`, `usb_serial`, `[usb]`).
 //!
-//! [`LiveSource`] is the frame source of both live drivers ([`LiveCamera`] implementations, one
-//! camera per capture device: per sensor, or shared by the sensors cropped from its frame, see
-//! [`super::device`]): each [`FrameSource::next_frame`] reads one frame from every connected
-//! device in turn, straight into the sensor's image or, for a shared device, into a frame buffer
-//! sized at opening whose windows are copied into the sensors' images. A device whose read
-//! fails marks its sensors invalid for that frame (the [`ImageFault`] counted and warned,
-//! rate-limited); when the failure means the device is gone (unplugged, I/O error, or
-//! [`LOST_AFTER_TIMEOUTS`] timeouts in a row) it is closed, reported on standard error, and
-//! reopened every [`SourceOptions::reopen_interval`] until it comes back (reported again); the
-//! other devices go on meanwhile. With no device connected, `next_frame` waits for the next
-//! reopening attempt instead of spinning.
-//!
-//! Clock: image timestamps are nanoseconds of the host's monotonic clock: the drivers' own
-//! (V4L2 buffers stamped `CLOCK_MONOTONIC`) or, where a driver has none, [`host_time_ns`], the
-//! time since the first call in this process (also monotonic, but another origin).
+//! Imports run one way: this file uses the sources (`replay`, `v4l2`, `usb`, and through them
+//! [`super::live`]); none of them uses it.
 
-use super::device::{capture_devices, copy_window, CaptureDevice};
-use super::{FrameSet, FrameSource, ImageFault, Pacing, ReplaySource, SensorImage, SourceError, SourceStats};
-use super::{WarningKind, WarningLimiter};
+use super::replay::ReplaySource;
+use super::spec::{SourceOptions, SourceSpec};
+use super::{FrameSource, SourceError};
 use omnitrack_core::rig::Rig;
-use std::fmt;
 use std::path::Path;
-use std::sync::OnceLock;
-use std::time::{Duration, Instant};
-
-/// Timeouts in a row after which a live sensor counts as lost and is reopened.
-pub const LOST_AFTER_TIMEOUTS: u32 = 3;
-
-/// Warnings of one kind printed before the rest are only counted.
-const WARN_LIMIT: u32 = 5;
-
-/// How sources are opened and run; [`SourceOptions::default`] is what `omnitrack run` uses.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct SourceOptions {
-    /// Pacing of `replay:DIR` (default: real time, like a camera).
-    pub pacing: Pacing,
-    /// Longest wait for one sensor's image before it counts as dropped (live sources; default 1 s).
-    pub frame_timeout: Duration,
-    /// How often a lost live sensor is reopened (default 1 s).
-    pub reopen_interval: Duration,
-}
-
-impl Default for SourceOptions {
-    fn default() -> SourceOptions {
-        SourceOptions {
-            pacing: Pacing::RealTime,
-            frame_timeout: Duration::from_secs(1),
-            reopen_interval: Duration::from_secs(1),
-        }
-    }
-}
 
 /// The hint printed when a live source is asked of a binary built without it.
 pub const V4L_DISABLED: &str = "live V4L2 capture is not in this build: rebuild with \
@@ -71,50 +27,35 @@ pub const USB_DISABLED: &str = "live USB3 Vision capture is not in this build: r
      `cargo build --release --features usb`";
 
 /// Opens the source named by `spec` with [`SourceOptions::default`]. See the module doc.
-pub fn open_source(spec: &str, rig: Option<&Rig>) -> Result<Box<dyn FrameSource + Send>, SourceError> {
+pub fn open_source(spec: &SourceSpec, rig: Option<&Rig>) -> Result<Box<dyn FrameSource + Send>, SourceError> {
     open_source_with(spec, rig, &SourceOptions::default())
 }
 
 /// [`open_source`] with explicit options.
 pub fn open_source_with(
-    spec: &str,
+    spec: &SourceSpec,
     rig: Option<&Rig>,
     options: &SourceOptions,
 ) -> Result<Box<dyn FrameSource + Send>, SourceError> {
-    let spec_error = |message: String| SourceError::Device {
-        device: spec.to_string(),
-        message,
-    };
-    let spec = spec.trim();
-    if let Some(dir) = spec.strip_prefix("replay:") {
-        if dir.is_empty() {
-            return Err(spec_error(
-                "replay needs a recording directory: --source replay:DIR".into(),
-            ));
-        }
-        let source = ReplaySource::open(Path::new(dir), options.pacing)?;
-        if let Some(rig) = rig {
-            check_same_sensors(source.rig(), rig, dir)?;
-        }
-        return Ok(Box::new(source));
-    }
-    let need_rig = |what: &str| {
-        rig.ok_or_else(|| spec_error(format!("needs the rig (--rig RIG.toml) to know each sensor's {what}")))
-    };
     match spec {
-        "v4l" => {
-            let rig = need_rig("V4L2 device")?;
-            open_v4l(rig, options)
+        SourceSpec::Replay(dir) => {
+            let source = ReplaySource::open(dir, options.pacing)?;
+            if let Some(rig) = rig {
+                check_same_sensors(source.rig(), rig, dir)?;
+            }
+            Ok(Box::new(source))
         }
-        "usb" => {
-            let rig = need_rig("USB3 Vision camera")?;
-            open_usb(rig, options)
-        }
-        "replay" => Err(spec_error(
-            "replay needs a recording directory: --source replay:DIR".into(),
-        )),
-        _ => Err(spec_error("unknown source (expected replay:DIR, v4l or usb)".into())),
+        SourceSpec::V4l => open_v4l(need_rig(spec, rig, "V4L2 device")?, options),
+        SourceSpec::Usb => open_usb(need_rig(spec, rig, "USB3 Vision camera")?, options),
     }
+}
+
+/// The rig a live source needs to know its devices, or one line saying so.
+fn need_rig<'r>(spec: &SourceSpec, rig: Option<&'r Rig>, what: &str) -> Result<&'r Rig, SourceError> {
+    rig.ok_or_else(|| SourceError::Device {
+        device: spec.to_string(),
+        message: format!("needs the rig (--rig RIG.toml) to know each sensor's {what}"),
+    })
 }
 
 #[cfg(feature = "v4l")]
@@ -144,13 +85,13 @@ fn open_usb(_rig: &Rig, _options: &SourceOptions) -> Result<Box<dyn FrameSource 
 }
 
 /// A `--rig` given with a recording must have the recording's sensors (count and sizes).
-fn check_same_sensors(recorded: &Rig, given: &Rig, dir: &str) -> Result<(), SourceError> {
+fn check_same_sensors(recorded: &Rig, given: &Rig, dir: &Path) -> Result<(), SourceError> {
     let sizes = |r: &Rig| r.sensors.iter().map(|s| (s.width, s.height)).collect::<Vec<_>>();
     if sizes(recorded) == sizes(given) {
         return Ok(());
     }
     Err(SourceError::Format {
-        path: Path::new(dir).join("rig.toml"),
+        path: dir.join("rig.toml"),
         line: None,
         message: format!(
             "the recording's rig '{}' ({} sensors) does not match --rig '{}' ({} sensors) in sensor count or sizes",
@@ -160,291 +101,4 @@ fn check_same_sensors(recorded: &Rig, given: &Rig, dir: &str) -> Result<(), Sour
             given.sensors.len()
         ),
     })
-}
-
-/// Nanoseconds since the first call in this process, monotonic.
-pub fn host_time_ns() -> u64 {
-    static EPOCH: OnceLock<Instant> = OnceLock::new();
-    EPOCH.get_or_init(Instant::now).elapsed().as_nanos() as u64
-}
-
-/// Why one read of a live sensor gave no image. Small and `Copy`: nothing is built per frame.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum FailureDetail {
-    /// No image within [`SourceOptions::frame_timeout`].
-    TimedOut,
-    /// An operating-system error number.
-    Os(i32),
-    /// The image arrived but could not be converted.
-    Convert(super::convert::ConvertError),
-    /// A USB3 Vision block was rejected.
-    U3v(super::u3v::RejectReason),
-    /// Anything else, in a few words.
-    Text(&'static str),
-}
-
-impl fmt::Display for FailureDetail {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            FailureDetail::TimedOut => f.write_str("no image in time"),
-            FailureDetail::Os(code) => write!(f, "{}", std::io::Error::from_raw_os_error(*code)),
-            FailureDetail::Convert(e) => write!(f, "{e}"),
-            FailureDetail::U3v(r) => write!(f, "USB3 Vision block rejected: {r}"),
-            FailureDetail::Text(t) => f.write_str(t),
-        }
-    }
-}
-
-/// One failed read of a live sensor.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct ReadFailure {
-    /// What the sensor's image is marked with for this frame.
-    pub fault: ImageFault,
-    /// Whether the device is gone (closed and reopened later) rather than one image lost.
-    pub lost: bool,
-    pub detail: FailureDetail,
-}
-
-/// A live camera: a V4L2 device or a USB3 Vision camera, delivering the images of one or more
-/// sensors of the rig ([`CaptureDevice`]).
-pub trait LiveCamera: Sized + Send {
-    /// What every (re)opening shares (e.g. the USB context); `()` when nothing.
-    type Env: Send;
-
-    /// Opens the camera of `device`, asking for its `width × height` frames (exactly, when
-    /// `device.exact`; else at least that). Errors are one line naming the device and its
-    /// sensors (`device.label`).
-    fn open(env: &mut Self::Env, device: &CaptureDevice, options: &SourceOptions) -> Result<Self, SourceError>;
-
-    /// The device, for messages (e.g. `/dev/video0`).
-    fn name(&self) -> &str;
-
-    /// The size of the frames it delivers, as negotiated when it was opened.
-    fn frame_size(&self) -> (u32, u32);
-
-    /// Reads the next frame into `img`'s pixels (an image of [`LiveCamera::frame_size`], not
-    /// marked); returns its timestamp (ns).
-    fn read(&mut self, img: &mut SensorImage) -> Result<u64, ReadFailure>;
-}
-
-/// Opens `device`'s camera and checks that its frames hold every window; sizes `scratch` (the
-/// frame buffer of a device split into windows) to the negotiated frame.
-pub fn open_device<C: LiveCamera>(
-    env: &mut C::Env,
-    device: &CaptureDevice,
-    options: &SourceOptions,
-    scratch: &mut Option<SensorImage>,
-) -> Result<C, SourceError> {
-    let camera = C::open(env, device, options)?;
-    let (w, h) = camera.frame_size();
-    device.check_fits(camera.name(), w, h)?;
-    if !device.direct && scratch.as_ref().is_none_or(|s| (s.width(), s.height()) != (w, h)) {
-        // Only at (re)opening, never per frame.
-        *scratch = Some(SensorImage::new(device.windows[0].sensor, w, h));
-    }
-    Ok(camera)
-}
-
-/// One device's camera slot: connected or waiting to be reopened.
-struct Slot<C> {
-    device: CaptureDevice,
-    camera: Option<C>,
-    /// The whole frame of a device split into windows; `None` for a direct device.
-    scratch: Option<SensorImage>,
-    /// The device name of the last connection, for messages while disconnected.
-    name: String,
-    retry_at: Instant,
-    timeouts: u32,
-}
-
-/// The [`FrameSource`] of a live driver: one [`LiveCamera`] per capture device. See the module
-/// doc.
-pub struct LiveSource<C: LiveCamera> {
-    rig: Rig,
-    env: C::Env,
-    options: SourceOptions,
-    slots: Vec<Slot<C>>,
-    /// Device slot of each sensor.
-    slot_of: Vec<usize>,
-    stats: SourceStats,
-    warnings: WarningLimiter,
-    sequence: u64,
-}
-
-impl<C: LiveCamera> fmt::Debug for LiveSource<C> {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.debug_struct("LiveSource")
-            .field("rig", &self.rig.name)
-            .field("connected", &self.connected())
-            .field("sequence", &self.sequence)
-            .finish()
-    }
-}
-
-impl<C: LiveCamera> LiveSource<C> {
-    /// Opens every capture device's camera ([`capture_devices`]); the first that fails is the
-    /// error (one line naming device and sensors). The frame buffers are the caller's
-    /// ([`FrameSet::for_rig`]); each device sizes its own scratch space here.
-    pub fn open_with_env(rig: Rig, mut env: C::Env, options: SourceOptions) -> Result<LiveSource<C>, SourceError> {
-        let now = Instant::now();
-        let devices = capture_devices(&rig)?;
-        let mut slot_of = vec![0; rig.sensors.len()];
-        let mut slots = Vec::with_capacity(devices.len());
-        for (d, device) in devices.into_iter().enumerate() {
-            let mut scratch = None;
-            let camera = open_device::<C>(&mut env, &device, &options, &mut scratch)?;
-            for k in device.sensors() {
-                slot_of[k] = d;
-            }
-            slots.push(Slot {
-                name: camera.name().to_string(),
-                device,
-                camera: Some(camera),
-                scratch,
-                retry_at: now,
-                timeouts: 0,
-            });
-        }
-        Ok(LiveSource {
-            stats: SourceStats::new(rig.sensors.len()),
-            rig,
-            env,
-            options,
-            slots,
-            slot_of,
-            warnings: WarningLimiter::new(WARN_LIMIT),
-            sequence: 0,
-        })
-    }
-
-    /// Whether a sensor's camera is connected now, by sensor id.
-    pub fn is_connected(&self, sensor: usize) -> bool {
-        self.slot_of
-            .get(sensor)
-            .is_some_and(|&d| self.slots[d].camera.is_some())
-    }
-
-    /// Devices connected now.
-    pub fn connected(&self) -> usize {
-        self.slots.iter().filter(|s| s.camera.is_some()).count()
-    }
-
-    /// The camera of a sensor, if connected.
-    pub fn camera(&self, sensor: usize) -> Option<&C> {
-        self.slot_of.get(sensor).and_then(|&d| self.slots[d].camera.as_ref())
-    }
-
-    /// Marks every sensor of device `d` invalid with `fault` and counts it.
-    fn fail_device(&mut self, d: usize, fault: ImageFault, out: &mut FrameSet) {
-        for w in &self.slots[d].device.windows {
-            out.sensor_mut(w.sensor).set_invalid(fault, 0);
-            self.stats.sensors[w.sensor].count(fault);
-        }
-    }
-
-    fn capture(&mut self, d: usize, out: &mut FrameSet) {
-        let now = Instant::now();
-        let slot = &mut self.slots[d];
-        if slot.camera.is_none() && now >= slot.retry_at {
-            match open_device::<C>(&mut self.env, &slot.device, &self.options, &mut slot.scratch) {
-                Ok(camera) => {
-                    eprintln!("{} ({}): connected again, capturing", slot.device.label, camera.name());
-                    self.stats.warnings_printed += 1;
-                    slot.name.clear();
-                    slot.name.push_str(camera.name());
-                    slot.camera = Some(camera);
-                    slot.timeouts = 0;
-                }
-                Err(e) => {
-                    slot.retry_at = now + self.options.reopen_interval;
-                    self.warnings.warn(
-                        &mut self.stats,
-                        WarningKind::Image(ImageFault::Missing),
-                        format_args!(
-                            "{e} (still unavailable, retrying every {:?})",
-                            self.options.reopen_interval
-                        ),
-                    );
-                }
-            }
-        }
-        let Some(camera) = slot.camera.as_mut() else {
-            self.fail_device(d, ImageFault::Missing, out);
-            return;
-        };
-        let read = match slot.scratch.as_mut() {
-            None => camera.read(out.sensor_mut(slot.device.windows[0].sensor)),
-            Some(frame) => camera.read(frame),
-        };
-        match read {
-            Ok(ts) => {
-                for w in &slot.device.windows {
-                    let img = out.sensor_mut(w.sensor);
-                    if let Some(frame) = slot.scratch.as_ref() {
-                        copy_window(frame, w, img);
-                    }
-                    img.set_valid(ts);
-                    self.stats.sensors[w.sensor].delivered += 1;
-                }
-                slot.timeouts = 0;
-            }
-            Err(failure) => {
-                let timed_out = failure.detail == FailureDetail::TimedOut;
-                slot.timeouts = if timed_out { slot.timeouts + 1 } else { 0 };
-                let lost = failure.lost || slot.timeouts >= LOST_AFTER_TIMEOUTS;
-                if lost {
-                    // Dropping the camera closes the device.
-                    slot.camera = None;
-                    slot.retry_at = now + self.options.reopen_interval;
-                    slot.timeouts = 0;
-                    eprintln!(
-                        "{} ({}): lost ({}); going on without it, reopening every {:?}",
-                        slot.device.label, slot.name, failure.detail, self.options.reopen_interval
-                    );
-                    self.stats.warnings_printed += 1;
-                } else {
-                    self.warnings.warn(
-                        &mut self.stats,
-                        WarningKind::Image(failure.fault),
-                        format_args!("{} ({}): {}", slot.device.label, slot.name, failure.detail),
-                    );
-                }
-                self.fail_device(d, failure.fault, out);
-            }
-        }
-    }
-}
-
-impl<C: LiveCamera> FrameSource for LiveSource<C> {
-    fn rig(&self) -> &Rig {
-        &self.rig
-    }
-
-    fn next_frame(&mut self, out: &mut FrameSet) -> Result<bool, SourceError> {
-        if !out.fits(&self.rig) {
-            return Err(SourceError::FrameSetMismatch {
-                rig: self.rig.name.clone(),
-            });
-        }
-        if self.connected() == 0 {
-            // Nothing to read: wait for the next reopening attempt rather than spin.
-            let now = Instant::now();
-            if let Some(at) = self.slots.iter().map(|s| s.retry_at).min() {
-                if at > now {
-                    std::thread::sleep((at - now).min(self.options.reopen_interval));
-                }
-            }
-        }
-        for d in 0..self.slots.len() {
-            self.capture(d, out);
-        }
-        out.sequence = self.sequence;
-        self.sequence += 1;
-        self.stats.frames_delivered += 1;
-        Ok(true)
-    }
-
-    fn stats(&self) -> &SourceStats {
-        &self.stats
-    }
 }

@@ -37,9 +37,10 @@
 //! per image (`tests/replay.rs` measures it). Removing it needs a reusable decoder (a later issue).
 
 use super::device::{crop_into, Window};
-use super::{FrameSet, FrameSource, ImageFault, SensorImage, SourceError, SourceStats, WarningKind, WarningLimiter};
+use super::{FrameSource, SourceError, SourceStats, WarningKind, WarningLimiter};
 use image::codecs::png::PngDecoder;
 use image::{ColorType, ImageDecoder, ImageError, Limits};
+use omnitrack_core::frame::{FrameSet, ImageFault, SensorImage};
 use omnitrack_core::rig::Rig;
 use omnitrack_core::trajectory::{load_tum, Trajectory};
 use std::collections::HashSet;

@@ -78,6 +78,7 @@
 //! and converting frames allocate nothing.
 
 use super::convert::{self, BayerPattern, ConvertError, YuvOrder, YuvRange};
+use omnitrack_core::frame::ImageFault;
 use std::fmt;
 
 /// Leader magic `U3VL`, read little-endian.
@@ -250,8 +251,7 @@ impl RejectReason {
     }
 
     /// The fault a source records for the sensor.
-    pub fn fault(self) -> super::ImageFault {
-        use super::ImageFault;
+    pub fn fault(self) -> ImageFault {
         match self {
             RejectReason::UnsupportedPayloadType | RejectReason::UnsupportedPixelFormat => ImageFault::WrongFormat,
             RejectReason::SizeMismatch => ImageFault::WrongSize,

@@ -35,9 +35,11 @@
 //! transfer structure with C `malloc` on each call, outside Rust's allocator.
 
 use super::device::CaptureDevice;
-use super::open::{host_time_ns, FailureDetail, LiveCamera, LiveSource, ReadFailure, SourceOptions};
+use super::live::{host_time_ns, FailureDetail, LiveCamera, LiveSource, ReadFailure};
+use super::spec::SourceOptions;
 use super::u3v::{U3vEvent, U3vStream};
-use super::{ImageFault, SensorImage, SourceError};
+use super::SourceError;
+use omnitrack_core::frame::{ImageFault, SensorImage};
 use omnitrack_core::rig::{Rig, UsbRig};
 use rusb::{Context, Device, DeviceHandle, Direction, TransferType, UsbContext};
 use std::time::{Duration, Instant};

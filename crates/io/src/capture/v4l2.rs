@@ -37,8 +37,10 @@
 
 use super::convert::{self, BayerPattern, ConvertError, YuvOrder, YuvRange};
 use super::device::CaptureDevice;
-use super::open::{host_time_ns, FailureDetail, LiveCamera, LiveSource, ReadFailure, SourceOptions};
-use super::{ImageFault, SensorImage, SourceError};
+use super::live::{host_time_ns, FailureDetail, LiveCamera, LiveSource, ReadFailure};
+use super::spec::SourceOptions;
+use super::SourceError;
+use omnitrack_core::frame::{ImageFault, SensorImage};
 use omnitrack_core::rig::Rig;
 use std::io;
 use v4l::buffer::{Flags, Type};

@@ -10,12 +10,12 @@
 //! buffer goes back to the sensor), marks the missing sensors invalid (with the fault their
 //! camera reported, else `Dropped` and a sync miss), and hands the frame to the tracker.
 
-use super::capture::{Arrival, SensorImages};
+use super::images::{Arrival, SensorImages};
 use super::pool::{Handover, Pool};
 use super::shared::{lock, Shared};
-use crate::pipeline::stats::SensorCounters;
+use super::stats::SensorCounters;
 use crossbeam::channel::{Receiver, RecvTimeoutError};
-use omnitrack_io::capture::ImageFault;
+use omnitrack_core::frame::ImageFault;
 use std::time::{Duration, Instant};
 
 pub(super) struct Assembler<'a, 'o> {

@@ -3,26 +3,25 @@
 //! the assembly thread ([`assembly`]).
 //!
 //! In: the source. Out: frames in pool slots posted through the [`Handover`] (whole-rig), or
-//! [`Arrival`]s of images in each sensor's own buffers ([`SensorImages`]) for the assembly, which
-//! posts the frames; faults and the source's failure are counted in the [`Shared`] state.
+//! [`Arrival`]s of images in each sensor's own buffers ([`SensorImages`], of [`super::images`])
+//! for the assembly, which posts the frames; faults and the source's failure are counted in the
+//! [`Shared`] state. Imports run one way: this file starts the assembly; the assembly and this
+//! file both use the buffers of `images`, which use neither.
 
 use super::assembly;
-use super::live::SensorCapture;
+use super::images::{Arrival, SensorImages, IMAGES_PER_SENSOR};
+use super::options::SensorCapture;
 use super::pool::{Handover, Pool};
-use super::shared::{lock, Shared};
+use super::shared::Shared;
 use super::stats::SensorCounters;
-use super::{PipelineSource, PipelineThread, TICK};
-use crossbeam::channel::{bounded, Receiver, RecvTimeoutError, Sender};
+use super::{PipelineSource, PipelineThread};
+use crossbeam::channel::{bounded, Sender};
 use omnitrack_config::BudgetConfig;
-use omnitrack_core::rig::Rig;
+use omnitrack_core::frame::SensorImage;
 use omnitrack_io::capture::device::MAX_WINDOWS_PER_DEVICE;
-use omnitrack_io::capture::{FrameSource, SensorImage, SourceStats};
-use std::sync::{Mutex, MutexGuard};
+use omnitrack_io::capture::{FrameSource, SourceStats};
 use std::thread::{Scope, ScopedJoinHandle};
 use std::time::{Duration, Instant};
-
-/// Image buffers per sensor for per-sensor capture.
-const IMAGES_PER_SENSOR: usize = 4;
 
 /// The capture thread of a whole-rig source. Returns the source's counters.
 fn capture_rig(source: &mut dyn FrameSource, shared: &Shared, pool: &Pool, handover: Handover) -> SourceStats {
@@ -63,60 +62,6 @@ fn capture_rig(source: &mut dyn FrameSource, shared: &Shared, pool: &Pool, hando
         }
     }
     source.stats().clone()
-}
-
-/// One sensor's image buffers (per-sensor capture) and the list of free ones.
-pub(super) struct SensorImages {
-    pub(super) images: Box<[Mutex<SensorImage>]>,
-    free_tx: Sender<usize>,
-    free_rx: Receiver<usize>,
-}
-
-impl SensorImages {
-    pub(super) fn new(rig: &Rig, k: usize) -> SensorImages {
-        let s = &rig.sensors[k];
-        let (free_tx, free_rx) = bounded(IMAGES_PER_SENSOR);
-        let images = (0..IMAGES_PER_SENSOR)
-            .map(|i| {
-                free_tx.send(i).expect("room for every handle");
-                Mutex::new(SensorImage::new(s.id, s.width, s.height))
-            })
-            .collect();
-        SensorImages {
-            images,
-            free_tx,
-            free_rx,
-        }
-    }
-
-    pub(super) fn image(&self, i: usize) -> MutexGuard<'_, SensorImage> {
-        lock(&self.images[i])
-    }
-
-    fn take(&self, shared: &Shared) -> Option<usize> {
-        loop {
-            if shared.stopping() {
-                return None;
-            }
-            match self.free_rx.recv_timeout(TICK) {
-                Ok(i) => return Some(i),
-                Err(RecvTimeoutError::Timeout) => continue,
-                Err(RecvTimeoutError::Disconnected) => return None,
-            }
-        }
-    }
-
-    pub(super) fn release(&self, i: usize) {
-        let _ = self.free_tx.try_send(i);
-    }
-}
-
-/// An image of one sensor, ready in its buffer `slot`.
-#[derive(Debug, Clone, Copy)]
-pub(super) struct Arrival {
-    pub(super) sensor: usize,
-    pub(super) slot: usize,
-    pub(super) arrived: Instant,
 }
 
 /// The capture thread of one capture device: one image of each of its sensors per read, each

@@ -9,30 +9,21 @@
 //! What every (re)opening shares (e.g. the USB context) sits behind a mutex, taken only to open.
 //! A device split into windows reads into a frame buffer sized at (re)opening and copies each
 //! window into its sensor's image.
+//!
+//! Imports run one way: the [`SensorCapture`] trait and the [`PipelineSource`] that holds its
+//! implementations are `options`'s; this file implements and builds them.
 
-use super::PipelineSource;
+use super::options::{PipelineSource, SensorCapture};
+use omnitrack_core::frame::{ImageFault, SensorImage};
 use omnitrack_core::rig::Rig;
 use omnitrack_io::capture::device::{capture_devices, copy_window, CaptureDevice};
-use omnitrack_io::capture::open::{open_device, FailureDetail, LiveCamera, LOST_AFTER_TIMEOUTS};
-use omnitrack_io::capture::{open_source_with, FrameSource, ImageFault, SensorImage, SourceError, SourceOptions};
+use omnitrack_io::capture::live::{open_device, FailureDetail, LiveCamera, LOST_AFTER_TIMEOUTS};
+use omnitrack_io::capture::{open_source_with, FrameSource, SourceError, SourceOptions, SourceSpec};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 /// Warnings of one fault kind per device logged at `warn` before the rest go to `debug`.
 const WARN_LIMIT: u32 = 5;
-
-/// The images of one capture device's sensors, read on a thread of its own.
-pub trait SensorCapture: Send {
-    /// The sensor ids it delivers (indices in the rig), in order; at most
-    /// [`MAX_WINDOWS_PER_DEVICE`](omnitrack_io::capture::device::MAX_WINDOWS_PER_DEVICE).
-    fn sensors(&self) -> &[usize];
-
-    /// Reads the next images into `imgs` (one per sensor of [`SensorCapture::sensors`], in that
-    /// order, each sized for its sensor) and marks each: valid with its capture time (ns, a clock
-    /// shared by all sensors of the rig), or invalid with its fault. `Ok(false)`: this device's
-    /// stream has ended. A per-image failure is never an `Err`.
-    fn capture(&mut self, imgs: &mut [&mut SensorImage]) -> Result<bool, SourceError>;
-}
 
 /// The [`SensorCapture`] of one [`LiveCamera`]. See the module doc.
 pub struct LiveDevice<C: LiveCamera> {
@@ -204,21 +195,21 @@ where
     })
 }
 
-/// Opens the source named by `spec` (`replay:DIR`, `v4l`, `usb`) for the pipeline: live drivers
+/// Opens the source `spec` names (`replay:DIR`, `v4l`, `usb`) for the pipeline: live drivers
 /// built into this binary as one [`SensorCapture`] per capture device (one capture thread each), anything
 /// else as the whole-rig source of [`open_source_with`] (one capture thread), whose errors —
 /// including a live source left out of the build, with the cargo command that enables it — are
 /// one line each.
 pub fn open_pipeline_source(
-    spec: &str,
+    spec: &SourceSpec,
     rig: Option<&Rig>,
     options: &SourceOptions,
 ) -> Result<PipelineSource, SourceError> {
-    match (spec.trim(), rig) {
+    match (spec, rig) {
         #[cfg(feature = "v4l")]
-        ("v4l", Some(rig)) => live_sensors::<omnitrack_io::capture::v4l2::V4l2Camera>(rig, (), options),
+        (SourceSpec::V4l, Some(rig)) => live_sensors::<omnitrack_io::capture::v4l2::V4l2Camera>(rig, (), options),
         #[cfg(feature = "usb")]
-        ("usb", Some(rig)) => {
+        (SourceSpec::Usb, Some(rig)) => {
             let env = omnitrack_io::capture::usb::UsbEnv::new(rig)?;
             live_sensors::<omnitrack_io::capture::usb::UsbCamera>(rig, env, options)
         }

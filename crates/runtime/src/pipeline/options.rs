@@ -1,12 +1,13 @@
 //! What [`run_pipeline`](super::run_pipeline) is asked to run: the [`PipelineSource`] its frames
-//! come from, and the [`PipelineOptions`] (run limits, pool size, stop flag, signals, services,
-//! lossless capture, a hook per thread naming it by [`PipelineThread`]).
+//! come from (a whole-rig source, or a [`SensorCapture`] per capture device), and the
+//! [`PipelineOptions`] (run limits, pool size, stop flag, signals, services, lossless capture, a
+//! hook per thread naming it by [`PipelineThread`]).
 
-use super::live::SensorCapture;
 use super::DEFAULT_POOL_SIZE;
 use crate::RunOptions;
+use omnitrack_core::frame::SensorImage;
 use omnitrack_core::rig::Rig;
-use omnitrack_io::capture::FrameSource;
+use omnitrack_io::capture::{FrameSource, SourceError};
 use omnitrack_io::publish::{POSE_SERVICE, STATUS_SERVICE};
 use std::fmt;
 use std::sync::atomic::AtomicBool;
@@ -42,6 +43,19 @@ impl fmt::Debug for PipelineSource {
             }
         }
     }
+}
+
+/// The images of one capture device's sensors, read on a thread of its own.
+pub trait SensorCapture: Send {
+    /// The sensor ids it delivers (indices in the rig), in order; at most
+    /// [`MAX_WINDOWS_PER_DEVICE`](omnitrack_io::capture::device::MAX_WINDOWS_PER_DEVICE).
+    fn sensors(&self) -> &[usize];
+
+    /// Reads the next images into `imgs` (one per sensor of [`SensorCapture::sensors`], in that
+    /// order, each sized for its sensor) and marks each: valid with its capture time (ns, a clock
+    /// shared by all sensors of the rig), or invalid with its fault. `Ok(false)`: this device's
+    /// stream has ended. A per-image failure is never an `Err`.
+    fn capture(&mut self, imgs: &mut [&mut SensorImage]) -> Result<bool, SourceError>;
 }
 
 /// The threads of the pipeline, for [`PipelineOptions::on_thread_start`].

@@ -114,17 +114,43 @@ fn set_current(priority: Option<u8>) -> Result<(), String> {
     }
 }
 
-/// The calling thread's policy and priority as the OS reports them: (`SCHED_FIFO`?, priority).
+/// A thread's scheduling as the OS reports it ([`current_thread_policy`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ThreadPolicy {
+    /// Whether the policy is `SCHED_FIFO`.
+    pub fifo: bool,
+    /// Its static priority (0 under the normal policy).
+    pub priority: i32,
+}
+
+impl ThreadPolicy {
+    /// The normal policy (`SCHED_OTHER`, priority 0).
+    pub const NORMAL: ThreadPolicy = ThreadPolicy {
+        fifo: false,
+        priority: 0,
+    };
+
+    /// `SCHED_FIFO` at `priority`.
+    pub const fn fifo(priority: i32) -> ThreadPolicy {
+        ThreadPolicy { fifo: true, priority }
+    }
+}
+
+/// The calling thread's policy and priority as the OS reports them (the normal policy when it
+/// cannot tell).
 #[cfg(unix)]
-pub fn current_thread_policy() -> (bool, i32) {
+pub fn current_thread_policy() -> ThreadPolicy {
     let mut policy = 0;
     let mut param = libc::sched_param { sched_priority: 0 };
     // SAFETY: both out-pointers are valid for the call.
     let rc = unsafe { libc::pthread_getschedparam(libc::pthread_self(), &mut policy, &mut param) };
     if rc != 0 {
-        return (false, 0);
+        return ThreadPolicy::NORMAL;
     }
-    (policy == libc::SCHED_FIFO, param.sched_priority)
+    ThreadPolicy {
+        fifo: policy == libc::SCHED_FIFO,
+        priority: param.sched_priority,
+    }
 }
 
 #[cfg(test)]
@@ -136,9 +162,9 @@ mod tests {
         std::thread::spawn(|| {
             assert_eq!(apply(PipelineThread::Search, 10), Ok(false));
             assert_eq!(apply(PipelineThread::Sink, 10), Ok(false));
-            assert_eq!(current_thread_policy(), (false, 0));
+            assert_eq!(current_thread_policy(), ThreadPolicy::NORMAL);
             assert_eq!(apply(PipelineThread::Process, 0), Ok(false));
-            assert_eq!(current_thread_policy(), (false, 0));
+            assert_eq!(current_thread_policy(), ThreadPolicy::NORMAL);
         })
         .join()
         .unwrap();
@@ -149,21 +175,21 @@ mod tests {
         std::thread::spawn(|| match apply(PipelineThread::Process, 7) {
             Ok(set) => {
                 assert!(set);
-                assert_eq!(current_thread_policy(), (true, 7));
+                assert_eq!(current_thread_policy(), ThreadPolicy::fifo(7));
                 // An edge worker started now inherits it; the search thread puts itself back.
                 let child = std::thread::spawn(current_thread_policy).join().unwrap();
-                assert_eq!(child, (true, 7));
+                assert_eq!(child, ThreadPolicy::fifo(7));
                 let search = std::thread::spawn(|| {
                     apply(PipelineThread::Search, 7).unwrap();
                     current_thread_policy()
                 })
                 .join()
                 .unwrap();
-                assert_eq!(search, (false, 0));
+                assert_eq!(search, ThreadPolicy::NORMAL);
             }
             Err(reason) => {
                 assert!(!reason.is_empty());
-                assert_eq!(current_thread_policy(), (false, 0));
+                assert_eq!(current_thread_policy(), ThreadPolicy::NORMAL);
             }
         })
         .join()

@@ -4,13 +4,15 @@
 //! In: frame handles from the hand-over ([`Handover`](super::pool::Handover)). Out: the frame
 //! back to the pool before publishing, a [`PoseSample`] per frame (the last good pose while not
 //! tracking, its covariance grown by `[motion]`'s speed limits for the time since), a [`StatusSample`] every `budgets.status_interval_ms`, a [`FrameRecord`] per frame to
-//! the sink's channel, and the [`ProcessOutcome`] at the end.
+//! the sink's channel, and the [`ProcessOutcome`] at the end (a type of `summary`, which turns
+//! it into the run's summary; this file uses it, not the other way).
 
 use super::pool::Pool;
 use super::publishing::{create_publisher, publishing};
 use super::shared::{lock, Shared};
 use super::stats::SensorCounters;
-use super::{stage_budget, PipelineOptions, PipelineThread, RunEnd, Stage, StageClock, TICK};
+use super::summary::{ProcessOutcome, RunEnd};
+use super::{stage_budget, PipelineOptions, PipelineThread, Stage, StageClock, TICK};
 use crate::FrameRecord;
 use crossbeam::channel::{Receiver, RecvTimeoutError, Sender};
 use nalgebra::Matrix6;
@@ -24,28 +26,12 @@ use omnitrack_io::publish::{
     STATUS_MAX_SENSORS,
 };
 use omnitrack_tracker::visibility::VisibilityTable;
-use omnitrack_tracker::{
-    search_link, FrameResult, InitReport, SearchKind, Tracker, TrackerEvent, TrackerState, TrackerStats,
-};
+use omnitrack_tracker::{search_link, FrameResult, InitReport, SearchKind, Tracker, TrackerEvent, TrackerState};
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 /// Publish errors logged at `warn` before the rest are only counted.
 const WARN_LIMIT: u64 = 5;
-
-/// What the process thread hands back.
-pub(super) struct ProcessOutcome {
-    pub(super) reason: RunEnd,
-    pub(super) clocks: Vec<StageClock>,
-    pub(super) tracker: TrackerStats,
-    pub(super) frames_processed: u64,
-    pub(super) first_frame: Option<Instant>,
-    pub(super) last_frame: Option<Instant>,
-    pub(super) poses_published: u64,
-    pub(super) status_published: u64,
-    pub(super) publish_errors: u64,
-    pub(super) publisher_error: Option<String>,
-}
 
 fn pose_status(r: &FrameResult) -> PoseStatus {
     match r.state {

@@ -1,18 +1,19 @@
 //! What a run did: why it ended ([`RunEnd`]) and its [`PipelineSummary`] (frames, drops,
 //! per-sensor and per-stage counts, publishing), one line of it as its `Display`.
 //!
-//! In: the counters the threads shared, the process thread's outcome and the whole-rig source's
-//! own counters. Out: the summary [`run_pipeline`](super::run_pipeline) returns.
+//! In: the counters the threads shared, the process thread's outcome ([`ProcessOutcome`], defined
+//! here with [`RunEnd`] so that the process thread uses this file and not the other way) and the
+//! whole-rig source's own counters. Out: the summary [`run_pipeline`](super::run_pipeline)
+//! returns.
 
-use super::process::ProcessOutcome;
 use super::shared::{lock, Shared};
 use super::stats::SensorCounters;
-use super::{Realtime, SensorSummary, Stage, StageSummary};
+use super::{Realtime, SensorSummary, Stage, StageClock, StageSummary};
 use omnitrack_io::capture::SourceStats;
 use omnitrack_tracker::TrackerStats;
 use std::fmt;
 use std::sync::atomic::Ordering;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 /// Why the pipeline stopped (when it did not fail). Not the solver's `StopReason`, which says why
 /// consensus sampling stopped.
@@ -24,6 +25,20 @@ pub enum RunEnd {
     MaxFrames,
     /// The stop flag was set (by the caller or a signal).
     Stopped,
+}
+
+/// What the process thread hands back.
+pub(super) struct ProcessOutcome {
+    pub(super) reason: RunEnd,
+    pub(super) clocks: Vec<StageClock>,
+    pub(super) tracker: TrackerStats,
+    pub(super) frames_processed: u64,
+    pub(super) first_frame: Option<Instant>,
+    pub(super) last_frame: Option<Instant>,
+    pub(super) poses_published: u64,
+    pub(super) status_published: u64,
+    pub(super) publish_errors: u64,
+    pub(super) publisher_error: Option<String>,
 }
 
 /// What a run did.

@@ -19,8 +19,9 @@ pub(crate) fn diagnose(
     seed: u64,
     truth: &Pose,
 ) -> Result<Option<usize>, String> {
-    use omnitrack::capture::{FrameSet, FrameSource};
+    use omnitrack::capture::FrameSource;
     use omnitrack::edges::EdgeDetector;
+    use omnitrack::frame::FrameSet;
     use omnitrack::tracker::{InitOptions, Initialiser};
     let mut source = ReplaySource::open(dir, Pacing::AsFastAsPossible).map_err(|e| e.to_string())?;
     let rig = source.rig().clone();

@@ -4,7 +4,7 @@
 //! triangles appended to the scene's, and how many of each were placed. All draws come from one
 //! stream in a fixed order, so a scene rebuilt from the same inputs is the same.
 
-use super::{add, box_triangles, quad_triangles, sample_on, Pattern, Site, Surface, SurfaceKind};
+use super::{add, box_triangles, quad_triangles, sample_on, ClutterCounts, Pattern, Site, Surface, SurfaceKind};
 use crate::render::appearance::{hash64, hsv, Appearance, Rng};
 use crate::render::fixtures::{near_keep_out, overlaps};
 use nalgebra::Vector3;
@@ -39,7 +39,7 @@ pub(super) fn place(
     surfaces: &mut Vec<Surface>,
     triangles: &mut Vec<Triangle>,
     payload: &mut Vec<u32>,
-) -> [usize; 3] {
+) -> ClutterCounts {
     let Site {
         model,
         floor_tris,
@@ -55,12 +55,12 @@ pub(super) fn place(
     let grain = Pattern::grain(appearance.clutter_texture);
 
     let mut rng = Rng::new(appearance.seed ^ 0xC1u64 << 32);
-    let mut clutter_counts = [0usize; 3];
+    let mut clutter_counts = ClutterCounts::default();
 
     // Furniture boxes on the floor.
     let want = site.count(appearance.clutter, 12.0);
     for _ in 0..want * 20 {
-        if clutter_counts[0] >= want {
+        if clutter_counts.furniture >= want {
             break;
         }
         let Some((p, _)) = sample_on(floor_tris, floor_cum, &mut rng) else {
@@ -95,7 +95,7 @@ pub(super) fn place(
             triangles,
         );
         payload.resize(payload.len() + triangles.len() - before, sid);
-        clutter_counts[0] += 1;
+        clutter_counts.furniture += 1;
     }
 
     // A wall spot: point, horizontal unit normal towards free space, along-wall axis, floor z.
@@ -138,7 +138,7 @@ pub(super) fn place(
     // Shelving units against walls: two sides, top, bottom and boards, no back.
     let want = site.count(appearance.clutter, 25.0);
     for _ in 0..want * 20 {
-        if clutter_counts[1] >= want {
+        if clutter_counts.shelves >= want {
             break;
         }
         let Some(WallSpot {
@@ -207,13 +207,13 @@ pub(super) fn place(
             box_triangles(c, [scale(u, w - 2.0 * t), scale(side, depth), scale(up, t)], triangles);
         }
         payload.resize(payload.len() + triangles.len() - before, sid);
-        clutter_counts[1] += 1;
+        clutter_counts.shelves += 1;
     }
 
     // Posters: a coloured rectangle with an inner rectangle of another colour, 8–9 mm off a wall.
     let want = site.count(appearance.clutter, 10.0);
     for _ in 0..want * 20 {
-        if clutter_counts[2] >= want {
+        if clutter_counts.posters >= want {
             break;
         }
         let Some(WallSpot {
@@ -262,7 +262,7 @@ pub(super) fn place(
             );
             payload.resize(payload.len() + triangles.len() - before, sid);
         }
-        clutter_counts[2] += 1;
+        clutter_counts.posters += 1;
     }
     clutter_counts
 }

@@ -14,7 +14,18 @@
 mod clutter;
 mod people;
 
-pub use people::{Person, PlacedPerson};
+pub use people::{Person, PersonColours, PlacedPerson};
+
+/// Clutter items placed in a scene (in the images only, not in the model), by kind.
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
+pub struct ClutterCounts {
+    /// Furniture boxes on the floor.
+    pub furniture: usize,
+    /// Shelving units against walls.
+    pub shelves: usize,
+    /// Posters on walls.
+    pub posters: usize,
+}
 
 use super::appearance::{hash64, hsv, Appearance, Rng};
 use super::fixtures::{self, FixtureCounts, Probe};
@@ -135,8 +146,8 @@ pub struct Scene {
     pub surfaces: Vec<Surface>,
     pub people: Vec<Person>,
     pub lights: Vec<Light>,
-    /// Clutter items placed (furniture, shelves, posters).
-    pub clutter_counts: [usize; 3],
+    /// Clutter items placed.
+    pub clutter_counts: ClutterCounts,
     /// Model triangles (the first `model_triangles` of the input, before clutter).
     pub model_triangles: usize,
     /// What [`super::fixtures`] found and added.

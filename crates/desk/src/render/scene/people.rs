@@ -16,8 +16,29 @@ pub struct Person {
     pub phase_m: f64,
     pub radius: f32,
     pub height: f32,
-    /// Trousers, shirt, head.
-    pub colours: [[f32; 3]; 3],
+    pub colours: PersonColours,
+}
+
+/// A person's colours (linear RGB), bottom to top.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PersonColours {
+    pub trousers: [f32; 3],
+    pub shirt: [f32; 3],
+    pub head: [f32; 3],
+}
+
+impl PersonColours {
+    /// The colour at `z`, a fraction of the person's height above the floor: trousers below
+    /// 0.47, shirt below 0.86, head above.
+    pub fn at_height(&self, z: f32) -> [f32; 3] {
+        if z < 0.47 {
+            self.trousers
+        } else if z < 0.86 {
+            self.shirt
+        } else {
+            self.head
+        }
+    }
 }
 
 impl Person {
@@ -166,11 +187,12 @@ pub(super) fn place(site: &Site, appearance: &Appearance) -> Vec<Person> {
             phase_m: prng.range(0.0, 2.0 * len),
             radius: r as f32,
             height: height as f32,
-            colours: [
-                hsv(prng.unit(), 0.5 * sat, prng.range(0.15, 0.45)),
-                hsv(prng.unit(), 0.7 * sat, prng.range(0.4, 0.9)),
-                hsv(0.07, 0.45 * sat, prng.range(0.45, 0.8)),
-            ],
+            // Drawn in this order (trousers, shirt, head): the seed's people stay the same.
+            colours: PersonColours {
+                trousers: hsv(prng.unit(), 0.5 * sat, prng.range(0.15, 0.45)),
+                shirt: hsv(prng.unit(), 0.7 * sat, prng.range(0.4, 0.9)),
+                head: hsv(0.07, 0.45 * sat, prng.range(0.45, 0.8)),
+            },
         });
     }
     people
