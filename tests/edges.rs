@@ -10,9 +10,10 @@ use omnitrack::edges::{edges_csv, Edge, EdgeDetector, EdgeParams, EDGES_CSV_HEAD
 use omnitrack::frame::{FrameSet, SensorImage};
 use omnitrack::Rig;
 use std::alloc::{GlobalAlloc, Layout, System};
-use std::path::Path;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::{Mutex, MutexGuard};
+
+mod common;
 
 /// Counts allocations while `COUNTING` is on.
 struct Counting;
@@ -58,7 +59,7 @@ fn serial() -> MutexGuard<'static, ()> {
 }
 
 fn rig() -> Rig {
-    Rig::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("firmware_config/ladybug2.toml")).expect("rig")
+    common::shipped_rig()
 }
 
 /// Renders sensor `k` of the rig: `colour(ray)` for the sensor-frame unit ray of each pixel,

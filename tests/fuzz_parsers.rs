@@ -29,6 +29,8 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
+mod common;
+
 /// A case slower than this is a hang.
 const HANG_LIMIT: Duration = Duration::from_secs(20);
 
@@ -312,7 +314,7 @@ fn tum_trajectories() {
 
 #[test]
 fn line_correspondences() {
-    let rig = Rig::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("firmware_config/ladybug2.toml")).unwrap();
+    let rig = common::shipped_rig();
     let csv = "sensor,u1,v1,u2,v2,x1,y1,z1,x2,y2,z2\n0,10.5,20.25,200,30,1,2,0,1,2,2.5\n\
                3,100,400,120,40,5,-1,0,5,-1,2.5\n5,190,250,10,260,0,0,2.5,4,0,2.5\n";
     fuzz("lines CSV", 6, vec![csv.as_bytes().to_vec()], move |b| {

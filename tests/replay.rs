@@ -188,9 +188,8 @@ fn delivers_every_frame_in_order_with_timestamps_and_pixels() {
 
 #[test]
 fn six_sensor_ladybug_rig_replays_through_a_trait_object() {
-    let rig_path = concat!(env!("CARGO_MANIFEST_DIR"), "/firmware_config/ladybug2.toml");
-    let rig_text = std::fs::read_to_string(rig_path).unwrap();
-    let rig = Rig::load(Path::new(rig_path)).unwrap();
+    let rig_text = std::fs::read_to_string(common::SHIPPED_RIG).unwrap();
+    let rig = common::shipped_rig();
     let sizes: Vec<(u32, u32)> = rig.sensors.iter().map(|s| (s.width, s.height)).collect();
     let dir = recording_with_rig(&rig_text, &sizes, 2);
 
@@ -579,9 +578,8 @@ fn missing_or_malformed_files_are_one_line_errors_naming_the_file() {
 /// of sensors, so that a regression (a per-frame `Vec`, a path built per frame) shows up here.
 #[test]
 fn steady_state_allocations_per_frame_are_constant_and_only_the_decoders() {
-    let rig_path = concat!(env!("CARGO_MANIFEST_DIR"), "/firmware_config/ladybug2.toml");
-    let rig_text = std::fs::read_to_string(rig_path).unwrap();
-    let rig = Rig::load(Path::new(rig_path)).unwrap();
+    let rig_text = std::fs::read_to_string(common::SHIPPED_RIG).unwrap();
+    let rig = common::shipped_rig();
     let sizes: Vec<(u32, u32)> = rig.sensors.iter().map(|s| (s.width, s.height)).collect();
     let dir = recording_with_rig(&rig_text, &sizes, 6);
 

@@ -7,10 +7,10 @@ use omnitrack::solver::{
     covariance, line_residuals, med_r_and_t, med_r_and_t_landmarks, point_residuals, r_and_t, r_and_t_mixed, r_then_t,
     LineError, PointObservation, SolveError, SolverOptions,
 };
-use omnitrack::Rig;
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
-use std::path::Path;
+
+mod common;
 
 // ---------------------------------------------------------------------------------------------
 // Synthetic data
@@ -22,7 +22,7 @@ fn pinhole() -> Vec<Pose> {
 
 /// … or the six sensors of the Ladybug2-like rig (centres a few cm apart).
 fn rig() -> Vec<Pose> {
-    let rig = Rig::load(Path::new("firmware_config/ladybug2.toml")).unwrap();
+    let rig = common::shipped_rig();
     assert_eq!(rig.sensors.len(), 6);
     rig.sensors.iter().map(|s| s.t_rig_sensor).collect()
 }

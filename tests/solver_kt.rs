@@ -11,7 +11,6 @@ use omnitrack::solver::{
 use omnitrack::Rig;
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
-use std::path::Path;
 use std::time::Duration;
 
 // ---------------------------------------------------------------- allocation counting
@@ -31,11 +30,7 @@ fn truth() -> Pose {
 }
 
 fn rig() -> Rig {
-    Rig::load(Path::new(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/firmware_config/ladybug2.toml"
-    )))
-    .unwrap()
+    common::shipped_rig()
 }
 
 /// A point 3–10 m in front of a camera looking along +z of its own frame, within ±0.6 rad-ish.

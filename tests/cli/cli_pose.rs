@@ -4,7 +4,6 @@ use crate::common::omnitrack;
 use nalgebra::{Isometry3, Point3, Vector3};
 use omnitrack::Rig;
 use std::fmt::Write;
-use std::path::Path;
 
 /// Lines seen from `truth` by the six-sensor rig: each segment's end points projected into the
 /// sensor that sees both.
@@ -62,8 +61,8 @@ fn lines_csv(rig: &Rig, truth: &Isometry3<f64>) -> (String, usize) {
 
 #[test]
 fn every_method_recovers_the_pose_and_prints_the_documented_json() {
-    let rig_path = concat!(env!("CARGO_MANIFEST_DIR"), "/firmware_config/ladybug2.toml");
-    let rig = Rig::load(Path::new(rig_path)).unwrap();
+    let rig_path = crate::common::SHIPPED_RIG;
+    let rig = crate::common::shipped_rig();
     let truth = Isometry3::new(Vector3::new(2.2, 1.9, 1.3), Vector3::new(0.02, -0.03, 0.8));
     let (csv, rows) = lines_csv(&rig, &truth);
     assert!(rows >= 15, "{rows} lines");
@@ -113,7 +112,7 @@ fn every_method_recovers_the_pose_and_prints_the_documented_json() {
 
 #[test]
 fn bad_input_is_one_line_naming_the_problem() {
-    let rig_path = concat!(env!("CARGO_MANIFEST_DIR"), "/firmware_config/ladybug2.toml");
+    let rig_path = crate::common::SHIPPED_RIG;
     let dir = tempfile::tempdir().unwrap();
     let bad = dir.path().join("bad.csv");
     std::fs::write(&bad, "sensor,u1,v1,u2,v2,x1,y1,z1,x2,y2,z2\n0,1,2,3\n").unwrap();

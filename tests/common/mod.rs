@@ -10,6 +10,14 @@ use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 use std::process::Command;
 
+/// The shipped rig's file (`firmware_config/ladybug2.toml`), the rig most tests look through.
+pub const SHIPPED_RIG: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/firmware_config/ladybug2.toml");
+
+/// The shipped rig, loaded from [`SHIPPED_RIG`].
+pub fn shipped_rig() -> omnitrack::Rig {
+    omnitrack::Rig::load(std::path::Path::new(SHIPPED_RIG)).expect("the shipped rig loads")
+}
+
 /// Runs the `omnitrack` binary: (exit code, stdout, stderr).
 pub fn omnitrack(args: &[&str]) -> (i32, String, String) {
     let out = Command::new(env!("CARGO_BIN_EXE_omnitrack"))

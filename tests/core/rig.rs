@@ -6,11 +6,7 @@ use omnitrack::rig::{Rig, Sensor};
 use std::path::Path;
 
 fn ladybug() -> Rig {
-    Rig::load(Path::new(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/firmware_config/ladybug2.toml"
-    )))
-    .unwrap()
+    crate::common::shipped_rig()
 }
 
 /// Whether a sensor images the direction `d` (rig frame) of a point far away.

@@ -11,10 +11,9 @@ use omnitrack::desk::kalibr::{rig_from_kalibr, KalibrError};
 use omnitrack::geometry::{Lens, Pose};
 use omnitrack::Rig;
 use std::fmt::Write as _;
-use std::path::Path;
 
 fn shipped() -> Rig {
-    Rig::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("firmware_config/ladybug2.toml")).unwrap()
+    crate::common::shipped_rig()
 }
 
 fn rows(m: &Matrix4<f64>) -> String {

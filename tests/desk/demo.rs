@@ -8,16 +8,11 @@ use omnitrack::desk::demo::{run_demo, DemoOptions, ERROR_PLOT_SIZE, STATES_PLOT_
 use omnitrack::desk::pictures::{omni_layout, OmniOptions, PlanOptions};
 use omnitrack::Rig;
 use std::collections::HashSet;
-use std::path::Path;
 
 const FRAMES: usize = 12;
 
 fn rig() -> Rig {
-    Rig::load(Path::new(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/firmware_config/ladybug2.toml"
-    )))
-    .unwrap()
+    crate::common::shipped_rig()
 }
 
 #[test]

@@ -1,5 +1,8 @@
 //! Integration tests of omnitrack-desk and the visibility build: plans, renders, scenarios, evaluation, pictures, the demo: one test binary for several files, so that they link once.
 
+#[path = "../common/mod.rs"]
+mod common;
+
 mod calibration;
 mod convert;
 mod demo;

@@ -58,7 +58,7 @@ fn out_dir() -> (Option<tempfile::TempDir>, PathBuf) {
 }
 
 fn rig() -> Rig {
-    Rig::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("firmware_config/ladybug2.toml")).unwrap()
+    crate::common::shipped_rig()
 }
 
 fn model() -> Model {

@@ -10,14 +10,9 @@ use omnitrack::desk::render::{Appearance, Renderer};
 use omnitrack::desk::scenario::{Scenario, ScenarioName};
 use omnitrack::frame::FrameSet;
 use omnitrack::{Model, Rig};
-use std::path::Path;
 
 fn rig() -> Rig {
-    Rig::load(Path::new(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/firmware_config/ladybug2.toml"
-    )))
-    .unwrap()
+    crate::common::shipped_rig()
 }
 
 /// Largest per-channel spread of colours in the 5 × 5 patch around a pixel.

@@ -33,7 +33,7 @@ fn room_obj() -> String {
 }
 
 fn rig() -> Rig {
-    Rig::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("firmware_config/ladybug2.toml")).unwrap()
+    crate::common::shipped_rig()
 }
 
 fn pose() -> Isometry3<f64> {
