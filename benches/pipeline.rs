@@ -32,7 +32,7 @@ mod bench {
     use omnitrack::desk::scenario::random::RandomBuilding;
     use omnitrack::desk::scenario::{Scenario, ScenarioName};
     use omnitrack::frame::FrameSet;
-    use omnitrack::publish::{PoseStatus, PoseSubscriber};
+    use omnitrack::publish::{PoseSubscriber, TrackerState};
     use omnitrack::runtime::pipeline::{run_pipeline, PipelineOptions, PipelineSummary, Stage};
     use omnitrack::runtime::{load_or_build_table, FrameRecord, RunOptions};
     use omnitrack::tracker::SearchVolume;
@@ -163,7 +163,7 @@ mod bench {
             loop {
                 match subscriber.wait(Duration::from_millis(50)).unwrap() {
                     Some(s) => {
-                        got.push((s.sequence, s.pose_status() == Ok(PoseStatus::Tracking), now_ns()));
+                        got.push((s.sequence, s.pose_status() == Ok(TrackerState::Tracking), now_ns()));
                         quiet = Instant::now();
                     }
                     None if done2.load(Ordering::Relaxed) && quiet.elapsed() > Duration::from_millis(300) => {

@@ -7,7 +7,7 @@
 
 use nalgebra::{Matrix6, Translation3, UnitQuaternion, Vector3};
 use omnitrack::geometry::Pose;
-use omnitrack::publish::{PosePublisher, PoseStatus, POSE_SERVICE};
+use omnitrack::publish::{PosePublisher, TrackerState, POSE_SERVICE};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 fn main() {
@@ -38,7 +38,7 @@ fn main() {
         let now_ns = SystemTime::now()
             .duration_since(UNIX_EPOCH)
             .map_or(0, |d| d.as_nanos() as u64);
-        match publisher.publish_pose(now_ns, sequence, PoseStatus::Tracking, &pose, &covariance, 60, 1e-5) {
+        match publisher.publish_pose(now_ns, sequence, TrackerState::Tracking, &pose, &covariance, 60, 1e-5) {
             Ok(reached) if sequence % 30 == 0 => println!("seq {sequence}: {reached} subscriber(s)"),
             Ok(_) => {}
             Err(e) => {

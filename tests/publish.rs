@@ -7,8 +7,8 @@ use std::time::Duration;
 
 use nalgebra::{Isometry3, Matrix6, Translation3, UnitQuaternion, Vector3};
 use omnitrack::publish::{
-    format_pose_line, format_status_line, listen, listen_status, PosePublisher, PoseSample, PoseStatus, PoseSubscriber,
-    SearchUnderWay, Stage, StatusPublisher, StatusSample, StatusSubscriber, STATUS_MAX_SENSORS,
+    format_pose_line, format_status_line, listen, listen_status, PosePublisher, PoseSample, PoseSubscriber, SearchKind,
+    Stage, StatusPublisher, StatusSample, StatusSubscriber, TrackerState, STATUS_MAX_SENSORS,
 };
 
 mod common;
@@ -42,7 +42,7 @@ fn sample_pose(seq: u64) -> PoseSample {
     PoseSample::from_pose(
         1_700_000_000_123_456_789 + seq,
         seq,
-        PoseStatus::Tracking,
+        TrackerState::Tracking,
         &pose,
         &cov,
         57,
@@ -114,13 +114,13 @@ fn type_names_are_the_interface_names() {
 
 #[test]
 fn status_converts_both_ways() {
-    for s in [PoseStatus::Initializing, PoseStatus::Tracking, PoseStatus::Lost] {
-        assert_eq!(PoseStatus::try_from(u8::from(s)), Ok(s));
+    for s in [TrackerState::Initialising, TrackerState::Tracking, TrackerState::Lost] {
+        assert_eq!(TrackerState::try_from(u8::from(s)), Ok(s));
     }
-    assert_eq!(u8::from(PoseStatus::Initializing), 0);
-    assert_eq!(u8::from(PoseStatus::Tracking), 1);
-    assert_eq!(u8::from(PoseStatus::Lost), 2);
-    assert_eq!(PoseStatus::try_from(7), Err(7));
+    assert_eq!(u8::from(TrackerState::Initialising), 0);
+    assert_eq!(u8::from(TrackerState::Tracking), 1);
+    assert_eq!(u8::from(TrackerState::Lost), 2);
+    assert_eq!(TrackerState::try_from(7), Err(7));
 }
 
 #[test]
@@ -161,7 +161,7 @@ fn pose_round_trip_keeps_all_fields() {
         .publish_pose(
             sent[0].timestamp_ns,
             0,
-            PoseStatus::Tracking,
+            TrackerState::Tracking,
             &pose,
             &sent[0].covariance_matrix(),
             57,
@@ -221,10 +221,10 @@ fn status_round_trip() {
     let mut s = StatusSample {
         timestamp_ns: 42,
         sequence: 7,
-        tracker_state: PoseStatus::Lost as u8,
+        tracker_state: TrackerState::Lost as u8,
         sensor_count: 6,
         pid: 4242,
-        searching: u8::from(SearchUnderWay::Relocalisation),
+        searching: SearchKind::wire(Some(SearchKind::Relocalisation)),
         ..StatusSample::default()
     };
     s.set_source("rig-under-test");
@@ -351,12 +351,12 @@ fn listen_status_prints_one_documented_line_per_status_sample() {
     });
     let mut s = StatusSample {
         timestamp_ns: 42,
-        tracker_state: u8::from(PoseStatus::Tracking),
+        tracker_state: u8::from(TrackerState::Tracking),
         sensor_count: 2,
         search: u8::from(SearchState::Widened),
         search_widened_to_m: 4.3,
         pid: 77,
-        searching: u8::from(SearchUnderWay::Reinitialisation),
+        searching: SearchKind::wire(Some(SearchKind::Reinitialisation)),
         ..StatusSample::default()
     };
     s.set_source("hall \"B\"");

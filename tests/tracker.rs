@@ -334,7 +334,7 @@ fn a_frame_that_shows_too_little_commits_nothing_and_the_next_frames_find_the_tr
         .cloned()
         .collect();
     let r = tracker.process(&few, frame.timestamp_ns().unwrap());
-    assert_eq!(r.state, TrackerState::Initializing, "{:?}", r.event);
+    assert_eq!(r.state, TrackerState::Initialising, "{:?}", r.event);
     assert!(r.pose.is_none());
     assert!(tracker.searching(), "{:?}", r.event);
 

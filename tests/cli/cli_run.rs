@@ -245,7 +245,7 @@ fn check_shows_shared_devices_and_refuses_one_without_crops() {
 #[cfg(feature = "desk")]
 #[test]
 fn a_killed_run_keeps_the_poses_it_published_and_the_next_run_publishes() {
-    use omnitrack::publish::{PoseStatus, PoseSubscriber};
+    use omnitrack::publish::{PoseSubscriber, TrackerState};
     use std::process::{Command, Stdio};
     use std::time::{Duration, Instant};
 
@@ -295,7 +295,7 @@ fn a_killed_run_keeps_the_poses_it_published_and_the_next_run_publishes() {
             published.len()
         );
         if let Some(s) = subscriber.wait(Duration::from_millis(100)).unwrap() {
-            if s.status == PoseStatus::Tracking as u8 {
+            if s.status == TrackerState::Tracking as u8 {
                 published.push(s.timestamp_ns);
             }
         }
@@ -304,7 +304,7 @@ fn a_killed_run_keeps_the_poses_it_published_and_the_next_run_publishes() {
     child.wait().unwrap();
     // The poses published before the kill that the subscriber had not taken yet.
     while let Some(s) = subscriber.receive().unwrap() {
-        if s.status == PoseStatus::Tracking as u8 {
+        if s.status == TrackerState::Tracking as u8 {
             published.push(s.timestamp_ns);
         }
     }

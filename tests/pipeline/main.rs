@@ -20,7 +20,7 @@ use omnitrack::capture::live::{FailureDetail, LiveCamera, ReadFailure};
 use omnitrack::capture::{FrameSource, Pacing, ReplaySource, SourceError, SourceOptions, SourceStats};
 use omnitrack::config::TrackerConfig;
 use omnitrack::frame::{FrameSet, ImageFault, SensorImage};
-use omnitrack::publish::{PoseStatus, PoseSubscriber, SearchState, StatusSample, StatusSubscriber};
+use omnitrack::publish::{PoseSubscriber, SearchState, StatusSample, StatusSubscriber, TrackerState};
 use omnitrack::runtime::pipeline::{
     inside_publish, live_sensors, run_pipeline, upstream_priority, FrameSink, PipelineOptions, PipelineThread,
     Realtime, RunEnd, Stage, TumSink,
@@ -296,9 +296,9 @@ fn every_processed_frame_is_published_and_equals_the_trajectory() {
         assert_eq!(s.inliers, r.result.inliers);
         if let Some(p) = r.result.pose {
             last_pose = Some(p);
-            assert_eq!(s.pose_status(), Ok(PoseStatus::Tracking));
+            assert_eq!(s.pose_status(), Ok(TrackerState::Tracking));
         } else {
-            assert_ne!(s.pose_status(), Ok(PoseStatus::Tracking));
+            assert_ne!(s.pose_status(), Ok(TrackerState::Tracking));
         }
         if let Some(p) = last_pose {
             let got = s.pose().unwrap();
@@ -311,7 +311,7 @@ fn every_processed_frame_is_published_and_equals_the_trajectory() {
     let written = load_tum(&tum_path).unwrap();
     let published: Vec<&omnitrack::publish::PoseSample> = samples
         .iter()
-        .filter(|s| s.pose_status() == Ok(PoseStatus::Tracking))
+        .filter(|s| s.pose_status() == Ok(TrackerState::Tracking))
         .collect();
     assert_eq!(written.len(), published.len());
     for (w, s) in written.iter().zip(published) {
@@ -867,14 +867,14 @@ fn frames_without_a_pose_publish_the_last_one_with_its_covariance_grown_for_the_
     let good = &samples[FROM as usize - 1];
     assert_eq!(
         good.pose_status(),
-        Ok(PoseStatus::Tracking),
+        Ok(TrackerState::Tracking),
         "tracking before the blackout"
     );
     let speed = cfg.motion.max_speed_m_s;
     let turn = cfg.motion.max_turn_rate_deg_s.to_radians();
     let mut last_sd = 0.0;
     for s in &samples[FROM as usize..TO as usize] {
-        assert_ne!(s.pose_status(), Ok(PoseStatus::Tracking));
+        assert_ne!(s.pose_status(), Ok(TrackerState::Tracking));
         assert_eq!(s.position_m, good.position_m);
         assert_eq!(s.rotation_wxyz, good.rotation_wxyz);
         let dt = (s.timestamp_ns - good.timestamp_ns) as f64 * 1e-9;
@@ -890,5 +890,5 @@ fn frames_without_a_pose_publish_the_last_one_with_its_covariance_grown_for_the_
     // Tracking again after it.
     assert!(samples[TO as usize..]
         .iter()
-        .any(|s| s.pose_status() == Ok(PoseStatus::Tracking)));
+        .any(|s| s.pose_status() == Ok(TrackerState::Tracking)));
 }

@@ -7,7 +7,7 @@
 //! Namespaces need root (CI runs as root). Elsewhere the test says why it did not run, and fails
 //! if `CI` is set, so that CI can never pass it by skipping.
 
-use omnitrack_io::publish::{PoseSample, PoseStatus, PoseSubscriber, SamplePublisher};
+use omnitrack_io::publish::{PoseSample, PoseSubscriber, SamplePublisher, TrackerState};
 use std::io::{BufRead, BufReader};
 use std::process::{Child, Command, Stdio};
 use std::sync::mpsc;
@@ -109,7 +109,7 @@ fn pose(sequence: u64) -> PoseSample {
     PoseSample {
         timestamp_ns: omnitrack_link::monotonic_ns(),
         sequence,
-        status: PoseStatus::Tracking as u8,
+        status: TrackerState::Tracking as u8,
         position_m: [sequence as f64 * 1e-3, 2.0, 1.6],
         inliers: 40,
         ..PoseSample::default()

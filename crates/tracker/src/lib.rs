@@ -2,11 +2,11 @@
 //! Figures 7 and 8) on the edges, the prior visibility table and the pose solvers.
 //!
 //! In: per frame, the frame's [`Edge`](omnitrack_edges::Edge)s (all sensors) and its capture time. Out: a
-//! [`FrameResult`]: the tracker state (initializing → tracking → lost → tracking), the pose
+//! [`FrameResult`]: the tracker state (initialising → tracking → lost → tracking), the pose
 //! `T_world_rig` with its covariance when tracking, and what the frame cost.
 //!
 //! States:
-//! - **Initializing / Lost**: [`init::Initialiser`] searches a volume (the `--init` hint, the
+//! - **Initialising / Lost**: [`init::Initialiser`] searches a volume (the `--init` hint, the
 //!   whole model without one, or after a loss a volume around the last good pose that grows with
 //!   every failed attempt). Its best distinct candidates are then scored on the next frames
 //!   (`confirm_frames`) before one is committed — the paper's admitted weakness is ambiguity from

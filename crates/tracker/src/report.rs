@@ -10,25 +10,7 @@ use nalgebra::Matrix6;
 use omnitrack_core::geometry::Pose;
 use std::time::Duration;
 
-/// Where the tracker is (the `status` of the pose message).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum TrackerState {
-    Initializing,
-    Tracking,
-    Lost,
-}
-
-/// A search the tracker runs off the frame path ([`Tracker::search_under_way`](crate::Tracker::search_under_way)).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum SearchKind {
-    /// The first search for a pose: the hint's volume, or the whole model.
-    Initialisation,
-    /// The motion prior failed on a frame: a local search about the last good pose (module
-    /// `maintenance`).
-    Relocalisation,
-    /// Tracking was lost: a search that widens with every failed attempt.
-    Reinitialisation,
-}
+pub use omnitrack_core::status::{SearchKind, TrackerState};
 
 /// Something that happened on a frame, for logs and benchmarks.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -208,7 +208,7 @@ impl<'m> Tracker<'m> {
             matched: vec![None; capacity],
             robust_scratch: vec![0.0; 2 * capacity],
             rng: SmallRng::seed_from_u64(seed),
-            state: TrackerState::Initializing,
+            state: TrackerState::Initialising,
             hint,
             pose: Pose::identity(),
             previous: None,
@@ -312,7 +312,7 @@ impl<'m> Tracker<'m> {
     fn step(&mut self, edges: &[Edge], timestamp_ns: u64) -> FrameResult {
         let result = match self.state {
             TrackerState::Tracking => self.maintain(edges, timestamp_ns),
-            TrackerState::Initializing | TrackerState::Lost => self.initialise(edges, timestamp_ns),
+            TrackerState::Initialising | TrackerState::Lost => self.initialise(edges, timestamp_ns),
         };
         self.last_time = timestamp_ns;
         result

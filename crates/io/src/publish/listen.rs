@@ -22,8 +22,8 @@
 //!
 //! - `source`: the publishing rig's name, quoted and escaped as a Rust string; `pid`: the
 //!   publishing process;
-//! - `state`: the tracker's [`PoseStatus`]; `searching`: the search running now
-//!   ([`SearchUnderWay`]: `none`, `initialising`, `relocalising`, `reinitialising`); `search`:
+//! - `state`: the tracker's [`TrackerState`]; `searching`: the search running now
+//!   ([`SearchKind`]: `none`, `initialising`, `relocalising`, `reinitialising`); `search`:
 //!   the last search's [`SearchState`] (`none`, `as_given`, `widened` followed by `:D` metres,
 //!   `no_cells`);
 //! - `sensors`, then per sensor the delivered images per second and the images lost since start;
@@ -33,8 +33,8 @@ use std::io::Write;
 use std::time::Duration;
 
 use super::{
-    PoseSample, PoseStatus, PoseSubscriber, PublishError, SearchState, SearchUnderWay, Stage, StatusSample,
-    StatusSubscriber,
+    PoseSample, PoseSubscriber, PublishError, SearchKind, SearchState, Stage, StatusSample, StatusSubscriber,
+    TrackerState,
 };
 
 /// Writes one sample as one line in the format above (without the newline).
@@ -43,7 +43,7 @@ pub fn format_pose_line(s: &PoseSample, out: &mut dyn Write) -> std::io::Result<
     let q = &s.rotation_wxyz;
     let sd = |i: usize| s.covariance[i * 7].max(0.0).sqrt();
     write!(out, "seq={} t={}ns status=", s.sequence, s.timestamp_ns)?;
-    match PoseStatus::try_from(s.status) {
+    match TrackerState::try_from(s.status) {
         Ok(st) => write!(out, "{}", st.as_str())?,
         Err(b) => write!(out, "unknown({b})")?,
     }
@@ -79,13 +79,13 @@ pub fn format_status_line(s: &StatusSample, out: &mut dyn Write) -> std::io::Res
         s.source(),
         s.pid
     )?;
-    match PoseStatus::try_from(s.tracker_state) {
+    match TrackerState::try_from(s.tracker_state) {
         Ok(st) => write!(out, "{}", st.as_str())?,
         Err(b) => write!(out, "unknown({b})")?,
     }
     write!(out, " searching=")?;
-    match SearchUnderWay::try_from(s.searching) {
-        Ok(st) => write!(out, "{}", st.as_str())?,
+    match SearchKind::from_wire(s.searching) {
+        Ok(kind) => write!(out, "{}", SearchKind::word(kind))?,
         Err(b) => write!(out, "unknown({b})")?,
     }
     write!(out, " search=")?;

@@ -50,7 +50,7 @@ use iceoryx2::service::port_factory::{event as event_factory, publish_subscribe 
 
 pub use listen::{format_pose_line, format_status_line, listen, listen_status, ListenError};
 pub use sample::{
-    PoseSample, PoseStatus, SearchState, SearchUnderWay, Stage, StatusSample, WireError, POSE_WIRE_BYTES,
+    PoseSample, SearchKind, SearchState, Stage, StatusSample, TrackerState, WireError, POSE_WIRE_BYTES,
     STATUS_MAX_SENSORS, STATUS_SOURCE_BYTES, STATUS_STAGES,
 };
 
@@ -244,7 +244,7 @@ impl PosePublisher {
         &self,
         timestamp_ns: u64,
         sequence: u64,
-        status: PoseStatus,
+        status: TrackerState,
         pose: &omnitrack_core::geometry::Pose,
         covariance: &nalgebra::Matrix6<f64>,
         inliers: u32,

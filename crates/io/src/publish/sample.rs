@@ -10,55 +10,7 @@ use iceoryx2::prelude::ZeroCopySend;
 use nalgebra::Matrix6;
 
 use omnitrack_core::geometry::{rotation_to_wxyz, Pose};
-
-/// The tracker's state as carried in [`PoseSample::status`] and [`StatusSample::tracker_state`].
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-#[repr(u8)]
-pub enum PoseStatus {
-    /// No pose yet: searching the initial volume. The pose fields carry no information.
-    Initializing = 0,
-    /// The pose is the tracker's current estimate.
-    Tracking = 1,
-    /// Tracking was lost; the pose fields hold the last good pose, re-initialisation is running.
-    Lost = 2,
-}
-
-impl PoseStatus {
-    /// The lower-case word used by `omnitrack listen`: `initializing`, `tracking`, `lost`.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            PoseStatus::Initializing => "initializing",
-            PoseStatus::Tracking => "tracking",
-            PoseStatus::Lost => "lost",
-        }
-    }
-}
-
-impl From<PoseStatus> for u8 {
-    fn from(s: PoseStatus) -> u8 {
-        s as u8
-    }
-}
-
-impl TryFrom<u8> for PoseStatus {
-    /// The byte that is not a known status.
-    type Error = u8;
-
-    fn try_from(v: u8) -> Result<Self, u8> {
-        match v {
-            0 => Ok(PoseStatus::Initializing),
-            1 => Ok(PoseStatus::Tracking),
-            2 => Ok(PoseStatus::Lost),
-            other => Err(other),
-        }
-    }
-}
-
-impl std::fmt::Display for PoseStatus {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.as_str())
-    }
-}
+pub use omnitrack_core::status::{SearchKind, SearchState, TrackerState};
 
 /// One pose of the rig, `T_world_rig`, as published on `omnitrack/pose` (docs/interfaces.md,
 /// "Pose service"). C layout, 384 bytes, alignment 8:
@@ -81,7 +33,7 @@ pub struct PoseSample {
     pub timestamp_ns: u64,
     /// Frame counter.
     pub sequence: u64,
-    /// [`PoseStatus`] as a byte: 0 initializing, 1 tracking, 2 lost.
+    /// [`TrackerState`] as a byte: 0 initializing, 1 tracking, 2 lost.
     pub status: u8,
     /// t of `T_world_rig`, metres, model coordinates.
     pub position_m: [f64; 3],
@@ -97,12 +49,12 @@ pub struct PoseSample {
 }
 
 impl Default for PoseSample {
-    /// Initializing, identity pose, zero covariance, all counters 0.
+    /// Initialising, identity pose, zero covariance, all counters 0.
     fn default() -> Self {
         PoseSample {
             timestamp_ns: 0,
             sequence: 0,
-            status: PoseStatus::Initializing as u8,
+            status: TrackerState::Initialising as u8,
             position_m: [0.0; 3],
             rotation_wxyz: [1.0, 0.0, 0.0, 0.0],
             covariance: [0.0; 36],
@@ -118,7 +70,7 @@ impl PoseSample {
     pub fn from_pose(
         timestamp_ns: u64,
         sequence: u64,
-        status: PoseStatus,
+        status: TrackerState,
         pose: &Pose,
         covariance: &Matrix6<f64>,
         inliers: u32,
@@ -143,9 +95,9 @@ impl PoseSample {
         }
     }
 
-    /// The status byte as a [`PoseStatus`]; `Err(byte)` when it is none of the known values.
-    pub fn pose_status(&self) -> Result<PoseStatus, u8> {
-        PoseStatus::try_from(self.status)
+    /// The status byte as a [`TrackerState`]; `Err(byte)` when it is none of the known values.
+    pub fn pose_status(&self) -> Result<TrackerState, u8> {
+        TrackerState::try_from(self.status)
     }
 
     /// The pose back as `T_world_rig`; `Err` when the quaternion is not unit or not finite.
@@ -187,7 +139,7 @@ impl PoseSample {
         }
         let u64_at = |o: usize| u64::from_le_bytes(b[o..o + 8].try_into().expect("8 bytes"));
         let f64_at = |o: usize| f64::from_le_bytes(b[o..o + 8].try_into().expect("8 bytes"));
-        PoseStatus::try_from(b[16]).map_err(WireError::Status)?;
+        TrackerState::try_from(b[16]).map_err(WireError::Status)?;
         let mut s = PoseSample {
             timestamp_ns: u64_at(0),
             sequence: u64_at(8),
@@ -231,7 +183,7 @@ mod wire_tests {
         let mut s = PoseSample {
             timestamp_ns: 0x0102_0304_0506_0708,
             sequence: 42,
-            status: PoseStatus::Tracking as u8,
+            status: TrackerState::Tracking as u8,
             position_m: [1.5, -2.25, 1e-300],
             rotation_wxyz: [0.5, 0.5, -0.5, 0.5],
             inliers: 77,
@@ -262,106 +214,6 @@ mod wire_tests {
             WireError::Status(9).to_string(),
             "status byte 9 is none of initializing (0), tracking (1), lost (2)"
         );
-    }
-}
-
-/// What the tracker's last search for a pose made of its volume, as carried in
-/// [`StatusSample::search`]: why a tracker that publishes no pose has none.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-#[repr(u8)]
-pub enum SearchState {
-    /// No search since start (or the tracker has tracked since its last one).
-    None = 0,
-    /// The last search covered the volume it was given (the hint, or the whole model).
-    AsGiven = 1,
-    /// The volume held no valid visibility node: the last search went out to the nearest ones,
-    /// over [`StatusSample::search_widened_to_m`] about the volume's centre.
-    Widened = 2,
-    /// The last search had no cell at all to search (a model without valid nodes).
-    NoCells = 3,
-}
-
-impl SearchState {
-    /// The word used by `omnitrack listen --status`: `none`, `as_given`, `widened`, `no_cells`.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            SearchState::None => "none",
-            SearchState::AsGiven => "as_given",
-            SearchState::Widened => "widened",
-            SearchState::NoCells => "no_cells",
-        }
-    }
-}
-
-impl From<SearchState> for u8 {
-    fn from(s: SearchState) -> u8 {
-        s as u8
-    }
-}
-
-impl TryFrom<u8> for SearchState {
-    /// The byte that is not a known search state.
-    type Error = u8;
-
-    fn try_from(v: u8) -> Result<Self, u8> {
-        match v {
-            0 => Ok(SearchState::None),
-            1 => Ok(SearchState::AsGiven),
-            2 => Ok(SearchState::Widened),
-            3 => Ok(SearchState::NoCells),
-            other => Err(other),
-        }
-    }
-}
-
-/// The search running now on the tracker's search thread, as carried in
-/// [`StatusSample::searching`]: while one runs, frames get no pose of their own (the pose
-/// service repeats the last good pose, status lost and its covariance grown; before the first
-/// pose, status initializing), and this says which search it is waiting for.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-#[repr(u8)]
-pub enum SearchUnderWay {
-    /// No search is running.
-    None = 0,
-    /// The first search for a pose (the hint's volume, or the whole model).
-    Initialisation = 1,
-    /// The motion prior failed on a frame: a local search about the last good pose.
-    Relocalisation = 2,
-    /// Tracking was lost: a search of a volume that grows with every failed attempt.
-    Reinitialisation = 3,
-}
-
-impl SearchUnderWay {
-    /// The word used by `omnitrack listen --status`: `none`, `initialising`, `relocalising`,
-    /// `reinitialising`.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            SearchUnderWay::None => "none",
-            SearchUnderWay::Initialisation => "initialising",
-            SearchUnderWay::Relocalisation => "relocalising",
-            SearchUnderWay::Reinitialisation => "reinitialising",
-        }
-    }
-}
-
-impl From<SearchUnderWay> for u8 {
-    fn from(s: SearchUnderWay) -> u8 {
-        s as u8
-    }
-}
-
-impl TryFrom<u8> for SearchUnderWay {
-    /// The byte that is not a known kind of search.
-    type Error = u8;
-
-    fn try_from(v: u8) -> Result<Self, u8> {
-        match v {
-            0 => Ok(SearchUnderWay::None),
-            1 => Ok(SearchUnderWay::Initialisation),
-            2 => Ok(SearchUnderWay::Relocalisation),
-            3 => Ok(SearchUnderWay::Reinitialisation),
-            other => Err(other),
-        }
     }
 }
 
@@ -440,7 +292,7 @@ impl Stage {
 /// | --- | --- | --- |
 /// | 0 | `timestamp_ns` | u64 |
 /// | 8 | `sequence` | u64 |
-/// | 16 | `tracker_state` | u8 ([`PoseStatus`]) |
+/// | 16 | `tracker_state` | u8 ([`TrackerState`]) |
 /// | 17 | `sensor_count` | u8 |
 /// | 18 | `search` | u8 ([`SearchState`], then 1 byte padding) |
 /// | 20 | `frame_rate_hz` | [f32; 16] |
@@ -450,7 +302,7 @@ impl Stage {
 /// | 248 | `stage_p99_us` | [u32; 8] |
 /// | 280 | `source` | [u8; 32] |
 /// | 312 | `pid` | u32 |
-/// | 316 | `searching` | u8 ([`SearchUnderWay`]) |
+/// | 316 | `searching` | u8 ([`SearchKind::wire`]: 0 none) |
 /// | 317 | `reserved` | [u8; 3], zero |
 ///
 /// v2 (2026-11-27) put the search's state in what was v1's padding: same size, new name, since
@@ -465,7 +317,7 @@ pub struct StatusSample {
     pub timestamp_ns: u64,
     /// Status counter.
     pub sequence: u64,
-    /// [`PoseStatus`] byte of the tracker.
+    /// [`TrackerState`] byte of the tracker.
     pub tracker_state: u8,
     /// How many of the per-sensor slots are in use (≤ [`STATUS_MAX_SENSORS`]).
     pub sensor_count: u8,
@@ -487,7 +339,7 @@ pub struct StatusSample {
     pub source: [u8; STATUS_SOURCE_BYTES],
     /// The publishing tracker's process id.
     pub pid: u32,
-    /// [`SearchUnderWay`] byte: the search running now, if any.
+    /// [`SearchKind::wire`] byte: the search running now, if any (0: none).
     pub searching: u8,
     /// Zero; room for later fields of the same version's size.
     pub reserved: [u8; 3],
@@ -498,7 +350,7 @@ impl Default for StatusSample {
         StatusSample {
             timestamp_ns: 0,
             sequence: 0,
-            tracker_state: PoseStatus::Initializing as u8,
+            tracker_state: TrackerState::Initialising as u8,
             sensor_count: 0,
             search: SearchState::None as u8,
             frame_rate_hz: [0.0; STATUS_MAX_SENSORS],
@@ -508,7 +360,7 @@ impl Default for StatusSample {
             stage_p99_us: [0; STATUS_STAGES],
             source: [0; STATUS_SOURCE_BYTES],
             pid: 0,
-            searching: SearchUnderWay::None as u8,
+            searching: SearchKind::wire(None),
             reserved: [0; 3],
         }
     }

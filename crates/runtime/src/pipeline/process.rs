@@ -22,22 +22,21 @@ use omnitrack_core::model::Model;
 use omnitrack_core::rig::Rig;
 use omnitrack_edges::EdgeDetector;
 use omnitrack_io::publish::{
-    PosePublisher, PoseSample, PoseStatus, SearchState, SearchUnderWay, StatusPublisher, StatusSample,
-    STATUS_MAX_SENSORS,
+    PosePublisher, PoseSample, SearchState, StatusPublisher, StatusSample, TrackerState, STATUS_MAX_SENSORS,
 };
 use omnitrack_tracker::visibility::VisibilityTable;
-use omnitrack_tracker::{search_link, FrameResult, InitReport, SearchKind, Tracker, TrackerEvent, TrackerState};
+use omnitrack_tracker::{search_link, FrameResult, InitReport, SearchKind, Tracker, TrackerEvent};
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 /// Publish errors logged at `warn` before the rest are only counted.
 const WARN_LIMIT: u64 = 5;
 
-fn pose_status(r: &FrameResult) -> PoseStatus {
+fn pose_status(r: &FrameResult) -> TrackerState {
     match r.state {
-        TrackerState::Initializing => PoseStatus::Initializing,
-        TrackerState::Tracking if r.pose.is_some() => PoseStatus::Tracking,
-        TrackerState::Tracking | TrackerState::Lost => PoseStatus::Lost,
+        TrackerState::Initialising => TrackerState::Initialising,
+        TrackerState::Tracking if r.pose.is_some() => TrackerState::Tracking,
+        TrackerState::Tracking | TrackerState::Lost => TrackerState::Lost,
     }
 }
 
@@ -77,7 +76,7 @@ struct Processor<'a, 'o, 'm> {
     /// The last good pose's time and covariance, which the samples after it grow.
     last_good: Option<(u64, Matrix6<f64>)>,
     motion: MotionConfig,
-    last_state: PoseStatus,
+    last_state: TrackerState,
     first_frame: Option<Instant>,
     last_frame: Option<Instant>,
     poses_published: u64,
@@ -292,12 +291,7 @@ impl Processor<'_, '_, '_> {
             sensor_count: self.shared.sensors.len().min(STATUS_MAX_SENSORS) as u8,
             search: self.search as u8,
             search_widened_to_m: self.search_widened_to_m,
-            searching: match self.tracker.search_under_way() {
-                None => SearchUnderWay::None,
-                Some(SearchKind::Initialisation) => SearchUnderWay::Initialisation,
-                Some(SearchKind::Relocalisation) => SearchUnderWay::Relocalisation,
-                Some(SearchKind::Reinitialisation) => SearchUnderWay::Reinitialisation,
-            } as u8,
+            searching: SearchKind::wire(self.tracker.search_under_way()),
             ..self.status_source
         };
         for (k, c) in self.shared.sensors.iter().enumerate() {
@@ -346,11 +340,12 @@ impl Processor<'_, '_, '_> {
 
 /// What a search made of its volume, and the widened diameter (m), for the status.
 fn search_state(rep: &InitReport) -> (SearchState, f32) {
-    match rep.widened_to_m {
-        _ if rep.cells_in_volume == 0 => (SearchState::NoCells, 0.0),
-        Some(d) => (SearchState::Widened, d as f32),
-        None => (SearchState::AsGiven, 0.0),
-    }
+    let state = rep.search_state();
+    let widened = match state {
+        SearchState::Widened => rep.widened_to_m.unwrap_or(0.0) as f32,
+        _ => 0.0,
+    };
+    (state, widened)
 }
 
 /// The process thread's body. The publishers, the edge detector and the tracker are made here,
@@ -396,7 +391,7 @@ pub(super) fn run_process(
         last_pose: Pose::identity(),
         last_good: None,
         motion: cfg.motion.clone(),
-        last_state: PoseStatus::Initializing,
+        last_state: TrackerState::Initialising,
         first_frame: None,
         last_frame: None,
         poses_published: 0,

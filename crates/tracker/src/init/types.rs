@@ -7,6 +7,7 @@
 use nalgebra::Point3;
 use omnitrack_config::TrackerConfig;
 use omnitrack_core::geometry::Pose;
+use omnitrack_core::status::SearchState;
 use std::time::Duration;
 
 /// Tunables of [`Initialiser`](super::Initialiser) (from tracker.toml `[initialisation]` and the noise model).
@@ -154,4 +155,16 @@ pub struct InitReport {
     /// the nearest cell not yet looked at, where the next search of a sweep starts. `None`:
     /// every cell of the volume has been looked at.
     pub swept_to_m: Option<f64>,
+}
+
+impl InitReport {
+    /// What the search made of its volume, as the status message carries it: no cell at all,
+    /// widened to the nearest valid nodes ([`InitReport::widened_to_m`]), or as given.
+    pub fn search_state(&self) -> SearchState {
+        match self.widened_to_m {
+            _ if self.cells_in_volume == 0 => SearchState::NoCells,
+            Some(_) => SearchState::Widened,
+            None => SearchState::AsGiven,
+        }
+    }
 }

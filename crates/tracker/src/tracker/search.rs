@@ -1,4 +1,4 @@
-//! The searches' scheduling and the commit decision (the crate's doc, "States": Initializing
+//! The searches' scheduling and the commit decision (the crate's doc, "States": Initialising
 //! and Lost): which volume a search covers and with what budget and breadth, when its result is
 //! taken up (module [`background`](crate::background)), which of its candidates pass the
 //! acceptance test, and when the candidates weighed over the next frames are told apart well
@@ -56,7 +56,7 @@ impl<'m> Tracker<'m> {
         let pending = self.pending.as_ref()?;
         Some(if pending.relocalisation.is_some() {
             SearchKind::Relocalisation
-        } else if self.state == TrackerState::Initializing {
+        } else if self.state == TrackerState::Initialising {
             SearchKind::Initialisation
         } else {
             SearchKind::Reinitialisation
