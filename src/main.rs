@@ -150,4 +150,14 @@ mod tests {
             problems.join("\n")
         );
     }
+
+    /// Every `omnitrack` command the README gives is one the command line takes as written.
+    #[test]
+    fn the_readme_commands_are_ones_the_command_line_takes() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/README.md");
+        let readme = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{path}: {e}"));
+        let command = <super::Cli as clap::CommandFactory>::command();
+        let problems = omnitrack::runtime::cli::readme_mismatches(&command, "omnitrack", &readme);
+        assert!(problems.is_empty(), "README.md:\n{}", problems.join("\n"));
+    }
 }

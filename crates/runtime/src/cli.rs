@@ -199,6 +199,84 @@ fn long_options(synopsis: &str) -> BTreeSet<String> {
     out
 }
 
+/// The commands the README gives for `program` (`omnitrack` or `omnitrack-desk`) that clap
+/// does not take as written, one line each: every `cargo run … --` line of its code blocks
+/// (continued over a trailing `\\`) must parse whole; every `program …` span in backticks in its
+/// prose must name commands and options that exist (its arguments may be left out there, as
+/// in "`omnitrack-desk extrude`"). A README command that stopped working fails the binary's
+/// test, not a newcomer.
+pub fn readme_mismatches(command: &clap::Command, program: &str, readme: &str) -> Vec<String> {
+    let mut problems = Vec::new();
+    let mut check = |line: &str, args: &[&str], whole: bool| {
+        let argv = std::iter::once(program).chain(args.iter().copied());
+        if let Err(e) = command.clone().try_get_matches_from(argv) {
+            if matches!(e.kind(), ErrorKind::DisplayHelp | ErrorKind::DisplayVersion) {
+                return;
+            }
+            let partial = matches!(
+                e.kind(),
+                ErrorKind::MissingRequiredArgument | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand
+            );
+            if whole || !partial {
+                problems.push(format!("`{line}`: {}", usage_error_line(program, "", &e)));
+            }
+        }
+    };
+    // Code blocks: `cargo run [--release] [-p PKG --bin BIN] -- ARGS`.
+    let mut in_block = false;
+    let mut pending = String::new();
+    for raw in readme.lines() {
+        if raw.trim_start().starts_with("```") {
+            in_block = !in_block;
+            continue;
+        }
+        if !in_block {
+            continue;
+        }
+        let text = raw.split(" #").next().unwrap_or(raw).trim();
+        if let Some(head) = text.strip_suffix('\\') {
+            pending.push_str(head);
+            pending.push(' ');
+            continue;
+        }
+        pending.push_str(text);
+        let line = std::mem::take(&mut pending);
+        let Some((cargo, args)) = line.split_once(" -- ") else {
+            continue;
+        };
+        if !cargo.trim_start().starts_with("cargo run") {
+            continue;
+        }
+        let runs_desk = cargo.contains("--bin omnitrack-desk");
+        if runs_desk != (program == "omnitrack-desk") || cargo.contains("--bin") && !runs_desk {
+            continue;
+        }
+        let args: Vec<&str> = args.split_whitespace().collect();
+        check(&line, &args, true);
+    }
+    // Prose: `program ARGS` in backticks, possibly wrapped over lines.
+    let prose: String = readme.split_whitespace().collect::<Vec<_>>().join(" ");
+    for (k, span) in prose.split('`').enumerate() {
+        if k % 2 == 0 {
+            continue;
+        }
+        let mut words = span.split_whitespace();
+        if words.next() != Some(program) {
+            continue;
+        }
+        let args: Vec<&str> = words.collect();
+        if args.is_empty()
+            || args
+                .iter()
+                .any(|a| a.contains('|') || a.contains('…') || a.starts_with('['))
+        {
+            continue;
+        }
+        check(span, &args, false);
+    }
+    problems
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
