@@ -11,12 +11,20 @@
 //! Steps: cache directory → recording ([`cached_scenario`]) → model and visibility table
 //! ([`load_or_build_table`]) → tracking from a 3 m search volume around a point 1 m off the true
 //! start ([`track`]) → evaluation ([`eval::evaluate`]) → pictures ([`pictures`]).
+//!
+//! Files: the run here; module `cache` where the recording and pictures are kept, module
+//! `report` the printed table.
+
+mod cache;
+mod report;
 
 use crate::eval::{self, EvalError, EvalOptions, Evaluation};
 use crate::pictures::{self, CorrespondenceState, ErrorTrace, OmniOptions, PictureError, PlanOptions, StateTrace};
 use crate::recording::{cached_scenario, RecordingError, RecordingOptions};
 use crate::results::percentile;
 use crate::scenario::{Scenario, ScenarioName};
+pub use cache::CacheError;
+use cache::{cache_label, choose_cache_dir, create_dir, join};
 use indicatif::{ProgressBar, ProgressStyle};
 use nalgebra::{Point3, Vector3};
 use omnitrack_config::TrackerConfig;
@@ -185,105 +193,6 @@ pub enum DemoError {
     Evaluation(#[from] EvalError),
     #[error(transparent)]
     Picture(#[from] PictureError),
-}
-
-/// A directory that cannot serve as the cache.
-#[derive(Debug, thiserror::Error)]
-pub enum CacheError {
-    #[error("{}: cannot create directory: {source}", .dir.display())]
-    Create { dir: PathBuf, source: std::io::Error },
-    #[error("{}: not writable: {source}", .dir.display())]
-    NotWritable { dir: PathBuf, source: std::io::Error },
-}
-
-fn join(problems: &[CacheError]) -> String {
-    problems.iter().map(ToString::to_string).collect::<Vec<_>>().join("; ")
-}
-
-/// Where recordings and pictures are kept, and why there.
-fn choose_cache_dir(explicit: Option<&Path>) -> Result<(PathBuf, String), DemoError> {
-    if let Some(dir) = explicit {
-        prepare_cache(dir)?;
-        return Ok((dir.to_path_buf(), "as given".into()));
-    }
-    let env = |name: &str| std::env::var_os(name).filter(|v| !v.is_empty()).map(PathBuf::from);
-    if let Some(dir) = env("OMNITRACK_CACHE") {
-        // An explicit setting that does not work is an error to report, not to paper over.
-        prepare_cache(&dir).map_err(DemoError::CacheVariable)?;
-        return Ok((dir, "$OMNITRACK_CACHE".into()));
-    }
-    let mut candidates: Vec<(PathBuf, String)> = Vec::new();
-    if let Some(x) = env("XDG_CACHE_HOME").filter(|p| p.is_absolute()) {
-        candidates.push((x.join("omnitrack"), "$XDG_CACHE_HOME/omnitrack".into()));
-    }
-    if cfg!(windows) {
-        if let Some(l) = env("LOCALAPPDATA") {
-            candidates.push((l.join("omnitrack"), "%LOCALAPPDATA%\\omnitrack".into()));
-        }
-    } else if let Some(home) = env("HOME") {
-        if cfg!(target_os = "macos") {
-            candidates.push((
-                home.join("Library/Caches/omnitrack"),
-                "~/Library/Caches/omnitrack".into(),
-            ));
-        } else {
-            candidates.push((home.join(".cache/omnitrack"), "~/.cache/omnitrack".into()));
-        }
-    }
-    // The workspace root (this crate is crates/desk of it).
-    let tree = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../..")).canonicalize();
-    if let Ok(tree) = tree {
-        candidates.push((
-            tree.join("target/omnitrack-cache"),
-            "no user cache directory: the source tree's target/".into(),
-        ));
-    }
-    candidates.push((
-        std::env::temp_dir().join("omnitrack-cache"),
-        "no user cache directory: the temporary directory".into(),
-    ));
-    let mut problems = Vec::new();
-    for (dir, why) in candidates {
-        match prepare_cache(&dir) {
-            Ok(()) => return Ok((dir, why)),
-            Err(e) => problems.push(e),
-        }
-    }
-    Err(DemoError::NoCache { tried: problems })
-}
-
-/// Creates `dir` and checks it is writable by writing its cache tag, which also keeps backup
-/// tools out of it (https://bford.info/cachedir/).
-fn prepare_cache(dir: &Path) -> Result<(), CacheError> {
-    create_dir(dir)?;
-    std::fs::write(
-        dir.join("CACHEDIR.TAG"),
-        "Signature: 8a477f597d28d172789f06886806bc55\n# omnitrack demo cache: recordings, tables, pictures\n",
-    )
-    .map_err(|source| CacheError::NotWritable {
-        dir: dir.to_path_buf(),
-        source,
-    })
-}
-
-fn create_dir(dir: &Path) -> Result<(), CacheError> {
-    std::fs::create_dir_all(dir).map_err(|source| CacheError::Create {
-        dir: dir.to_path_buf(),
-        source,
-    })
-}
-
-/// The cache label of a scenario: its own plan if it is not the built-in one of its name, so
-/// that two different buildings never share a recording.
-fn cache_label(scenario: &Scenario) -> String {
-    if scenario.geojson == Scenario::get(scenario.name).geojson {
-        return "default".into();
-    }
-    // FNV-1a: stable across runs and platforms, unlike the std hasher.
-    let hash = scenario.geojson.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| {
-        (h ^ u64::from(b)).wrapping_mul(0x100_0000_01b3)
-    });
-    format!("plan{hash:016x}")
 }
 
 fn bar(show: bool, len: u64, template: &str) -> ProgressBar {
@@ -618,107 +527,4 @@ fn pick_frame(frames: &[u64], estimate: &[Stamped], total: u64) -> Option<(u64, 
         .zip(estimate)
         .min_by_key(|(f, _)| f.abs_diff(middle))
         .map(|(&f, s)| (f, s.pose))
-}
-
-impl fmt::Display for DemoReport {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        let excerpt = if self.frames_requested < self.paper_frames {
-            format!(
-                ", a {:.0} s excerpt of the paper's {}-frame sequence",
-                self.frames_requested as f64 / self.frame_rate_hz,
-                self.paper_frames
-            )
-        } else {
-            String::new()
-        };
-        writeln!(
-            f,
-            "omnitrack demo: the synthetic `{}` building, {} frames at {} Hz{excerpt} (seed {})",
-            self.scenario, self.frames_requested, self.frame_rate_hz, self.seed
-        )?;
-        writeln!(f, "cache:     {} ({})", self.cache_dir.display(), self.cache_origin)?;
-        writeln!(
-            f,
-            "recording: {} ({})",
-            self.recording_dir.display(),
-            if self.rendered_now { "rendered now" } else { "reused" }
-        )?;
-        writeln!(f, "table:     {}", self.table_origin)?;
-        let c = self.hint.centre;
-        writeln!(
-            f,
-            "start:     searched a {} m volume centred at ({:.2}, {:.2}, {:.2}), {:.1} m from the true start",
-            self.hint.diameter_m.unwrap_or(f64::NAN),
-            c.x,
-            c.y,
-            c.z,
-            (c - self.first_truth).norm()
-        )?;
-        writeln!(f)?;
-        let ms = |d: Option<Duration>| d.map_or("n/a".into(), |d| format!("{:.0}", d.as_secs_f64() * 1e3));
-        let pair = |p: Option<(f64, f64)>, scale: f64, digits: usize| {
-            p.map_or("n/a".into(), |(a, b)| {
-                format!("{:.digits$} / {:.digits$}", a * scale, b * scale)
-            })
-        };
-        let first = self
-            .first_pose_frame
-            .map_or(String::new(), |k| format!(" (first pose on frame {k})"));
-        let rows = [
-            ("frames", self.frames.to_string()),
-            (
-                "frames tracked",
-                format!(
-                    "{:.1} % on time ({} of {}), {:.1} % with the late poses",
-                    100.0 * self.tracked as f64 / self.frames.max(1) as f64,
-                    self.tracked,
-                    self.frames,
-                    100.0 * (self.tracked + self.late) as f64 / self.frames.max(1) as f64,
-                ),
-            ),
-            ("ATE position RMSE / max (cm)", pair(self.ate_position_m, 100.0, 2)),
-            ("ATE rotation RMSE / max (deg)", pair(self.ate_rotation_deg, 1.0, 3)),
-            ("initialisation (ms)", format!("{}{first}", ms(self.init_time))),
-            ("frames/s (edges + tracking)", format!("{:.1}", self.frames_per_s)),
-            (
-                "latency p50 / p99 (ms)",
-                format!("{:.1} / {:.1}", self.latency_p50_ms, self.latency_p99_ms),
-            ),
-            (
-                "re-initialisations",
-                format!(
-                    "{} ({} losses, {} relocalisations)",
-                    self.reinitialisations, self.losses, self.relocalisations
-                ),
-            ),
-        ];
-        for (name, value) in rows {
-            writeln!(f, "  {name:<31} {value}")?;
-        }
-        writeln!(
-            f,
-            "  (ATE with no alignment: both trajectories are in the model frame; speed excludes PNG decoding)"
-        )?;
-        writeln!(f)?;
-        writeln!(f, "pictures:")?;
-        for p in &self.pictures {
-            writeln!(f, "  {:<22} {}", p.name, p.path.display())?;
-        }
-        for s in &self.skipped {
-            writeln!(f, "  not drawn: {s}")?;
-        }
-        let t = &self.times;
-        let s = |d: Duration| d.as_secs_f64();
-        write!(
-            f,
-            "time: recording {:.1} s ({}), visibility table {:.1} s, tracking {:.1} s (with PNG decoding), \
-             pictures {:.1} s; total {:.1} s",
-            s(t.recording),
-            if self.rendered_now { "rendered" } else { "cached" },
-            s(t.table),
-            s(t.tracking),
-            s(t.pictures),
-            s(t.total)
-        )
-    }
 }
