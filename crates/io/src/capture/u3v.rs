@@ -77,8 +77,13 @@
 //! format at the sensor's size (3 bytes a pixel plus [`MAX_PADDING_X`] a line); pushing transfers
 //! and converting frames allocate nothing.
 
+mod pixel;
+mod reject;
+
 use super::convert::{self, BayerPattern, ConvertError, YuvOrder, YuvRange};
 use omnitrack_core::frame::ImageFault;
+pub use pixel::PixelFormat;
+pub use reject::RejectReason;
 use std::fmt;
 
 /// Leader magic `U3VL`, read little-endian.
@@ -100,175 +105,6 @@ pub const MAX_PADDING_X: usize = 256;
 
 /// The common first 16 bytes of a leader and a trailer.
 const PREFIX: usize = 16;
-
-/// Supported PFNC pixel formats.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum PixelFormat {
-    Mono8,
-    Rgb8,
-    Bgr8,
-    BayerGr8,
-    BayerRg8,
-    BayerGb8,
-    BayerBg8,
-    Yuv422_8,
-    Yuv422_8Uyvy,
-    YCbCr422_8,
-    YCbCr422_8CbYCrY,
-}
-
-impl PixelFormat {
-    /// Every supported format.
-    pub const ALL: [PixelFormat; 11] = [
-        PixelFormat::Mono8,
-        PixelFormat::Rgb8,
-        PixelFormat::Bgr8,
-        PixelFormat::BayerGr8,
-        PixelFormat::BayerRg8,
-        PixelFormat::BayerGb8,
-        PixelFormat::BayerBg8,
-        PixelFormat::Yuv422_8,
-        PixelFormat::Yuv422_8Uyvy,
-        PixelFormat::YCbCr422_8,
-        PixelFormat::YCbCr422_8CbYCrY,
-    ];
-
-    /// The PFNC code.
-    pub fn pfnc(self) -> u32 {
-        match self {
-            PixelFormat::Mono8 => 0x0108_0001,
-            PixelFormat::Rgb8 => 0x0218_0014,
-            PixelFormat::Bgr8 => 0x0218_0015,
-            PixelFormat::BayerGr8 => 0x0108_0008,
-            PixelFormat::BayerRg8 => 0x0108_0009,
-            PixelFormat::BayerGb8 => 0x0108_000A,
-            PixelFormat::BayerBg8 => 0x0108_000B,
-            PixelFormat::Yuv422_8 => 0x0210_0032,
-            PixelFormat::Yuv422_8Uyvy => 0x0210_001F,
-            PixelFormat::YCbCr422_8 => 0x0210_003B,
-            PixelFormat::YCbCr422_8CbYCrY => 0x0210_0043,
-        }
-    }
-
-    /// The supported format of a PFNC code, if any.
-    pub fn from_pfnc(code: u32) -> Option<PixelFormat> {
-        PixelFormat::ALL.into_iter().find(|f| f.pfnc() == code)
-    }
-
-    /// The PFNC name.
-    pub fn name(self) -> &'static str {
-        match self {
-            PixelFormat::Mono8 => "Mono8",
-            PixelFormat::Rgb8 => "RGB8",
-            PixelFormat::Bgr8 => "BGR8",
-            PixelFormat::BayerGr8 => "BayerGR8",
-            PixelFormat::BayerRg8 => "BayerRG8",
-            PixelFormat::BayerGb8 => "BayerGB8",
-            PixelFormat::BayerBg8 => "BayerBG8",
-            PixelFormat::Yuv422_8 => "YUV422_8",
-            PixelFormat::Yuv422_8Uyvy => "YUV422_8_UYVY",
-            PixelFormat::YCbCr422_8 => "YCbCr422_8",
-            PixelFormat::YCbCr422_8CbYCrY => "YCbCr422_8_CbYCrY",
-        }
-    }
-
-    /// Bytes of one pixel in the payload.
-    pub fn bytes_per_pixel(self) -> usize {
-        match self {
-            PixelFormat::Mono8
-            | PixelFormat::BayerGr8
-            | PixelFormat::BayerRg8
-            | PixelFormat::BayerGb8
-            | PixelFormat::BayerBg8 => 1,
-            PixelFormat::Yuv422_8
-            | PixelFormat::Yuv422_8Uyvy
-            | PixelFormat::YCbCr422_8
-            | PixelFormat::YCbCr422_8CbYCrY => 2,
-            PixelFormat::Rgb8 | PixelFormat::Bgr8 => 3,
-        }
-    }
-}
-
-impl fmt::Display for PixelFormat {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.name())
-    }
-}
-
-/// Why a block was not delivered.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum RejectReason {
-    /// Bytes that are neither a leader where one was expected nor a trailer where one was
-    /// expected (counted once per run of garbage).
-    WrongMagic,
-    /// A leader or trailer whose size field is too small for its fields or above [`HEADER_MAX`].
-    BadHeader,
-    /// A payload type other than image (`0x0001`).
-    UnsupportedPayloadType,
-    /// A pixel format not in [`PixelFormat`].
-    UnsupportedPixelFormat,
-    /// size_x / size_y not the sensor's, or the trailer's size_y not the leader's.
-    SizeMismatch,
-    /// The payload received, the payload the leader implies and the trailer's
-    /// valid_payload_size disagree (a truncated block, a missing trailer, a payload too large).
-    PayloadSizeMismatch,
-    /// The trailer's block id is not the leader's.
-    BlockIdMismatch,
-    /// The trailer reports a non-zero status.
-    TrailerStatus,
-}
-
-impl RejectReason {
-    /// Every reason, in the order of [`RejectReason::index`].
-    pub const ALL: [RejectReason; 8] = [
-        RejectReason::WrongMagic,
-        RejectReason::BadHeader,
-        RejectReason::UnsupportedPayloadType,
-        RejectReason::UnsupportedPixelFormat,
-        RejectReason::SizeMismatch,
-        RejectReason::PayloadSizeMismatch,
-        RejectReason::BlockIdMismatch,
-        RejectReason::TrailerStatus,
-    ];
-
-    /// Position in [`RejectReason::ALL`].
-    pub fn index(self) -> usize {
-        self as usize
-    }
-
-    /// Short human-readable name.
-    pub fn name(self) -> &'static str {
-        match self {
-            RejectReason::WrongMagic => "wrong magic",
-            RejectReason::BadHeader => "bad leader/trailer size",
-            RejectReason::UnsupportedPayloadType => "unsupported payload type",
-            RejectReason::UnsupportedPixelFormat => "unsupported pixel format",
-            RejectReason::SizeMismatch => "image size mismatch",
-            RejectReason::PayloadSizeMismatch => "payload size mismatch",
-            RejectReason::BlockIdMismatch => "block id mismatch",
-            RejectReason::TrailerStatus => "trailer status error",
-        }
-    }
-
-    /// The fault a source records for the sensor.
-    pub fn fault(self) -> ImageFault {
-        match self {
-            RejectReason::UnsupportedPayloadType | RejectReason::UnsupportedPixelFormat => ImageFault::WrongFormat,
-            RejectReason::SizeMismatch => ImageFault::WrongSize,
-            RejectReason::TrailerStatus => ImageFault::Dropped,
-            RejectReason::WrongMagic
-            | RejectReason::BadHeader
-            | RejectReason::PayloadSizeMismatch
-            | RejectReason::BlockIdMismatch => ImageFault::Corrupt,
-        }
-    }
-}
-
-impl fmt::Display for RejectReason {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.name())
-    }
-}
 
 /// What a stream parsed so far.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
