@@ -23,6 +23,36 @@
 //! the [`EdgeConfig`] (edges per sensor); [`EdgeDetector::detect`] allocates nothing. Sensors are
 //! spread over a persistent pool of worker threads (the calling thread works too) fed through
 //! bounded crossbeam channels.
+//!
+//! A bright square on a dark image from one 50° pinhole gives its four sides:
+//!
+//! ```
+//! use omnitrack_config::EdgeConfig;
+//! use omnitrack_core::{FrameSet, Rig};
+//! use omnitrack_edges::EdgeDetector;
+//!
+//! let rig = Rig::from_toml_str(
+//!     "name = \"one\"\n[[sensors]]\nid = 0\nresolution = [640, 480]\nmodel = \"pinhole\"\n\
+//!      intrinsics = [686.0, 686.0, 319.5, 239.5]\nrotation_wxyz = [0.5, -0.5, 0.5, -0.5]\n\
+//!      translation_m = [0.0, 0.0, 0.0]\n",
+//!     "one.toml",
+//! )?;
+//! let mut frame = FrameSet::for_rig(&rig);
+//! let image = frame.sensor_mut(0);
+//! for (k, px) in image.pixels_mut().chunks_mut(3).enumerate() {
+//!     let (x, y) = (k % 640, k / 640);
+//!     let inside = (220..420).contains(&x) && (140..340).contains(&y);
+//!     px.fill(if inside { 230 } else { 20 });
+//! }
+//! image.timestamp_ns = 1;
+//! image.valid = true;
+//! let mut detector = EdgeDetector::new(&rig, &EdgeConfig::default());
+//! let edges = detector.detect(&frame);
+//! // The square's sides, each about 200 px (16°) long.
+//! let long: Vec<_> = edges.iter().filter(|e| e.length_rad > 0.2).collect();
+//! assert_eq!(long.len(), 4, "{edges:?}");
+//! # Ok::<(), omnitrack_core::rig::RigError>(())
+//! ```
 
 mod contrario;
 mod gradient;

@@ -31,6 +31,38 @@
 //! `tracker::maintenance`); what a frame's answer holds (module `report`); the searches
 //! themselves (module [`init`]); the correspondence table of Figure 8 ([`correspondence`]); the
 //! visibility table ([`visibility`]); the search worker ([`background`]).
+//!
+//! The tracker on a recording's frames, from a 3 m hint (what `omnitrack run` does, without the
+//! threads and the publishers; `tests/tracker.rs` runs it on rendered recordings):
+//!
+//! ```no_run
+//! use nalgebra::Point3;
+//! use omnitrack_config::TrackerConfig;
+//! use omnitrack_core::{FrameSet, Model, Rig};
+//! use omnitrack_edges::EdgeDetector;
+//! use omnitrack_tracker::visibility::VisibilityTable;
+//! use omnitrack_tracker::{SearchVolume, Tracker};
+//! use std::path::Path;
+//!
+//! # fn frames() -> Vec<FrameSet> { Vec::new() }
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! let rig = Rig::load(Path::new("firmware_config/ladybug2.toml"))?;
+//! let model = Model::load(Path::new("office.obj"))?;
+//! let table = VisibilityTable::load(Path::new("office.vis"), &model)?;
+//! let cfg = TrackerConfig::load(Path::new("firmware_config/tracker.toml"))?;
+//! let hint = SearchVolume { centre: Point3::new(3.0, 13.0, 1.2), diameter_m: Some(3.0) };
+//! let mut tracker = Tracker::new(&rig, &model, &table, &cfg, Some(hint), 1);
+//! let mut detector = EdgeDetector::new(&rig, &cfg.edges);
+//! for frame in frames() {
+//!     let timestamp_ns = frame.sensors()[0].timestamp_ns;
+//!     let result = tracker.process(detector.detect(&frame), timestamp_ns);
+//!     if let Some(pose) = result.pose {
+//!         println!("{timestamp_ns} {:?} {:?}", result.state, pose.translation.vector);
+//!     }
+//! }
+//! # Ok(())
+//! # }
+//! ```
 
 pub mod background;
 pub mod correspondence;
