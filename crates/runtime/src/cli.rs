@@ -244,11 +244,12 @@ pub fn readme_mismatches(command: &clap::Command, program: &str, readme: &str) -
         let Some((cargo, args)) = line.split_once(" -- ") else {
             continue;
         };
-        if !cargo.trim_start().starts_with("cargo run") {
+        // The examples (`--example`) are programs of their own, not the binaries' commands.
+        if !cargo.trim_start().starts_with("cargo run") || cargo.contains("--example") {
             continue;
         }
         let runs_desk = cargo.contains("--bin omnitrack-desk");
-        if runs_desk != (program == "omnitrack-desk") || cargo.contains("--bin") && !runs_desk {
+        if runs_desk != (program == "omnitrack-desk") || (cargo.contains("--bin") && !runs_desk) {
             continue;
         }
         let args: Vec<&str> = args.split_whitespace().collect();
