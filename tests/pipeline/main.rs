@@ -39,8 +39,8 @@ use std::time::{Duration, Instant};
 
 // ---- allocation counting -------------------------------------------------------------------
 
-/// Counts, while `WINDOW` is open, every allocation of every thread of the process except those
-/// marked `EXEMPT` (the replay's capture thread: its PNG decoder allocates per image). Inside
+/// Counts, while `WINDOW` is open, every allocation of every thread of the process except the
+/// test harness's and those marked `EXEMPT` (the replay's capture thread: its PNG decoder allocates per image). Inside
 /// an iceoryx2 publish of the pipeline (`inside_publish`) they go to `PUBLISH_ALLOCS` instead.
 struct Counting;
 
@@ -53,7 +53,7 @@ thread_local! {
 }
 
 fn count_alloc() {
-    if !WINDOW.load(Ordering::Relaxed) || EXEMPT.try_with(Cell::get).unwrap_or(true) {
+    if !WINDOW.load(Ordering::Relaxed) || EXEMPT.try_with(Cell::get).unwrap_or(true) || common::on_harness_thread() {
         return;
     }
     if inside_publish() {
