@@ -608,7 +608,7 @@ fn steady_state_allocations_per_frame_are_constant_and_only_the_decoders() {
 }
 
 /// A recording reads only regular files inside its folder: paths with `..` or absolute ones are
-/// bad rows; a link out of the folder, a FIFO (which would block the read forever) and a device
+/// bad rows; a link out of the folder (the file itself, or a folder on its path), a FIFO (which would block the read forever) and a device
 /// (which never ends) are skipped images, counted and warned about, and the run goes on.
 #[test]
 fn a_recording_reads_nothing_outside_its_folder() {
@@ -619,11 +619,14 @@ fn a_recording_reads_nothing_outside_its_folder() {
     append_index(
         dir.path(),
         &format!(
-            "\n7,0,700,../{}\n7,1,700,{}\n",
+            "\n7,0,700,../{}\n7,1,700,{}\n8,0,800,outlink/{}\n",
             secret.file_name().unwrap().to_str().unwrap(),
-            secret.display()
+            secret.display(),
+            secret.file_name().unwrap().to_str().unwrap(),
         ),
     );
+    // Frame 8: sensor 0 a file inside a folder that is a link out of the recording.
+    std::os::unix::fs::symlink(outside.path(), dir.path().join("outlink")).unwrap();
     // Frame 1: sensor 0 a link out of the folder, sensor 1 a FIFO; frame 2: sensor 0 /dev/zero.
     let s0 = dir.path().join("sensor0");
     std::fs::remove_file(s0.join("000001.png")).unwrap();
@@ -641,8 +644,8 @@ fn a_recording_reads_nothing_outside_its_folder() {
     while source.next_frame(&mut frame).unwrap() {
         valid.push((frame.sensor(0).valid, frame.sensor(1).valid));
     }
-    assert_eq!(valid, vec![(true, true), (false, false), (false, true)]);
-    assert_eq!(source.stats().sensors[0].missing, 2);
+    assert_eq!(valid, vec![(true, true), (false, false), (false, true), (false, false)]);
+    assert_eq!(source.stats().sensors[0].missing, 3);
     assert_eq!(source.stats().sensors[1].missing, 1);
 }
 

@@ -327,7 +327,7 @@ impl fmt::Display for Problem {
         match self {
             Problem::Io(e) if e.kind() == io::ErrorKind::NotFound => f.write_str("file not found"),
             Problem::Io(e) => write!(f, "cannot read: {e}"),
-            Problem::Outside => f.write_str("a link to a file outside the recording, not followed"),
+            Problem::Outside => f.write_str("a path that leads outside the recording through a link, not followed"),
             Problem::NotAFile => f.write_str("not a regular file"),
             Problem::TooLarge(n) => write!(f, "{n} bytes, more than a PNG of the sensor's size can be"),
             Problem::Decode(e) => write!(f, "not a valid PNG: {e}"),
@@ -481,24 +481,22 @@ impl DeviceFrame {
 fn read_file(path: &Path, root: &Path, file_buf: &mut Vec<u8>, most: u64) -> Result<(), (ImageFault, Problem)> {
     file_buf.clear();
     let missing = |e| (ImageFault::Missing, Problem::Io(e));
-    // Only a regular file inside the recording: a link out of it, a FIFO (which would block the
-    // read) or a device (/dev/zero, which never ends) is refused before it is opened.
-    if std::fs::symlink_metadata(path)
-        .map_err(missing)?
-        .file_type()
-        .is_symlink()
-        && !std::fs::canonicalize(path).map_err(missing)?.starts_with(root)
-    {
+    // Only a regular file inside the recording. Every link on the path is resolved first (a
+    // folder of the recording linked to /etc leads out as surely as a linked file does), and
+    // what is opened is the resolved path that was checked. A FIFO (which would block the read)
+    // or a device (/dev/zero, which never ends) is refused before it is opened.
+    let real = std::fs::canonicalize(path).map_err(missing)?;
+    if !real.starts_with(root) {
         return Err((ImageFault::Missing, Problem::Outside));
     }
-    let meta = std::fs::metadata(path).map_err(missing)?;
+    let meta = std::fs::metadata(&real).map_err(missing)?;
     if !meta.is_file() {
         return Err((ImageFault::Missing, Problem::NotAFile));
     }
     if meta.len() > most {
         return Err((ImageFault::Corrupt, Problem::TooLarge(meta.len())));
     }
-    File::open(path)
+    File::open(&real)
         .and_then(|f| f.take(most).read_to_end(file_buf))
         .map_err(missing)?;
     Ok(())
