@@ -18,7 +18,7 @@
 //! | `desk` (feature `desk`) | `omnitrack-desk` | offline work: plans, renders, evaluation, demo |
 
 pub use omnitrack_config as config;
-pub use omnitrack_core::{frame, geometry, lines, model, rig, trajectory};
+pub use omnitrack_core::{frame, geometry, lines, model, rig, text_file, trajectory};
 pub use omnitrack_edges as edges;
 pub use omnitrack_io::{capture, publish};
 pub use omnitrack_runtime as runtime;

@@ -50,7 +50,8 @@ pub fn run(
         None => TrackerConfig::default().solver_options(),
     };
     let name = lines.display().to_string();
-    let text = std::fs::read_to_string(&lines).map_err(|e| format!("{name}: cannot read: {e}"))?;
+    let text = omnitrack::text_file::read_text(&lines, omnitrack::text_file::LARGE_FILE_LIMIT)
+        .map_err(|e| format!("{name}: cannot read: {e}"))?;
     let correspondences = omnitrack::lines::parse_lines(&text, &name, &rig)?;
     let solution = solver::solve(method, &correspondences, guess.as_ref(), &options, 0)
         .map_err(|e| format!("{name}: no pose: {e}"))?;

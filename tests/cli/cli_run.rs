@@ -173,8 +173,9 @@ fn a_closed_standard_output_ends_quietly() {
     }
 }
 
-/// A device or a FIFO given as an input file is refused at once: `/dev/zero` used to fill the
-/// memory and a FIFO to wait for a writer for ever.
+/// A device or a FIFO given as an input file of any command is refused at once: `/dev/zero`
+/// used to fill the memory and a FIFO to wait for a writer for ever (`pose --lines` and `edges`
+/// too, until 2026-11-29).
 #[test]
 fn devices_and_fifos_are_refused_as_input_files() {
     let dir = tempfile::tempdir().unwrap();
@@ -185,13 +186,19 @@ fn devices_and_fifos_are_refused_as_input_files() {
         .unwrap()
         .success());
     let fifo = fifo.to_str().unwrap();
-    for args in [
-        ["check", "--rig", "/dev/zero"],
-        ["check", "--model", "/dev/zero"],
-        ["check", "--config", fifo],
-        ["check", "--rig", fifo],
-    ] {
-        let (code, _, stderr) = omnitrack(&args);
+    let rig = crate::common::SHIPPED_RIG;
+    let args: [&[&str]; 8] = [
+        &["check", "--rig", "/dev/zero"],
+        &["check", "--model", "/dev/zero"],
+        &["check", "--config", fifo],
+        &["check", "--rig", fifo],
+        &["pose", "--rig", rig, "--lines", fifo],
+        &["pose", "--rig", rig, "--lines", "/dev/zero"],
+        &["edges", "--rig", rig, "--sensor", "0", fifo],
+        &["edges", "--rig", rig, "--sensor", "0", "/dev/zero"],
+    ];
+    for args in args {
+        let (code, _, stderr) = omnitrack(args);
         assert_eq!(code, 2, "{args:?}: {stderr}");
         assert!(stderr.trim_end().ends_with("not a regular file"), "{args:?}: {stderr}");
     }

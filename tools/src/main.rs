@@ -363,7 +363,8 @@ fn run(command: Command) -> Result<(), String> {
                 },
         } => {
             let file = camchain.display().to_string();
-            let yaml = std::fs::read_to_string(&camchain).map_err(|e| format!("{file}: cannot read: {e}"))?;
+            let yaml = omnitrack::text_file::read_text(&camchain, omnitrack::text_file::SMALL_FILE_LIMIT)
+                .map_err(|e| format!("{file}: cannot read: {e}"))?;
             let rig = omnitrack::desk::kalibr::rig_from_kalibr(&yaml, &file, &rig_name(name, &out), &rig_frame)
                 .map_err(|e| e.to_string())?;
             let header = format!(
@@ -384,7 +385,8 @@ fn run(command: Command) -> Result<(), String> {
         } => {
             use omnitrack::desk::opencv_calib::{rig_from_opencv, OpenCvModel};
             let shown = file.display().to_string();
-            let yaml = std::fs::read_to_string(&file).map_err(|e| format!("{shown}: cannot read: {e}"))?;
+            let yaml = omnitrack::text_file::read_text(&file, omnitrack::text_file::SMALL_FILE_LIMIT)
+                .map_err(|e| format!("{shown}: cannot read: {e}"))?;
             let model = match model {
                 OpenCvLens::Fisheye => OpenCvModel::Fisheye,
                 OpenCvLens::Default => OpenCvModel::Default,
@@ -427,7 +429,8 @@ fn run(command: Command) -> Result<(), String> {
         }
         Command::Extrude { plan, out } => {
             let plan_name = plan.display().to_string();
-            let text = std::fs::read_to_string(&plan).map_err(|e| format!("{plan_name}: cannot read: {e}"))?;
+            let text = omnitrack::text_file::read_text(&plan, omnitrack::text_file::LARGE_FILE_LIMIT)
+                .map_err(|e| format!("{plan_name}: cannot read: {e}"))?;
             let obj = floorplan::extrude(&text, &plan_name).map_err(|e| e.to_string())?;
             // Loading the result back is the check that matters: it is what the tracker will do.
             let out_name = out.display().to_string();
@@ -479,7 +482,8 @@ fn run(command: Command) -> Result<(), String> {
         } => {
             let rig = Rig::load(&rig).map_err(|e| e.to_string())?;
             let model_name = model.display().to_string();
-            let obj = std::fs::read_to_string(&model).map_err(|e| format!("{model_name}: cannot read: {e}"))?;
+            let obj = omnitrack::text_file::read_text(&model, omnitrack::text_file::LARGE_FILE_LIMIT)
+                .map_err(|e| format!("{model_name}: cannot read: {e}"))?;
             let trajectory = load_tum(&trajectory).map_err(|e| e.to_string())?;
             if trajectory.is_empty() {
                 return Err("the trajectory has no poses".into());

@@ -15,8 +15,9 @@ pub const SMALL_FILE_LIMIT: u64 = 16 << 20;
 /// Models, trajectories, frame indexes: a model of a whole campus is tens of megabytes.
 pub const LARGE_FILE_LIMIT: u64 = 4 << 30;
 
-/// The text of the regular file at `path`, if it has at most `limit` bytes.
-pub fn read_text(path: &Path, limit: u64) -> Result<String, Error> {
+/// The size of the regular file at `path`, if it has at most `limit` bytes; an error saying why
+/// not otherwise (for inputs that are not text, such as images, read by their own decoders).
+pub fn regular_file_len(path: &Path, limit: u64) -> Result<u64, Error> {
     let meta = std::fs::metadata(path)?;
     if !meta.is_file() {
         return Err(Error::new(ErrorKind::InvalidInput, "not a regular file"));
@@ -30,7 +31,13 @@ pub fn read_text(path: &Path, limit: u64) -> Result<String, Error> {
             ),
         ));
     }
-    let mut text = String::with_capacity(meta.len() as usize);
+    Ok(meta.len())
+}
+
+/// The text of the regular file at `path`, if it has at most `limit` bytes.
+pub fn read_text(path: &Path, limit: u64) -> Result<String, Error> {
+    let len = regular_file_len(path, limit)?;
+    let mut text = String::with_capacity(len as usize);
     // `take`: a file that grows while it is read still stops at the limit.
     std::fs::File::open(path)?.take(limit).read_to_string(&mut text)?;
     Ok(text)

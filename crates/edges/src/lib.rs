@@ -581,6 +581,10 @@ pub fn edges_csv_for_image(
         path: path.to_path_buf(),
         source,
     };
+    // Only a regular file no larger than any image of the sensor's size can be (4 bytes a pixel
+    // and 1 MiB): a FIFO would block the read for ever, and /dev/zero never ends.
+    let most = 4 * u64::from(s.width) * u64::from(s.height) + (1 << 20);
+    omnitrack_core::text_file::regular_file_len(path, most).map_err(|e| unreadable(image::ImageError::IoError(e)))?;
     let reader = || {
         image::ImageReader::open(path)
             .map_err(|e| unreadable(image::ImageError::IoError(e)))?
