@@ -116,6 +116,53 @@ fn a_short_replay_writes_a_tum_trajectory_near_the_truth() {
         let d = (e.pose.translation.vector - g.pose.translation.vector).norm();
         assert!(d < 0.15, "{d} m off at {}", e.timestamp_ns);
     }
+
+    // The disk fills up mid-run (a file size limit, its signal ignored as a full disk sends
+    // none): the trajectory ends at its last whole line, the run goes on and says so.
+    let cut = dir.path().join("cut.tum");
+    let limit = std::fs::metadata(&out).unwrap().len() / 2;
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_omnitrack"));
+    child.args([
+        "run",
+        "--model",
+        rec.join("model.obj").to_str().unwrap(),
+        "--source",
+        &format!("replay:{}", rec.display()),
+        "--init",
+        &init,
+        "--trajectory",
+        cut.to_str().unwrap(),
+        "--no-publish",
+    ]);
+    // SAFETY: between fork and exec the closure only makes two async-signal-safe system calls.
+    unsafe {
+        use std::os::unix::process::CommandExt;
+        child.pre_exec(move || {
+            let most = libc::rlimit {
+                rlim_cur: limit,
+                rlim_max: limit,
+            };
+            libc::setrlimit(libc::RLIMIT_FSIZE, &most);
+            libc::signal(libc::SIGXFSZ, libc::SIG_IGN);
+            Ok(())
+        });
+    }
+    let run = child.output().unwrap();
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert_eq!(run.status.code(), Some(0), "{stderr}");
+    let text = std::fs::read_to_string(&cut).unwrap();
+    assert!(text.ends_with('\n') && text.len() as u64 <= limit, "{text:?}");
+    let kept = load_tum(&cut).unwrap();
+    assert!(
+        !kept.is_empty() && kept.len() < est.len(),
+        "{} of {}",
+        kept.len(),
+        est.len()
+    );
+    assert!(
+        stderr.contains(&format!("the trajectory stops at its {} poses", kept.len())),
+        "{stderr}"
+    );
 }
 
 /// A hint whose volume holds no valid node (20 m above the lab) is searched out to the nearest

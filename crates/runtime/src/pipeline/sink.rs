@@ -10,7 +10,7 @@ use super::shared::Shared;
 use super::PipelineThread;
 use crate::{FrameRecord, SinkError};
 use crossbeam::channel::Receiver;
-use std::io::Write as _;
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::Ordering;
 
@@ -71,6 +71,25 @@ pub struct TumSink {
     synced: std::time::Instant,
     /// Set when a write failed: nothing more is written.
     failed: bool,
+    /// Bytes of the file that hold whole lines (the header and every pose written).
+    whole: u64,
+}
+
+/// Counts the bytes written through it (a TUM line's length, without formatting it twice).
+struct Counted<'a, W: Write> {
+    inner: &'a mut W,
+    bytes: u64,
+}
+
+impl<W: Write> Write for Counted<'_, W> {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let n = self.inner.write(buf)?;
+        self.bytes += n as u64;
+        Ok(n)
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.inner.flush()
+    }
 }
 
 impl TumSink {
@@ -83,7 +102,8 @@ impl TumSink {
         };
         let f = std::fs::File::create(path).map_err(|e| failed("create", e))?;
         let mut out = std::io::BufWriter::with_capacity(4 << 10, f);
-        writeln!(out, "# timestamp_s tx ty tz qx qy qz qw (T_world_rig)")
+        const HEADER: &str = "# timestamp_s tx ty tz qx qy qz qw (T_world_rig)\n";
+        out.write_all(HEADER.as_bytes())
             .and_then(|()| out.flush())
             .map_err(|e| failed("write", e))?;
         Ok(TumSink {
@@ -94,6 +114,7 @@ impl TumSink {
             last_ns: None,
             synced: std::time::Instant::now(),
             failed: false,
+            whole: HEADER.len() as u64,
         })
     }
 
@@ -112,8 +133,18 @@ impl TumSink {
         self.failed
     }
 
+    /// Stops the trajectory at its last whole line: a write cut short by a full disk leaves part
+    /// of a line in the file (and in the buffer, which would be written again when dropped), and
+    /// a reader of the file would stumble on it. The buffer is dropped unwritten and the file
+    /// truncated to its whole lines.
     fn stop_writing(&mut self, source: std::io::Error) {
         self.failed = true;
+        if let Ok(clone) = self.out.get_ref().try_clone() {
+            let cut = std::mem::replace(&mut self.out, std::io::BufWriter::with_capacity(0, clone));
+            let (file, _unwritten) = cut.into_parts();
+            // A file that cannot even be truncated keeps its cut line; the reader skips it.
+            let _ = file.set_len(self.whole);
+        }
         let e = TrajectoryFileError {
             path: self.path.clone(),
             action: "write",
@@ -142,12 +173,20 @@ impl FrameSink for TumSink {
             timestamp_ns: r.timestamp_ns,
             pose: *pose,
         };
-        let written = omnitrack_core::trajectory::write_tum_line(&mut self.out, &stamped)
-            .and_then(|()| writeln!(self.out))
-            .and_then(|()| self.out.flush());
-        if let Err(e) = written {
-            self.stop_writing(e);
-            return Ok(());
+        let mut line = Counted {
+            inner: &mut self.out,
+            bytes: 0,
+        };
+        let written = omnitrack_core::trajectory::write_tum_line(&mut line, &stamped)
+            .and_then(|()| writeln!(line))
+            .map(|()| line.bytes)
+            .and_then(|bytes| self.out.flush().map(|()| bytes));
+        match written {
+            Ok(bytes) => self.whole += bytes,
+            Err(e) => {
+                self.stop_writing(e);
+                return Ok(());
+            }
         }
         self.poses += 1;
         self.last_ns = Some(r.timestamp_ns);
@@ -279,6 +318,7 @@ mod tests {
             last_ns: None,
             synced: std::time::Instant::now(),
             failed: false,
+            whole: 0,
         };
         for t in [10, 20, 30] {
             assert!(sink.frame(&tracked(t)).is_ok());
