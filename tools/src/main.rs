@@ -504,6 +504,9 @@ fn run(command: Command) -> Result<(), String> {
                 rpe_delta,
             };
             let evaluation = evaluate_files(&gt, &est, &options).map_err(|e| e.to_string())?;
+            for cut in &evaluation.cut_lines {
+                eprintln!("omnitrack-desk: {cut}");
+            }
             if json {
                 println!("{}", eval_json(&evaluation));
             } else {

@@ -24,7 +24,7 @@
 
 use nalgebra::{Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
 use omnitrack_core::geometry::Pose;
-use omnitrack_core::trajectory::{load_tum, Stamped, TumError};
+use omnitrack_core::trajectory::{load_tum_whole_lines, Stamped, TumError};
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -162,6 +162,8 @@ pub struct Evaluation {
     pub ate: ErrorSeries,
     /// `None` when fewer than `rpe_delta + 1` poses were associated.
     pub rpe: Option<ErrorSeries>,
+    /// Lines left out of the files read: a last line cut off by its writer (a full disk).
+    pub cut_lines: Vec<TumError>,
 }
 
 /// Pairs `(gt index, est index)` of poses whose timestamps match within `max_diff_s`, as evo
@@ -345,18 +347,21 @@ pub fn evaluate(gt: &[Stamped], est: &[Stamped], options: &EvalOptions) -> Resul
         alignment,
         ate,
         rpe,
+        cut_lines: Vec::new(),
     })
 }
 
 /// Reads two TUM files and compares them; errors name both files.
 pub fn evaluate_files(gt: &Path, est: &Path, options: &EvalOptions) -> Result<Evaluation, EvalError> {
-    let gt_traj = load_tum(gt)?;
-    let est_traj = load_tum(est)?;
-    evaluate(&gt_traj, &est_traj, options).map_err(|e| EvalError::Files {
+    let (gt_traj, gt_cut) = load_tum_whole_lines(gt)?;
+    let (est_traj, est_cut) = load_tum_whole_lines(est)?;
+    let mut evaluation = evaluate(&gt_traj, &est_traj, options).map_err(|e| EvalError::Files {
         gt: gt.display().to_string(),
         est: est.display().to_string(),
         source: Box::new(e),
-    })
+    })?;
+    evaluation.cut_lines.extend(gt_cut.into_iter().chain(est_cut));
+    Ok(evaluation)
 }
 
 impl Evaluation {

@@ -84,6 +84,32 @@ pub fn load_tum(path: &Path) -> Result<Trajectory, TumError> {
     parse_tum(&text, &file)
 }
 
+/// Reads a TUM file that its writer may have cut short (a full disk, a killed process): a last
+/// line without its newline that does not parse is left out and returned as the note saying so.
+/// Every other line must parse, as in [`load_tum`]: a bad line in the middle is a wrong file, not
+/// a cut one.
+pub fn load_tum_whole_lines(path: &Path) -> Result<(Trajectory, Option<TumError>), TumError> {
+    let file = path.display().to_string();
+    let text = crate::text_file::read_text(path, crate::text_file::LARGE_FILE_LIMIT).map_err(|e| TumError {
+        file: file.clone(),
+        line: None,
+        message: format!("cannot read trajectory: {e}"),
+    })?;
+    match parse_tum(&text, &file) {
+        Ok(t) => Ok((t, None)),
+        Err(e) if !text.ends_with('\n') && e.line == Some(text.lines().count()) => {
+            let whole = &text[..text.rfind('\n').map_or(0, |i| i + 1)];
+            let t = parse_tum(whole, &file)?;
+            let note = TumError {
+                message: format!("the last line is cut off (no newline: {}); left out", e.message),
+                ..e
+            };
+            Ok((t, Some(note)))
+        }
+        Err(e) => Err(e),
+    }
+}
+
 /// Seconds written as a decimal (up to 9 places kept exactly) to nanoseconds.
 fn parse_seconds(s: &str) -> Option<u64> {
     let (whole, frac) = s.split_once('.').unwrap_or((s, ""));
@@ -143,6 +169,34 @@ pub fn to_tum_string(trajectory: &[Stamped]) -> String {
 mod tests {
     use super::*;
     use nalgebra::{Isometry3, Vector3};
+
+    /// A last line cut off by its writer (no newline, does not parse) is left out and noted; a
+    /// bad line anywhere else, or a last line that is whole, is still an error.
+    #[test]
+    fn a_cut_off_last_line_is_left_out_and_said() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("t.tum");
+        let line = |k: u64| format!("{k}.5 1 2 3 0 0 0 1\n");
+        let whole: String = (0..3).map(line).collect();
+        for (text, poses, noted) in [
+            (whole.clone(), Some(3), false),
+            (format!("{whole}3.5 1 2"), Some(3), true),
+            (format!("{whole}3.5 1 2\n"), None, false),
+            (format!("{}x\n{}", line(0), line(1)), None, false),
+        ] {
+            std::fs::write(&path, &text).unwrap();
+            match load_tum_whole_lines(&path) {
+                Ok((t, note)) => {
+                    assert_eq!((Some(t.len()), note.is_some()), (poses, noted), "{text:?}");
+                    if let Some(n) = note {
+                        assert_eq!(n.line, Some(4));
+                        assert!(n.to_string().contains("cut off"), "{n}");
+                    }
+                }
+                Err(e) => assert_eq!(poses, None, "{text:?}: {e}"),
+            }
+        }
+    }
 
     #[test]
     fn round_trip_keeps_nanoseconds_and_poses() {
