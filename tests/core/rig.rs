@@ -179,6 +179,11 @@ fn bad_rig_files_name_the_file_the_sensor_and_the_key() {
             "rig.toml: sensor 1, key 'resolution': must be two positive whole pixel counts",
         ),
         (
+            // `check` passed it and `run` aborted allocating 51 GB for its edge stage.
+            edit("[512, 384]", "[65535, 65535]"),
+            "rig.toml: sensor 1, key 'resolution': 65535×65535 is 4294836225 pixels, more than a sensor can have",
+        ),
+        (
             edit("model = \"kb4\"\n", ""),
             "rig.toml: sensor 1, key 'model': missing",
         ),

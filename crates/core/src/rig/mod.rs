@@ -16,6 +16,10 @@ use std::fmt::Write as _;
 use std::path::Path;
 use toml::{Table, Value};
 
+/// The most pixels one sensor's image may have (8192 × 8192: twice a 32-megapixel
+/// equirectangular panorama); the stages' buffers are sized by it.
+pub const MAX_SENSOR_PIXELS: u64 = 1 << 26;
+
 /// One camera of the rig.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Sensor {
@@ -311,6 +315,19 @@ fn parse_sensor(entry: &Value, index: usize, count: usize) -> Result<Sensor, Pla
         return Err(fail(
             "resolution",
             format!("must be two positive whole pixel counts, found {resolution:?}"),
+        ));
+    }
+    // Every stage sizes its buffers by the sensors' pixels (the edge stage about a dozen bytes a
+    // pixel): a sensor larger than any camera makes is refused here, before a run allocates for
+    // it and aborts.
+    let pixels = resolution[0] * resolution[1];
+    if pixels > MAX_SENSOR_PIXELS as f64 {
+        return Err(fail(
+            "resolution",
+            format!(
+                "{}×{} is {pixels} pixels, more than a sensor can have here ({MAX_SENSOR_PIXELS}, 8192×8192)",
+                resolution[0], resolution[1]
+            ),
         ));
     }
     let model = match t.get("model") {
