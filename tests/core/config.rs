@@ -105,6 +105,15 @@ fn bad_values_name_the_key() {
             "[visibility]\ncube_map_resolution = 100000\n",
             "key 'visibility.cube_map_resolution': must be at most 4096",
         ),
+        // 40 frames took 100 s instead of 2 with this accepted.
+        (
+            "[solver]\nmax_iterations = 4000000000\n",
+            "key 'solver.max_iterations': must be at most 1000",
+        ),
+        (
+            "[solver]\nlms_subset_size = 40\n",
+            "key 'solver.lms_subset_size': must be at most 12",
+        ),
     ];
     for (text, expected) in cases {
         let e = TrackerConfig::from_toml_str(text, "tracker.toml")

@@ -219,6 +219,12 @@ impl TrackerConfig {
             return Err("key 'visibility.node_heights_m': must be a non-empty list of finite heights".into());
         }
         at_least("solver.max_iterations", s.max_iterations, 1)?;
+        at_most(
+            "solver.max_iterations",
+            f64::from(s.max_iterations),
+            1000.0,
+            "the solves converge in tens, and every frame may run one to its limit",
+        )?;
         positive("solver.convergence_rad", s.convergence_rad)?;
         if ![12, 24, 60].contains(&s.initial_rotation_samples) {
             return Err(format!(
@@ -227,6 +233,12 @@ impl TrackerConfig {
             ));
         }
         at_least("solver.lms_subset_size", s.lms_subset_size, 3)?;
+        at_most(
+            "solver.lms_subset_size",
+            f64::from(s.lms_subset_size),
+            12.0,
+            "the number of subsets drawn grows as (1 - outliers)^-size",
+        )?;
         open_unit("solver.lms_success_probability", s.lms_success_probability)?;
         open_unit("solver.lms_outlier_fraction", s.lms_outlier_fraction)?;
         positive("solver.lms_outlier_threshold", s.lms_outlier_threshold)?;
