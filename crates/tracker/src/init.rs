@@ -132,9 +132,12 @@
 //!
 //! **The whole model** (start-up without a hint, over a thousand cells in `lab`) deals its cells
 //! to [`LANES`] lanes, each with its own per-cell buffers, its share of the work budget and a
-//! generator seeded per cell; up to one thread per core runs the lanes. What each lane searches
-//! is fixed by the dealing alone, so the answer does not depend on the number of cores or on
-//! how the threads were scheduled.
+//! generator seeded per cell; up to one thread per core runs the lanes. The grid's scan, three
+//! quarters of such a search, is dealt out the same way (module `grid_scan`): its plan cells,
+//! nearest first, in turn to the lanes, each with its own buffers, keep-best lists and an equal
+//! share of the scan's budget, the lists merged in lane order. What each lane searches is
+//! fixed by the dealing alone, so the answer does not depend on the number of cores
+//! ([`Initialiser::set_threads`]) or on how the threads were scheduled.
 //!
 //! Fixed memory: all tables are sized in [`Initialiser::new`]. A bounded volume (a hint, a
 //! re-initialisation, a relocalisation) is searched on the calling thread and allocates nothing;

@@ -11,7 +11,7 @@
 //!
 //! **Lanes.** A bounded volume is scanned on the calling thread in one lane. The whole model
 //! (three quarters of a search without a hint, over a thousand cells) is dealt out as the
-//! triplets' cells are: cell k (nearest first) to lane k mod [`LANES`](super::LANES), each lane with its own
+//! triplets' cells are: cell k (nearest first) to lane k mod [`LANES`], each lane with its own
 //! buffers ([`GridLane`]) and an equal share of the scan's budget, up to one thread per core
 //! running the lanes. Each lane's scores and keep-best lists depend only on the cells dealt to
 //! it, and the lists are merged in lane order, so the answer depends neither on the number of
@@ -25,7 +25,7 @@
 use super::scoring::length_share;
 #[cfg(debug_assertions)]
 use super::scoring::support_of;
-use super::{work, GridBest, Initialiser, SearchVolume, FULL_COVER, GRID_SEGMENTS, VOTE_EDGES};
+use super::{work, GridBest, Initialiser, SearchVolume, FULL_COVER, GRID_SEGMENTS, LANES, VOTE_EDGES};
 use crate::edge_index::EdgeIndex;
 #[cfg(debug_assertions)]
 use crate::matching::best_edge_and_cover;
@@ -142,7 +142,7 @@ pub(super) struct GridSweep {
 impl Initialiser<'_> {
     /// Scores the lattice's positions of the plan cells from `first` on (nearest first) within
     /// `scan_limit` work units in all (what the run has spent included), into
-    /// `self.grid_best`: in one lane for a bounded volume, in [`LANES`](super::LANES) for the whole model.
+    /// `self.grid_best`: in one lane for a bounded volume, in [`LANES`] for the whole model.
     pub(super) fn scan_grid(
         &mut self,
         grid: &GridLattice,
@@ -150,9 +150,7 @@ impl Initialiser<'_> {
         first: usize,
         scan_limit: u64,
     ) -> GridSweep {
-        // One lane for now, whatever the volume: dealing the whole model's cells out is the
-        // next step.
-        let lanes = 1;
+        let lanes = if volume.diameter_m.is_none() { LANES } else { 1 };
         let lane_limit = scan_limit.saturating_sub(self.work) / lanes as u64;
         let mut all = std::mem::take(&mut self.grid_lanes);
         let used = &mut all[..lanes];
