@@ -44,8 +44,6 @@ pub struct EdgeIndex {
     /// Scratch of the counting sort: each edge's bucket.
     key: Vec<u32>,
     sensors: usize,
-    /// Edges handed out by [`Self::near`] since [`Self::build`]: the work a caller charges.
-    visited: u64,
 }
 
 /// The bucket of a unit normal (taken with n_z ≥ 0).
@@ -69,7 +67,6 @@ impl EdgeIndex {
             start: vec![0; sensors * BUCKETS + 1],
             key: Vec::with_capacity(max_edges.min(1 << 16)),
             sensors,
-            visited: 0,
         }
     }
 
@@ -78,7 +75,6 @@ impl EdgeIndex {
     pub fn build(&mut self, edges: &[Edge]) {
         self.start.fill(0);
         self.key.clear();
-        self.visited = 0;
         for e in edges.iter().take(self.key.capacity()) {
             let s = e.sensor as usize;
             let k = if s < self.sensors {
@@ -114,11 +110,12 @@ impl EdgeIndex {
 
     /// Calls `f` with the index of every edge of `sensor` whose plane normal is within the
     /// angle whose cosine is `cos_gate` of `m` or of −m (`m` unit length), and perhaps a few
-    /// more: the caller applies its own test.
+    /// more: the caller applies its own test. Returns how many edges it handed out. Only reads
+    /// the index, so that the threads of a search can share one.
     #[inline]
-    pub fn near(&mut self, sensor: usize, m: &Vector3<f64>, cos_gate: f64, mut f: impl FnMut(usize)) {
+    pub fn near(&self, sensor: usize, m: &Vector3<f64>, cos_gate: f64, mut f: impl FnMut(usize)) -> u64 {
         if sensor >= self.sensors {
-            return;
+            return 0;
         }
         let m = if m.z < 0.0 { -m } else { *m };
         let chord = (2.0 - 2.0 * cos_gate.clamp(-1.0, 1.0)).max(0.0).sqrt();
@@ -150,23 +147,14 @@ impl EdgeIndex {
             }
         };
         let half = if r <= chord { PI } else { (chord / r).min(1.0).asin() };
-        visit(az - half, az + half, &self.start, &self.order, &mut self.visited);
+        let mut visited = 0;
+        visit(az - half, az + half, &self.start, &self.order, &mut visited);
         // Near the horizon the plane may match −m, whose canonical azimuth is the opposite
         // (unless the first window already went all the way round).
         if m.z <= chord && half < PI {
-            visit(
-                az + PI - half,
-                az + PI + half,
-                &self.start,
-                &self.order,
-                &mut self.visited,
-            );
+            visit(az + PI - half, az + PI + half, &self.start, &self.order, &mut visited);
         }
-    }
-
-    /// Edges handed out by [`Self::near`] since the last [`Self::build`].
-    pub fn visited(&self) -> u64 {
-        self.visited
+        visited
     }
 }
 
@@ -238,7 +226,7 @@ mod tests {
         }
         let mut index = EdgeIndex::new(1024, 3);
         index.build(&edges);
-        let mut total_visited = 0;
+        let (mut total_visited, mut counted) = (0, 0);
         for q in 0..2000 {
             let m = match q % 4 {
                 0 => Vector3::new(
@@ -253,7 +241,7 @@ mod tests {
             let sensor = q % 3;
             let gate: f64 = [2.0f64, 6.0, 12.0][q % 3].to_radians();
             let mut seen = vec![0u32; edges.len()];
-            index.near(sensor, &m, gate.cos(), |i| seen[i] += 1);
+            counted += index.near(sensor, &m, gate.cos(), |i| seen[i] += 1);
             for (i, e) in edges.iter().enumerate() {
                 let passes = e.sensor as usize == sensor && m.dot(&e.plane.normal).abs() >= gate.cos();
                 assert!(seen[i] <= 1, "edge {i} handed out {} times", seen[i]);
@@ -267,6 +255,6 @@ mod tests {
         }
         // Far fewer than all of a sensor's edges per query.
         assert!(total_visited < 2000 * 200 / 4, "visited {total_visited}");
-        assert_eq!(index.visited(), u64::from(total_visited));
+        assert_eq!(counted, u64::from(total_visited));
     }
 }

@@ -132,9 +132,12 @@
 //!
 //! **The whole model** (start-up without a hint, over a thousand cells in `lab`) deals its cells
 //! to [`LANES`] lanes, each with its own per-cell buffers, its share of the work budget and a
-//! generator seeded per cell; up to one thread per core runs the lanes. What each lane searches
-//! is fixed by the dealing alone, so the answer does not depend on the number of cores or on
-//! how the threads were scheduled.
+//! generator seeded per cell; up to one thread per core runs the lanes. The grid's scan, three
+//! quarters of such a search, is dealt out the same way (module `grid_scan`): its plan cells,
+//! nearest first, in turn to the lanes, each with its own buffers, keep-best lists and an equal
+//! share of the scan's budget, the lists merged in lane order. What each lane searches is
+//! fixed by the dealing alone, so the answer does not depend on the number of cores
+//! ([`Initialiser::set_threads`]) or on how the threads were scheduled.
 //!
 //! Fixed memory: all tables are sized in [`Initialiser::new`]. A bounded volume (a hint, a
 //! re-initialisation, a relocalisation) is searched on the calling thread and allocates nothing;
@@ -147,6 +150,7 @@ use super::vanishing::{VanishingDirections, MAX_ROTATIONS};
 use super::vote::{TranslationVote, PEAKS};
 use crate::visibility::at_pose::PoseVisibility;
 use crate::visibility::VisibilityTable;
+use grid_scan::{GridLane, MeritScratch};
 use nalgebra::{Point3, UnitQuaternion, Vector3};
 use omnitrack_core::geometry::{Correspondence, Pose};
 use omnitrack_core::model::Model;
@@ -159,6 +163,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+mod grid_scan;
 mod run;
 mod scoring;
 mod translation;
@@ -307,10 +312,13 @@ pub struct Initialiser<'m> {
     /// `vote_edges` by the direction of their planes (module `edge_index`): the grid's scores
     /// match each segment against the edges that can pass its gate, not against all.
     vote_index: EdgeIndex,
-    /// Per vote edge: explained by a predicted segment ([`Self::coarse_merit`]).
-    vote_explained: [bool; VOTE_EDGES],
-    /// Calls of [`Self::coarse_merit`] (debug builds check some against all pairs).
-    merit_calls: u64,
+    /// The scratch of [`Self::coarse_merit`] on the calling thread (the climbs).
+    merit: MeritScratch,
+    /// The grid scan's lanes (module `grid_scan`): one for a bounded volume, [`LANES`] for the
+    /// whole model.
+    grid_lanes: Vec<GridLane>,
+    /// At most this many threads run the whole model's lanes (`None`: one per core).
+    threads: Option<usize>,
     /// Rotation hypotheses from vanishing directions (module `vanishing`).
     vanishing: VanishingDirections,
     /// The floors: the rig stands in a band above the one beneath it.
@@ -395,8 +403,9 @@ impl<'m> Initialiser<'m> {
             vote: TranslationVote::new(model.segments.len()),
             vote_edges: heapless::Vec::new(),
             vote_index: EdgeIndex::new(VOTE_EDGES, rig.sensors.len().min(crate::matching::MAX_SENSORS)),
-            vote_explained: [false; VOTE_EDGES],
-            merit_calls: 0,
+            merit: MeritScratch::new(max_set),
+            grid_lanes: (0..LANES).map(|_| GridLane::new(model)).collect(),
+            threads: None,
             vanishing: VanishingDirections::new(model, max_edges),
             floors,
             grid_best: std::array::from_fn(|_| GridBest::new()),
@@ -486,6 +495,20 @@ impl<'m> Initialiser<'m> {
         self.cancel = Some(flag);
     }
 
+    /// At most `threads` threads run the lanes of a whole-model search (`None`: one per core);
+    /// at most [`LANES`] are used. The answer does not depend on it: what each lane searches is
+    /// fixed by the dealing of the cells alone.
+    pub fn set_threads(&mut self, threads: Option<usize>) {
+        self.threads = threads;
+    }
+
+    /// The threads a whole-model search runs its lanes on.
+    fn threads(&self) -> usize {
+        self.threads
+            .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
+            .clamp(1, LANES)
+    }
+
     fn cancelled(&self) -> bool {
         self.cancel.as_ref().is_some_and(|c| c.load(Ordering::Relaxed))
     }
@@ -505,10 +528,10 @@ impl<'m> Initialiser<'m> {
         self.work = self.work.saturating_add(units.max(cast));
     }
 
-    /// Occlusion rays cast so far (`visibility::at_pose`): what the searches are charged for
-    /// on a detailed model.
+    /// Occlusion rays cast so far (`visibility::at_pose`, the grid's lanes included): what the
+    /// searches are charged for on a detailed model.
     pub fn rays_cast(&self) -> u64 {
-        self.at_pose.rays_cast()
+        self.at_pose.rays_cast() + self.grid_lanes.iter().map(GridLane::rays_cast).sum::<u64>()
     }
 
     /// Whether the run has spent `limit` work units, or the wall clock's backstop has fallen.

@@ -1,8 +1,9 @@
 //! The search itself ([`Initialiser::run`]): the stages of the parent module's doc in their
-//! order — the vanishing directions' rotations, the grid and its climbs (module `translation`),
-//! INIT-SEGMENT-EDGE over the volume's cells (module `triplets`, on lanes for the whole model),
-//! the polish of their best samples, the translation vote — each within what is left of the
-//! work budget.
+//! order — the vanishing directions' rotations, the grid's scan (module `grid_scan`) and its
+//! climbs (module `translation`), INIT-SEGMENT-EDGE over the volume's cells (module
+//! `triplets`), the polish of their best samples, the translation vote — each within what is
+//! left of the work budget; and the threads that run the whole model's lanes of the scan and
+//! of the triplets ([`Initialiser::on_threads`]).
 //!
 //! In: a frame's edges, a [`SearchVolume`], a generator. Out: the best distinct [`Candidate`]s
 //! and an [`InitReport`].
@@ -129,35 +130,9 @@ impl Initialiser<'_> {
                 report.work += part.work;
             };
             if lanes > 1 {
-                // Threads only here, at start-up: a bounded search allocates nothing. Thread t
-                // runs lanes t, t + threads, …
+                // Threads only here, at start-up: a bounded search allocates nothing.
                 let base: u64 = rng.random();
-                let threads = std::thread::available_parallelism()
-                    .map_or(1, |n| n.get())
-                    .clamp(1, lanes);
-                let mut parts = [InitReport::default(); LANES];
-                let mut by_thread: Vec<Vec<(usize, &mut CellScratch)>> = (0..threads).map(|_| Vec::new()).collect();
-                for (k, w) in scratch.iter_mut().enumerate() {
-                    by_thread[k % threads].push((k, w));
-                }
-                std::thread::scope(|scope| {
-                    let handles: Vec<_> = by_thread
-                        .into_iter()
-                        .map(|lanes_of| {
-                            scope.spawn(move || {
-                                lanes_of
-                                    .into_iter()
-                                    .map(|(k, w)| (k, search(w, k, None, base)))
-                                    .collect::<Vec<_>>()
-                            })
-                        })
-                        .collect();
-                    for h in handles {
-                        for (k, part) in h.join().unwrap_or_default() {
-                            parts[k] = part;
-                        }
-                    }
-                });
+                let parts = self.on_threads(&mut scratch, |k, w| search(w, k, None, base));
                 // In lane order, so that the sums and the pool do not depend on the threads.
                 for part in parts {
                     add(part);
@@ -203,6 +178,38 @@ impl Initialiser<'_> {
         report.backstop |= self.backstop_hit;
         report.timed_out |= self.work >= limit || report.backstop;
         (&self.candidates, report)
+    }
+
+    /// Runs `job` on each of `lanes` (lane k as `job(k, lane)`) on up to [`Self::threads`]
+    /// scoped threads, thread t taking lanes t, t + threads, …; returns their results in lane
+    /// order, so that nothing downstream depends on the threads.
+    pub(super) fn on_threads<S: Send, R: Send + Default>(
+        &self,
+        lanes: &mut [S],
+        job: impl Fn(usize, &mut S) -> R + Sync,
+    ) -> Vec<R> {
+        let n = lanes.len();
+        let threads = self.threads().min(n).max(1);
+        let mut by_thread: Vec<Vec<(usize, &mut S)>> = (0..threads).map(|_| Vec::new()).collect();
+        for (k, lane) in lanes.iter_mut().enumerate() {
+            by_thread[k % threads].push((k, lane));
+        }
+        let mut parts: Vec<R> = std::iter::repeat_with(R::default).take(n).collect();
+        let job = &job;
+        std::thread::scope(|scope| {
+            let handles: Vec<_> = by_thread
+                .into_iter()
+                .map(|mine| {
+                    scope.spawn(move || mine.into_iter().map(|(k, lane)| (k, job(k, lane))).collect::<Vec<_>>())
+                })
+                .collect();
+            for h in handles {
+                for (k, part) in h.join().unwrap_or_default() {
+                    parts[k] = part;
+                }
+            }
+        });
+        parts
     }
 
     /// Adds a polished candidate, or replaces the one in its place (the same pose within

@@ -175,13 +175,7 @@ impl Initialiser<'_> {
     /// The share (by angle) of `edges` that one of `self.support_pred` explains: plane within
     /// the gate (cos) and overlapping.
     pub(super) fn predicted_support<'e>(&self, edges: impl Iterator<Item = &'e Edge>, cos_gate: f64) -> f64 {
-        length_share(edges, self.centres.len(), |_, e| {
-            let s = e.sensor as usize;
-            self.support_pred.iter().any(|pred| {
-                let nrm = &pred.normals[s];
-                nrm.dot(&e.plane.normal).abs() >= cos_gate && overlap(pred, &self.centres[s], nrm, e) >= 0.5
-            })
-        })
+        support_of(&self.support_pred, &self.centres, edges, cos_gate)
     }
 
     /// How many model segments the rig images long enough to detect from `pose`: in sight
@@ -325,6 +319,23 @@ pub(super) fn in_view(view: &ViewMap, pose: &Pose, a: &Point3<f64>, b: &Point3<f
         }
     }
     n as f64 / SAMPLES as f64
+}
+
+/// The share (by angle) of `edges` that one of `predicted` (seen by sensors centred at
+/// `centres`) explains: plane within the gate (cos) and overlapping.
+pub(super) fn support_of<'e>(
+    predicted: &[Predicted],
+    centres: &[Point3<f64>],
+    edges: impl Iterator<Item = &'e Edge>,
+    cos_gate: f64,
+) -> f64 {
+    length_share(edges, centres.len(), |_, e| {
+        let s = e.sensor as usize;
+        predicted.iter().any(|pred| {
+            let nrm = &pred.normals[s];
+            nrm.dot(&e.plane.normal).abs() >= cos_gate && overlap(pred, &centres[s], nrm, e) >= 0.5
+        })
+    })
 }
 
 /// The share (by angle) of `edges` for which `hit(k, edge)` holds (k: the edge's place in

@@ -1,22 +1,19 @@
 //! The translation searches that go past the paper (the parent module's doc, "Translation by
 //! voting" and "Rotation from vanishing directions, translation by a grid"): under a few
-//! rotations, positions on a grid over the search volume scored by coverage and climbed, and
-//! positions voted by the vertical edge planes.
+//! rotations, positions on a grid over the search volume scored by coverage (the scan itself
+//! in module `grid_scan`) and climbed, and positions voted by the vertical edge planes.
 //!
 //! In: the frame's edges, the search volume or a centre and diameter, the rotations to try, a
-//! work budget. Out: polished candidates offered to the initialiser's list.
+//! work budget. Out: polished candidates offered to the initialiser's list, and what the grid's
+//! scan covered.
 
-use super::scoring::length_share;
+use super::grid_scan::{GridLattice, GridSweep};
 use super::work;
 use super::{
-    layer_half_height, GridBest, Initialiser, SearchVolume, CLIMB, FULL_COVER, GRID_GATE_RAD, GRID_KEEP, GRID_SEGMENTS,
-    GRID_SHARE, GRID_STEP_M, GRID_WORTH, HEIGHT_STEP_M, SAME_POSITION_M, SAME_ROTATION_RAD, VOTED_CANDIDATES,
-    VOTED_ROTATIONS,
+    layer_half_height, Initialiser, SearchVolume, CLIMB, GRID_GATE_RAD, GRID_KEEP, GRID_SEGMENTS, GRID_SHARE,
+    GRID_STEP_M, GRID_WORTH, HEIGHT_STEP_M, SAME_ROTATION_RAD, VOTED_CANDIDATES, VOTED_ROTATIONS,
 };
-use crate::edge_index::EdgeIndex;
-#[cfg(debug_assertions)]
-use crate::matching::best_edge_and_cover;
-use crate::matching::{gated_cover, Gate, Predicted};
+use crate::matching::Gate;
 use crate::vanishing::MAX_ROTATIONS;
 use crate::vote::{Grid, PEAKS};
 use nalgebra::{Point3, Translation3, UnitQuaternion, Vector3};
@@ -119,38 +116,20 @@ impl Initialiser<'_> {
             (Some(lo), Some(hi)) => (h.origin[2] + lo - half_z, h.origin[2] + hi + half_z),
             _ => (h.origin[2], h.origin[2]),
         };
-        let gate = Gate::geometric(GRID_GATE_RAD);
-        let min_len = 3.0 * self.opts.min_length_rad;
-        for best in &mut self.grid_best {
-            best.clear();
-        }
         self.select_plan_cells(volume);
         let grid = GridLattice {
             half,
             step,
+            steps,
             slab: [slab_lo, slab_hi],
             band: [band_lo, band_hi],
+            gate: Gate::geometric(GRID_GATE_RAD),
+            min_len: 3.0 * self.opts.min_length_rad,
         };
-        // Plan cells nearest first, every rotation at each: the budget cuts the far cells of
-        // all rotations alike, never a whole rotation. Every cell of the table's grid is
-        // searched, whether or not its node is valid: a closet or a hallway narrower than the
-        // node spacing often has its node inside a wall, and the rig can still stand there.
         // (Looking at every cell on a coarser lattice first and refining the most promising
         // was tried, and committed more twins: docs/decisions.md.)
         let first = self.plan_cells.partition_point(|c| c.0 < self.sweep_from_m);
-        let mut scanned = first;
-        'cells: for ci in first..self.plan_cells.len() {
-            let centre = self.plan_cells[ci].1;
-            for ix in 0..steps {
-                for iy in 0..steps {
-                    if self.spent(scan_limit) {
-                        break 'cells;
-                    }
-                    self.grid_position(&grid, &centre, ix, iy, volume, &gate, min_len);
-                }
-            }
-            scanned = ci + 1;
-        }
+        let sweep = self.scan_grid(&grid, volume, first, scan_limit);
         // Positions far below the best of any rotation are not worth a climb and a polish; the
         // others climb best first, so that the deadline cuts the least promising.
         let top = self.grid_best[..self.vanishing_count]
@@ -179,80 +158,13 @@ impl Initialiser<'_> {
                     Translation3::from(self.grid_best[ri][k].1.coords),
                     self.vanishing_rot[ri],
                 ),
-                min_len,
+                grid.min_len,
             );
             if let Some(c) = self.polish(&start, edges) {
                 self.offer(c);
             }
         }
-        GridSweep {
-            in_volume: self.plan_cells.len(),
-            skipped: first,
-            scanned: scanned - first,
-            next_m: self.plan_cells.get(scanned).map(|c| c.0),
-        }
-    }
-
-    /// The grid's position (`ix`, `iy`) of the plan cell about `centre`: its heights (inside the
-    /// band above the floor beneath, the known height when upright, the whole slab in a model
-    /// without floors) and the vanishing directions' rotations scored by
-    /// [`Self::coarse_merit`] over the [`GRID_SEGMENTS`] longest segments in sight from the
-    /// middle of its heights, each kept among its rotation's best.
-    #[allow(clippy::too_many_arguments)]
-    fn grid_position(
-        &mut self,
-        grid: &GridLattice,
-        centre: &Point3<f64>,
-        ix: usize,
-        iy: usize,
-        volume: &SearchVolume,
-        gate: &Gate,
-        min_len: f64,
-    ) {
-        let (x, y) = (
-            centre.x - grid.half + (ix as f64 + 0.5) * grid.step,
-            centre.y - grid.half + (iy as f64 + 0.5) * grid.step,
-        );
-        let Some((z_lo, z_hi)) = self.heights_at(x, y, grid) else {
-            return;
-        };
-        let inside = |p: &Point3<f64>| volume.diameter_m.is_none_or(|d| (p - volume.centre).norm() <= 0.5 * d);
-        let plan = Point3::new(x, y, 0.5 * (z_lo + z_hi));
-        let (lo, hi) = (Point3::new(x, y, z_lo), Point3::new(x, y, z_hi));
-        if !inside(&lo) && !inside(&hi) && !inside(&plan) {
-            return;
-        }
-        // The longest segments in sight from the middle of the heights: a bounded cost per
-        // position, and the lines that decide where the rig is.
-        self.longest_in_sight(&plan, GRID_SEGMENTS);
-        let segs = std::mem::take(&mut self.grid_segs);
-        let mut z = z_lo;
-        while z <= z_hi + 1e-9 {
-            let p = Point3::new(x, y, z);
-            z += GRID_STEP_M;
-            if !inside(&p) {
-                continue;
-            }
-            for ri in 0..self.vanishing_count {
-                let pose = Pose::from_parts(Translation3::from(p.coords), self.vanishing_rot[ri]);
-                if let Some(score) = self.coarse_merit(&pose, &segs, gate, min_len) {
-                    keep_best_apart(&mut self.grid_best[ri], (score, p));
-                }
-            }
-        }
-        self.grid_segs = segs;
-    }
-
-    /// The lattice's heights at plan position (`x`, `y`): the band above the floor beneath (none
-    /// outside the building), the known height when upright, the table's slab in a model
-    /// without floors.
-    fn heights_at(&self, x: f64, y: f64, grid: &GridLattice) -> Option<(f64, f64)> {
-        let (lo, hi) = match self.opts.upright_height_m {
-            Some(z) => (z, z),
-            None if self.floors.any() => self.floors.band(x, y, grid.slab, grid.band, self.at_pose.solid())?,
-            None => (grid.slab[0], grid.slab[1]),
-        };
-        (lo <= hi).then_some((lo, hi))
+        sweep
     }
 
     /// Coordinate ascent of the coarse merit ([`Self::coarse_merit`]) from `start` in x, y and
@@ -317,135 +229,5 @@ impl Initialiser<'_> {
             self.grid_order = order;
         }
         self.spend(work::SIGHT);
-    }
-
-    /// [`Candidate::merit`] at a coarse gate, for the grid: of `segments`, those at least
-    /// `min_len` long at `pose`, the share the frame's longest edges cover within `gate` (each up
-    /// to [`FULL_COVER`]), times the share (by angle) of those edges (the [`VOTE_EDGES`] longest)
-    /// that one of them explains within `gate`. `None` if fewer than six segments are that long.
-    ///
-    /// The support is over all the vote's edges rather than the few dozen longest, as the final
-    /// [`Candidate::support`] is over all edges: measured on the ZInD panoramas (docs/decisions.md), the
-    /// 64 longest let the grid drop the truth in favour of poses along texture (3 m hint: 20 of
-    /// 32 within 10 cm with 64, 24 with all 256).
-    pub(super) fn coarse_merit(&mut self, pose: &Pose, segments: &[u32], gate: &Gate, min_len: f64) -> Option<f64> {
-        let (mut explained, mut counted) = (0.0, 0usize);
-        self.vote_explained[..self.vote_edges.len()].fill(false);
-        self.support_pred.clear();
-        for &s in segments {
-            let seg = &self.model.segments[s as usize];
-            let pred = Predicted::new(&[seg.a, seg.b], pose, &self.centres);
-            if pred.length_rad < min_len {
-                continue;
-            }
-            counted += 1;
-            let cover = cover_near(
-                &pred,
-                &self.centres,
-                &self.vote_edges,
-                &mut self.vote_index,
-                gate,
-                &mut self.vote_explained,
-            );
-            if let Some(cover) = cover {
-                explained += (cover / FULL_COVER).min(1.0);
-            }
-            // Kept only for the debug builds' check against all pairs below.
-            if cfg!(debug_assertions) && self.support_pred.len() < self.support_pred.capacity() {
-                self.support_pred.push(pred);
-            }
-        }
-        let marks = &self.vote_explained[..self.vote_edges.len()];
-        let support = (counted >= 6).then(|| length_share(self.vote_edges.iter(), self.centres.len(), |k, _| marks[k]));
-        // Debug builds (the tests) check one score in 16 against every pair, as the scores were
-        // computed before the index.
-        self.merit_calls = self.merit_calls.wrapping_add(1);
-        #[cfg(debug_assertions)]
-        if let Some(support) = support.filter(|_| self.merit_calls % 16 == 1 && self.support_pred.len() == counted) {
-            let mut all = 0.0;
-            for &s in segments {
-                let seg = &self.model.segments[s as usize];
-                let pred = Predicted::new(&[seg.a, seg.b], pose, &self.centres);
-                if pred.length_rad >= min_len {
-                    if let (Some(_), cover) = best_edge_and_cover(&pred, &self.centres, &self.vote_edges, gate) {
-                        all += (cover / FULL_COVER).min(1.0);
-                    }
-                }
-            }
-            let plain = self.predicted_support(self.vote_edges.iter(), gate.cos_alpha);
-            debug_assert!(
-                (all - explained).abs() < 1e-9,
-                "explained {explained} by the index, {all} by all pairs"
-            );
-            debug_assert!(
-                (plain - support).abs() < 1e-12,
-                "support {support} by the index, {plain} by all pairs"
-            );
-        }
-        self.spend(segments.len() as u64 * self.vote_edges.len() as u64 / 100 * work::MERIT_PER_SEGMENT_100_EDGES);
-        Some(explained / counted as f64 * support?)
-    }
-}
-
-/// [`best_edge_and_cover`]'s cover of `pred` over the edges of `index` (built from `edges`)
-/// that can pass the gate: `None` if no edge passes it. Every edge that passes is marked in
-/// `explained`: the support's test (plane within the gate, overlapping by half) is the cover's.
-fn cover_near(
-    pred: &Predicted,
-    centres: &[Point3<f64>],
-    edges: &[Edge],
-    index: &mut EdgeIndex,
-    gate: &Gate,
-    explained: &mut [bool],
-) -> Option<f64> {
-    let mut covered = 0.0;
-    let mut any = false;
-    for (s, c) in centres.iter().enumerate() {
-        let n = &pred.normals[s];
-        index.near(s, n, gate.cos_alpha, |i| {
-            if let Some((_, share)) = gated_cover(pred, c, n, &edges[i], gate) {
-                covered += share;
-                any = true;
-                explained[i] = true;
-            }
-        });
-    }
-    any.then_some(covered.min(1.0))
-}
-
-/// The grid search's lattice in each plan cell: half the node spacing and the step between its
-/// positions (m), the table's slab of heights and the height band above a floor (m).
-struct GridLattice {
-    half: f64,
-    step: f64,
-    slab: [f64; 2],
-    band: [f64; 2],
-}
-
-/// What the grid's scan of a volume's plan cells (nearest first) covered: the cells meeting
-/// the volume, those skipped as an earlier search of the sweep's, those scored now, and the
-/// distance (m, in plan) of the first cell not looked at (`None`: the volume is covered).
-pub(super) struct GridSweep {
-    pub in_volume: usize,
-    pub skipped: usize,
-    pub scanned: usize,
-    pub next_m: Option<f64>,
-}
-
-/// Keeps `entry` (score, position; highest score best) among the best [`GRID_KEEP`] that are at
-/// least [`SAME_POSITION_M`] apart: a better neighbour replaces a worse one.
-pub(super) fn keep_best_apart(best: &mut GridBest, entry: (f64, Point3<f64>)) {
-    if let Some(k) = best.iter().position(|b| (b.1 - entry.1).norm() < SAME_POSITION_M) {
-        if entry.0 > best[k].0 {
-            best[k] = entry;
-        }
-        return;
-    }
-    if let Err(entry) = best.push(entry) {
-        if let Some(w) = best.iter_mut().min_by(|a, b| a.0.total_cmp(&b.0)) {
-            if entry.0 > w.0 {
-                *w = entry;
-            }
-        }
     }
 }

@@ -145,15 +145,18 @@ pub struct InitReport {
     pub diameter_m: Option<f64>,
     /// The grid search's plan cells (those of the table's grid meeting the volume) and how
     /// many of them it looked at before its share of the budget was spent: every position of
-    /// a cell looked at was scored.
+    /// a cell looked at was scored. In a whole-model search, the cells looked at by all its
+    /// lanes: some may lie beyond [`Self::swept_to_m`].
     pub plan_cells_in_volume: usize,
     pub plan_cells_scanned: usize,
     /// Of the volume's plan cells, those nearer its centre than [`Initialiser::set_sweep_from`](super::Initialiser::set_sweep_from)
     /// (looked at by earlier searches of a sweep) and skipped by this one.
     pub plan_cells_skipped: usize,
     /// How far from the centre (m, in plan) the cells looked at by now reach: the distance of
-    /// the nearest cell not yet looked at, where the next search of a sweep starts. `None`:
-    /// every cell of the volume has been looked at.
+    /// the nearest cell not yet looked at, where the next search of a sweep starts (the whole
+    /// model's lanes stop at different distances: from the nearest cell any of them left, so
+    /// that a sweep looks at some cells twice rather than skip one). `None`: every cell of the
+    /// volume has been looked at.
     pub swept_to_m: Option<f64>,
 }
 

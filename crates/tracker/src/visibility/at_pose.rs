@@ -24,7 +24,9 @@
 //! Fixed memory: the model's triangles in a BVH and per-segment buffers are built in
 //! [`PoseVisibility::new`]; [`PoseVisibility::at`] allocates nothing. Its time is bounded by
 //! [`SAMPLES`] occlusion rays per candidate segment, and the answer for the last position is
-//! kept, so asking again at the same place costs nothing.
+//! kept, so asking again at the same place costs nothing. A thread that ranks segments from a
+//! shared value ([`PoseVisibility::widest_with`]) brings its own [`SightBuffers`], sized as
+//! the value's own.
 
 use super::VisibilityTable;
 use nalgebra::Point3;
@@ -66,102 +68,40 @@ pub fn sample_point(a: &Point3<f64>, b: &Point3<f64>, k: usize) -> Point3<f64> {
 /// Exact visibility of the model's segments from any position, by ray casting.
 pub struct PoseVisibility {
     bvh: TriangleBvh,
-    /// Per segment: the query that last took it as a candidate.
-    stamp: Vec<u32>,
-    query: u32,
+    /// The buffers of this value's own queries.
+    own: SightBuffers,
     seen: Vec<SeenSegment>,
     /// Where `seen` was computed (`None`: not yet).
     last: Option<Point3<f64>>,
-    /// [`Self::widest`]'s candidates: (the angle the whole segment spans, index).
+}
+
+/// The buffers one query of [`PoseVisibility::widest_with`] works in, apart from the model's
+/// triangles: threads that query one [`PoseVisibility`] at once each bring their own (sized
+/// once, like the rest).
+pub struct SightBuffers {
+    /// Per segment: the query that last took it as a candidate.
+    stamp: Vec<u32>,
+    query: u32,
+    /// The candidates of a query: (the angle the whole segment spans, index).
     ranked: Vec<(f64, u32)>,
-    /// Occlusion rays cast since [`Self::new`]: what a caller charges for a query.
+    /// Occlusion rays cast with these buffers: what a caller charges for a query.
     rays: u64,
 }
 
-impl PoseVisibility {
-    /// The model's triangles in a BVH, and buffers for all of its segments.
-    pub fn new(model: &Model) -> PoseVisibility {
-        let (tris, faces): (Vec<_>, Vec<_>) = model_triangles(model).into_iter().unzip();
-        PoseVisibility {
-            bvh: TriangleBvh::build(&tris, &faces),
+impl SightBuffers {
+    /// Room for all of `model`'s segments.
+    pub fn new(model: &Model) -> SightBuffers {
+        SightBuffers {
             stamp: vec![0; model.segments.len()],
             query: 0,
-            seen: Vec::with_capacity(model.segments.len()),
-            last: None,
             ranked: Vec::with_capacity(model.segments.len()),
             rays: 0,
         }
     }
 
-    /// Occlusion rays cast so far by [`Self::at`] and [`Self::widest`]: a query's cost is the
-    /// difference before and after it (a few hundred nanoseconds a ray on a model of 10⁴
-    /// triangles), so a caller with a work budget charges what a query did, not what a typical
-    /// one does.
+    /// Occlusion rays cast so far with these buffers ([`PoseVisibility::rays_cast`]).
     pub fn rays_cast(&self) -> u64 {
         self.rays
-    }
-
-    /// The `keep` segments seen from `at` that span the largest angle in sight (the angle the
-    /// segment spans from `at` × the share of it in sight), as (that angle, index) pairs in no
-    /// particular order, into `out` (cleared first). The same segments and angles as ranking
-    /// all of [`Self::at`] by that angle and keeping the `keep` largest, ties apart.
-    ///
-    /// **Why ranked.** The cost of [`Self::at`] follows the model's detail: every candidate
-    /// segment costs [`SAMPLES`] rays, and a storey of an architect's model offers thousands
-    /// (window sashes, stair nosings, column casings). What a grid position is scored by is a
-    /// few dozen of the widest. The whole angle a segment spans from `at` bounds the angle it
-    /// spans in sight, so the candidates are taken widest first and rays are cast only until
-    /// no candidate left could enter the kept: the cost follows `keep` and what is in view,
-    /// not the model's segment count.
-    pub fn widest(
-        &mut self,
-        model: &Model,
-        table: &VisibilityTable,
-        at: &Point3<f64>,
-        keep: usize,
-        out: &mut Vec<(f64, u32)>,
-    ) {
-        out.clear();
-        if keep == 0 {
-            return;
-        }
-        self.gather(table, at);
-        for r in &mut self.ranked {
-            let seg = &model.segments[r.1 as usize];
-            r.0 = spanned_angle(at, &seg.a, &seg.b);
-        }
-        self.ranked.sort_unstable_by(|x, y| y.0.total_cmp(&x.0));
-        // The kept, and the least of them once there are `keep`.
-        let mut least = (f64::NEG_INFINITY, 0usize);
-        for &(bound, s) in &self.ranked {
-            if out.len() == keep && bound <= least.0 {
-                break;
-            }
-            let seg = &model.segments[s as usize];
-            let mask = in_sight(&self.bvh, at, &seg.a, &seg.b);
-            self.rays += SAMPLES as u64;
-            if mask == 0 {
-                continue;
-            }
-            let angle = bound * f64::from(mask.count_ones()) / SAMPLES as f64;
-            if out.len() < keep {
-                if out.len() < out.capacity() {
-                    out.push((angle, s));
-                }
-                if out.len() == keep {
-                    least = least_of(out);
-                }
-            } else if angle > least.0 {
-                out[least.1] = (angle, s);
-                least = least_of(out);
-            }
-        }
-    }
-
-    /// The model's triangles in a BVH: for other ray casts against the model (the step onto a
-    /// floor, `tracker::floor`), so that it is built once.
-    pub fn solid(&self) -> &TriangleBvh {
-        &self.bvh
     }
 
     /// `self.ranked` ← the candidates for what `at` sees, each once (angle 0): the union of the
@@ -194,6 +134,70 @@ impl PoseVisibility {
             }
         }
     }
+}
+
+impl PoseVisibility {
+    /// The model's triangles in a BVH, and buffers for all of its segments.
+    pub fn new(model: &Model) -> PoseVisibility {
+        let (tris, faces): (Vec<_>, Vec<_>) = model_triangles(model).into_iter().unzip();
+        PoseVisibility {
+            bvh: TriangleBvh::build(&tris, &faces),
+            own: SightBuffers::new(model),
+            seen: Vec::with_capacity(model.segments.len()),
+            last: None,
+        }
+    }
+
+    /// Occlusion rays cast so far by [`Self::at`] and [`Self::widest`]: a query's cost is the
+    /// difference before and after it (a few hundred nanoseconds a ray on a model of 10⁴
+    /// triangles), so a caller with a work budget charges what a query did, not what a typical
+    /// one does. (Those of [`Self::widest_with`] count in the buffers given to it.)
+    pub fn rays_cast(&self) -> u64 {
+        self.own.rays
+    }
+
+    /// The `keep` segments seen from `at` that span the largest angle in sight (the angle the
+    /// segment spans from `at` × the share of it in sight), as (that angle, index) pairs in no
+    /// particular order, into `out` (cleared first). The same segments and angles as ranking
+    /// all of [`Self::at`] by that angle and keeping the `keep` largest, ties apart.
+    ///
+    /// **Why ranked.** The cost of [`Self::at`] follows the model's detail: every candidate
+    /// segment costs [`SAMPLES`] rays, and a storey of an architect's model offers thousands
+    /// (window sashes, stair nosings, column casings). What a grid position is scored by is a
+    /// few dozen of the widest. The whole angle a segment spans from `at` bounds the angle it
+    /// spans in sight, so the candidates are taken widest first and rays are cast only until
+    /// no candidate left could enter the kept: the cost follows `keep` and what is in view,
+    /// not the model's segment count.
+    pub fn widest(
+        &mut self,
+        model: &Model,
+        table: &VisibilityTable,
+        at: &Point3<f64>,
+        keep: usize,
+        out: &mut Vec<(f64, u32)>,
+    ) {
+        widest(&self.bvh, &mut self.own, model, table, at, keep, out);
+    }
+
+    /// [`Self::widest`] in `buffers` (sized for the same model) rather than this value's own:
+    /// the same answer, and this value is only read, so several threads can ask at once.
+    pub fn widest_with(
+        &self,
+        buffers: &mut SightBuffers,
+        model: &Model,
+        table: &VisibilityTable,
+        at: &Point3<f64>,
+        keep: usize,
+        out: &mut Vec<(f64, u32)>,
+    ) {
+        widest(&self.bvh, buffers, model, table, at, keep, out);
+    }
+
+    /// The model's triangles in a BVH: for other ray casts against the model (the step onto a
+    /// floor, `tracker::floor`), so that it is built once.
+    pub fn solid(&self) -> &TriangleBvh {
+        &self.bvh
+    }
 
     /// The segments seen from `at` with the share of each in sight (empty outside the table), or
     /// those of the last query when it was within [`REUSE_M`] of `at`.
@@ -204,11 +208,11 @@ impl PoseVisibility {
         }
         self.last = Some(*at);
         self.seen.clear();
-        self.gather(table, at);
-        for &(_, s) in &self.ranked {
+        self.own.gather(table, at);
+        for &(_, s) in &self.own.ranked {
             let seg = &model.segments[s as usize];
             let mask = in_sight(&self.bvh, at, &seg.a, &seg.b);
-            self.rays += SAMPLES as u64;
+            self.own.rays += SAMPLES as u64;
             if mask != 0 {
                 self.seen.push(SeenSegment {
                     segment: s,
@@ -218,6 +222,53 @@ impl PoseVisibility {
             }
         }
         &self.seen
+    }
+}
+
+/// [`PoseVisibility::widest`] against `bvh` in `buffers`.
+fn widest(
+    bvh: &TriangleBvh,
+    buffers: &mut SightBuffers,
+    model: &Model,
+    table: &VisibilityTable,
+    at: &Point3<f64>,
+    keep: usize,
+    out: &mut Vec<(f64, u32)>,
+) {
+    out.clear();
+    if keep == 0 {
+        return;
+    }
+    buffers.gather(table, at);
+    for r in &mut buffers.ranked {
+        let seg = &model.segments[r.1 as usize];
+        r.0 = spanned_angle(at, &seg.a, &seg.b);
+    }
+    buffers.ranked.sort_unstable_by(|x, y| y.0.total_cmp(&x.0));
+    // The kept, and the least of them once there are `keep`.
+    let mut least = (f64::NEG_INFINITY, 0usize);
+    for &(bound, s) in &buffers.ranked {
+        if out.len() == keep && bound <= least.0 {
+            break;
+        }
+        let seg = &model.segments[s as usize];
+        let mask = in_sight(bvh, at, &seg.a, &seg.b);
+        buffers.rays += SAMPLES as u64;
+        if mask == 0 {
+            continue;
+        }
+        let angle = bound * f64::from(mask.count_ones()) / SAMPLES as f64;
+        if out.len() < keep {
+            if out.len() < out.capacity() {
+                out.push((angle, s));
+            }
+            if out.len() == keep {
+                least = least_of(out);
+            }
+        } else if angle > least.0 {
+            out[least.1] = (angle, s);
+            least = least_of(out);
+        }
     }
 }
 
