@@ -92,19 +92,28 @@ fn a_short_replay_writes_a_tum_trajectory_near_the_truth() {
     let t0 = truth[0].pose.translation.vector;
     // A 1.5 m radius around a point 0.8 m from the true start.
     let init = format!("{},{},{},1.5", t0.x + 0.8, t0.y, t0.z);
+    let (model, source) = (rec.join("model.obj"), format!("replay:{}", rec.display()));
+    let run_to = |trajectory: &std::path::Path| {
+        let model = model.to_str().unwrap();
+        let trajectory = trajectory.to_str().unwrap().to_string();
+        [
+            "run",
+            "--model",
+            model,
+            "--source",
+            &source,
+            "--init",
+            &init,
+            "--trajectory",
+        ]
+        .map(str::to_string)
+        .into_iter()
+        .chain([trajectory, "--no-publish".to_string()])
+        .collect::<Vec<String>>()
+    };
     let out = dir.path().join("est.tum");
-    let (code, stdout, stderr) = omnitrack(&[
-        "run",
-        "--model",
-        rec.join("model.obj").to_str().unwrap(),
-        "--source",
-        &format!("replay:{}", rec.display()),
-        "--init",
-        &init,
-        "--trajectory",
-        out.to_str().unwrap(),
-        "--no-publish",
-    ]);
+    let args = run_to(&out);
+    let (code, stdout, stderr) = omnitrack(&args.iter().map(String::as_str).collect::<Vec<_>>());
     assert_eq!(code, 0, "{stderr}");
     assert!(stdout.is_empty());
     // The search's result is taken up a budget later on the recording's clock (frame 5 of 6),
@@ -122,18 +131,7 @@ fn a_short_replay_writes_a_tum_trajectory_near_the_truth() {
     let cut = dir.path().join("cut.tum");
     let limit = std::fs::metadata(&out).unwrap().len() / 2;
     let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_omnitrack"));
-    child.args([
-        "run",
-        "--model",
-        rec.join("model.obj").to_str().unwrap(),
-        "--source",
-        &format!("replay:{}", rec.display()),
-        "--init",
-        &init,
-        "--trajectory",
-        cut.to_str().unwrap(),
-        "--no-publish",
-    ]);
+    child.args(run_to(&cut));
     // SAFETY: between fork and exec the closure only makes two async-signal-safe system calls.
     unsafe {
         use std::os::unix::process::CommandExt;

@@ -75,13 +75,19 @@ pub fn parse_tum(text: &str, file: &str) -> Result<Trajectory, TumError> {
 
 /// Reads a TUM file.
 pub fn load_tum(path: &Path) -> Result<Trajectory, TumError> {
+    let (text, file) = read_tum_text(path)?;
+    parse_tum(&text, &file)
+}
+
+/// The text of a TUM file and its name for messages.
+fn read_tum_text(path: &Path) -> Result<(String, String), TumError> {
     let file = path.display().to_string();
     let text = crate::text_file::read_text(path, crate::text_file::LARGE_FILE_LIMIT).map_err(|e| TumError {
         file: file.clone(),
         line: None,
         message: format!("cannot read trajectory: {e}"),
     })?;
-    parse_tum(&text, &file)
+    Ok((text, file))
 }
 
 /// Reads a TUM file that its writer may have cut short (a full disk, a killed process): a last
@@ -89,12 +95,7 @@ pub fn load_tum(path: &Path) -> Result<Trajectory, TumError> {
 /// Every other line must parse, as in [`load_tum`]: a bad line in the middle is a wrong file, not
 /// a cut one.
 pub fn load_tum_whole_lines(path: &Path) -> Result<(Trajectory, Option<TumError>), TumError> {
-    let file = path.display().to_string();
-    let text = crate::text_file::read_text(path, crate::text_file::LARGE_FILE_LIMIT).map_err(|e| TumError {
-        file: file.clone(),
-        line: None,
-        message: format!("cannot read trajectory: {e}"),
-    })?;
+    let (text, file) = read_tum_text(path)?;
     match parse_tum(&text, &file) {
         Ok(t) => Ok((t, None)),
         Err(e) if !text.ends_with('\n') && e.line == Some(text.lines().count()) => {
