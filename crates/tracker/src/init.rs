@@ -228,7 +228,11 @@ const HEIGHT_STEP_M: f64 = 0.1;
 /// its best positions, the triplets and the vote.
 pub const GRID_SHARE: f64 = 0.75;
 /// A search still running at this many times its budget on the wall clock stops (reported).
-pub const BACKSTOP_FACTOR: u32 = 4;
+/// An unoptimised build (the tests') does the same work several times slower by construction,
+/// and its tests run side by side: at 4× there, a loaded machine stopped a relocalisation short
+/// and the tracker test that expects it to commit failed (2026-11-29). The backstop is for a
+/// machine far slower than the reference, not for the build.
+pub const BACKSTOP_FACTOR: u32 = if cfg!(debug_assertions) { 40 } else { 4 };
 
 /// Lanes of the whole-model search (and most threads it uses).
 pub const LANES: usize = 4;
