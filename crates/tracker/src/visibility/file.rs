@@ -326,12 +326,14 @@ impl VisibilityTable {
         // Written beside it and renamed over it: a reader never sees half a table, a crash leaves
         // the old one, and a symbolic link at `path` is replaced, not written through (the cache
         // beside a model must not overwrite whatever a link there points to).
-        let mut temporary = path.as_os_str().to_owned();
-        temporary.push(format!(".partial-{}", std::process::id()));
-        let temporary = PathBuf::from(temporary);
+        // Serialised before any file exists: a process that dies here (out of memory aborts, it
+        // does not unwind) leaves nothing behind.
+        let bytes = self.to_bytes();
+        remove_stale_partials(path);
+        let temporary = partial_path(path, std::process::id());
         let written = (|| {
             let mut f = std::fs::File::create(&temporary)?;
-            std::io::Write::write_all(&mut f, &self.to_bytes())?;
+            std::io::Write::write_all(&mut f, &bytes)?;
             f.sync_all()?;
             std::fs::rename(&temporary, path)
         })();
@@ -389,9 +391,97 @@ impl VisibilityTable {
     }
 }
 
+/// Where process `pid` writes the table for `path` before renaming it into place.
+fn partial_path(path: &Path, pid: u32) -> PathBuf {
+    let mut temporary = path.as_os_str().to_owned();
+    temporary.push(format!(".partial-{pid}"));
+    PathBuf::from(temporary)
+}
+
+/// Removes the `<path>.partial-<pid>` files of processes that no longer run (killed while
+/// writing: SIGKILL and power loss run no clean-up), so that they do not pile up beside the
+/// model. A process that still runs may be writing its own: it is left alone. Where `/proc`
+/// cannot tell (another OS), nothing is removed.
+fn remove_stale_partials(path: &Path) {
+    let (Some(dir), Some(name)) = (path.parent(), path.file_name().and_then(|n| n.to_str())) else {
+        return;
+    };
+    if !Path::new("/proc/self").exists() {
+        return;
+    }
+    let dir = if dir.as_os_str().is_empty() {
+        Path::new(".")
+    } else {
+        dir
+    };
+    let prefix = format!("{name}.partial-");
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
+    for e in entries.flatten() {
+        let file_name = e.file_name();
+        let Some(pid) = file_name
+            .to_str()
+            .and_then(|f| f.strip_prefix(&prefix))
+            .and_then(|p| p.parse::<u32>().ok())
+        else {
+            continue;
+        };
+        let alive = Path::new("/proc").join(pid.to_string()).exists();
+        if !alive && e.file_type().is_ok_and(|t| t.is_file()) {
+            let _ = std::fs::remove_file(e.path());
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Half-written table files of `path` by `pids`, and one of another table's.
+    fn partials(path: &Path, pids: &[u32]) -> Vec<PathBuf> {
+        let mut files: Vec<PathBuf> = pids.iter().map(|&p| partial_path(path, p)).collect();
+        files.push(path.with_file_name("other.vis.partial-4194305"));
+        for p in &files {
+            std::fs::write(p, b"half a table").unwrap();
+        }
+        files
+    }
+
+    /// A table file left half written by a process that was killed is removed; one of a process
+    /// that still runs (pid 1 always does) is not, nor another table's. 4194305 is above Linux's
+    /// largest pid (2^22): no process has it.
+    #[test]
+    fn stale_partial_files_are_those_of_dead_processes_only() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("model.vis");
+        let files = partials(&path, &[4_194_305, 1]);
+        remove_stale_partials(&path);
+        assert!(!files[0].exists(), "the dead writer's file is removed");
+        assert!(files[1].exists() && files[2].exists());
+    }
+
+    /// ... and a save clears them, leaving no file of its own beside the table.
+    #[cfg(feature = "build")]
+    #[test]
+    fn a_save_removes_the_partial_files_of_dead_processes() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("model.vis");
+        let files = partials(&path, &[4_194_305, 1]);
+        // A box room 4 × 3 × 2.5 m.
+        let obj = "v 0 0 0\nv 4 0 0\nv 4 3 0\nv 0 3 0\nv 0 0 2.5\nv 4 0 2.5\nv 4 3 2.5\nv 0 3 2.5\n\
+                   f 1 2 3 4\nf 5 8 7 6\nf 1 5 6 2\nf 2 6 7 3\nf 3 7 8 4\nf 4 8 5 1\n";
+        let model = omnitrack_core::model::Model::from_obj_str(obj, "room.obj").expect("a valid model");
+        let table = crate::visibility::build::build_table(&model, "room.obj", &Default::default());
+        table.save(&path).unwrap();
+        assert!(VisibilityTable::load_unchecked(&path).is_ok());
+        assert!(!files[0].exists(), "the dead writer's file is removed");
+        assert!(files[1].exists() && files[2].exists());
+        assert!(
+            !partial_path(&path, std::process::id()).exists(),
+            "its own is renamed into place"
+        );
+    }
 
     #[test]
     fn delta_round_trip() {
