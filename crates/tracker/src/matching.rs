@@ -171,12 +171,16 @@ pub fn best_edge_and_cover(
 ) -> (Option<(usize, f64)>, f64) {
     let mut best: Option<(usize, f64)> = None;
     let mut covered = 0.0;
+    let mut arcs = [None; MAX_SENSORS];
+    for ((arc, c), n) in arcs.iter_mut().zip(centres).zip(&pred.normals) {
+        *arc = SegmentArc::new(pred, c, n);
+    }
     for (i, e) in edges.iter().enumerate() {
         let s = e.sensor as usize;
-        if s >= centres.len() {
+        let Some(arc) = arcs.get(s).copied().flatten().filter(|_| s < centres.len()) else {
             continue;
-        }
-        if let Some((cos, share)) = gated_cover(pred, &centres[s], &pred.normals[s], e, gate) {
+        };
+        if let Some((cos, share)) = arc.gated_cover(&pred.normals[s], e, gate) {
             covered += share;
             if best.is_none_or(|(_, c)| cos > c) {
                 best = Some((i, cos));
@@ -186,48 +190,67 @@ pub fn best_edge_and_cover(
     (best.map(|(i, cos)| (i, cos.min(1.0).acos())), covered.min(1.0))
 }
 
-/// Whether `edge` passes `gate` against `pred` seen by the sensor centred at `c` (its predicted
-/// plane normal `n`): the planes' |cos| and the share of the segment the edge covers, or `None`.
-/// One pair of [`best_edge_and_cover`], for callers that choose the edges themselves
-/// (`crate::edge_index`).
-#[inline]
-pub(crate) fn gated_cover(
-    pred: &Predicted,
-    c: &Point3<f64>,
-    n: &Vector3<f64>,
-    edge: &Edge,
-    gate: &Gate,
-) -> Option<(f64, f64)> {
-    let cos = n.dot(&edge.plane.normal).abs();
-    if cos < gate.cos_alpha || !gate.signature_matches(edge) {
-        return None;
-    }
-    let (common, shorter, seg) = shared_angle(pred, c, n, edge);
-    if common <= 0.0 || shorter <= 0.0 || common / shorter < gate.min_overlap {
-        return None;
-    }
-    Some((cos, common / seg))
-}
-
 /// (angle shared by edge and segment, the shorter one's angle, the segment's angle) about `c`
 /// in the plane of normal `n`.
 #[inline]
 pub(crate) fn shared_angle(pred: &Predicted, c: &Point3<f64>, n: &Vector3<f64>, edge: &Edge) -> (f64, f64, f64) {
-    let a = pred.ends_rig[0] - c.coords;
-    let b = pred.ends_rig[1] - c.coords;
-    let Some(u) = a.try_normalize(1e-12) else {
-        return (0.0, 0.0, 0.0);
-    };
-    let w = n.cross(&u);
-    let angle = |x: &Vector3<f64>| x.dot(&w).atan2(x.dot(&u));
-    let seg_hi = angle(&b);
-    let (s_lo, s_hi) = if seg_hi >= 0.0 { (0.0, seg_hi) } else { (seg_hi, 0.0) };
-    let e0 = angle(&edge.plane.ends[0]);
-    let e1 = angle(&edge.plane.ends[1]);
-    let (e_lo, e_hi) = if e0 <= e1 { (e0, e1) } else { (e1, e0) };
-    let common = s_hi.min(e_hi) - s_lo.max(e_lo);
-    let shorter = (s_hi - s_lo).min(e_hi - e_lo);
-    (common, shorter, s_hi - s_lo)
+    SegmentArc::new(pred, c, n).map_or((0.0, 0.0, 0.0), |arc| arc.shared(edge))
+}
+
+/// A predicted segment as an arc about a sensor centre, in its plane: what [`shared_angle`]
+/// measures an edge against. The same for every edge of that sensor, so a caller that tries
+/// many edges against one segment builds it once (in the grid's scan the segment's own angle
+/// was a third of the search's arc tangents).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct SegmentArc {
+    /// The in-plane axes: `u` towards the segment's first end, `w` = n × u.
+    u: Vector3<f64>,
+    w: Vector3<f64>,
+    lo: f64,
+    hi: f64,
+}
+
+impl SegmentArc {
+    /// `None` when the segment's first end is at the centre (no plane to measure in).
+    #[inline]
+    pub(crate) fn new(pred: &Predicted, c: &Point3<f64>, n: &Vector3<f64>) -> Option<SegmentArc> {
+        let a = pred.ends_rig[0] - c.coords;
+        let b = pred.ends_rig[1] - c.coords;
+        let u = a.try_normalize(1e-12)?;
+        let w = n.cross(&u);
+        let end = b.dot(&w).atan2(b.dot(&u));
+        let (lo, hi) = if end >= 0.0 { (0.0, end) } else { (end, 0.0) };
+        Some(SegmentArc { u, w, lo, hi })
+    }
+
+    /// (angle shared with `edge`, the shorter one's angle, the segment's angle).
+    #[inline]
+    pub(crate) fn shared(&self, edge: &Edge) -> (f64, f64, f64) {
+        let angle = |x: &Vector3<f64>| x.dot(&self.w).atan2(x.dot(&self.u));
+        let e0 = angle(&edge.plane.ends[0]);
+        let e1 = angle(&edge.plane.ends[1]);
+        let (e_lo, e_hi) = if e0 <= e1 { (e0, e1) } else { (e1, e0) };
+        let common = self.hi.min(e_hi) - self.lo.max(e_lo);
+        let shorter = (self.hi - self.lo).min(e_hi - e_lo);
+        (common, shorter, self.hi - self.lo)
+    }
+
+    /// Whether `edge` passes `gate` against this arc's segment (its predicted plane normal `n`):
+    /// the planes' |cos| and the share of the segment the edge covers, or `None`. One pair of
+    /// [`best_edge_and_cover`], for callers that choose the edges themselves
+    /// (`crate::edge_index`).
+    #[inline]
+    pub(crate) fn gated_cover(&self, n: &Vector3<f64>, edge: &Edge, gate: &Gate) -> Option<(f64, f64)> {
+        let cos = n.dot(&edge.plane.normal).abs();
+        if cos < gate.cos_alpha || !gate.signature_matches(edge) {
+            return None;
+        }
+        let (common, shorter, seg) = self.shared(edge);
+        if common <= 0.0 || shorter <= 0.0 || common / shorter < gate.min_overlap {
+            return None;
+        }
+        Some((cos, common / seg))
+    }
 }
 
 /// The correspondence of an edge and a model segment.

@@ -29,7 +29,7 @@ use super::{work, GridBest, Initialiser, SearchVolume, FULL_COVER, GRID_SEGMENTS
 use crate::edge_index::EdgeIndex;
 #[cfg(debug_assertions)]
 use crate::matching::best_edge_and_cover;
-use crate::matching::{gated_cover, Gate, Predicted};
+use crate::matching::{Gate, Predicted, SegmentArc};
 use crate::vanishing::MAX_ROTATIONS;
 use crate::visibility::at_pose::SightBuffers;
 use nalgebra::{Point3, Translation3};
@@ -416,8 +416,11 @@ fn cover_near(
     let mut any = false;
     for (s, c) in centres.iter().enumerate() {
         let n = &pred.normals[s];
+        let Some(arc) = SegmentArc::new(pred, c, n) else {
+            continue;
+        };
         index.near(s, n, gate.cos_alpha, |i| {
-            if let Some((_, share)) = gated_cover(pred, c, n, &edges[i], gate) {
+            if let Some((_, share)) = arc.gated_cover(n, &edges[i], gate) {
                 covered += share;
                 any = true;
                 explained[i] = true;
