@@ -379,7 +379,14 @@ pub(super) fn run_process(
         ready: ready_rx,
         records: records_tx,
         detector: EdgeDetector::new(rig, &cfg.edges),
-        tracker: Tracker::new(rig, model, table, cfg, opts.run.hint, opts.run.seed),
+        tracker: {
+            let mut tracker = Tracker::new(rig, model, table, cfg, opts.run.hint, opts.run.seed);
+            // A stop is honoured within a tick, not after the whole model's search: the search
+            // ends at its next check and is discarded (no pose from half a search).
+            tracker.stop_searches_on(std::sync::Arc::clone(shared.stop));
+            tracker.stop_searches_on(std::sync::Arc::clone(&shared.halt));
+            tracker
+        },
         poses,
         status,
         clocks,
