@@ -416,3 +416,36 @@ fn a_second_publisher_on_a_service_is_refused() {
     drop(first);
     assert!(PosePublisher::create(&name).is_ok());
 }
+
+/// `omnitrack listen > /dev/full` (issue 50, item 10): the first sample that cannot be written
+/// ends the command with one error line and exit 2, not a panic or a silent loop.
+#[test]
+fn listen_to_a_full_disk_is_one_error_line() {
+    let prefix = unique("listen-full");
+    let publisher = PosePublisher::create(&format!("{prefix}/pose")).unwrap();
+    let full = std::fs::OpenOptions::new().write(true).open("/dev/full").unwrap();
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_omnitrack"))
+        .args(["listen", "--services", &prefix])
+        .stdout(full)
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let deadline = std::time::Instant::now() + WAIT;
+    let mut seq = 0;
+    while child.try_wait().unwrap().is_none() && std::time::Instant::now() < deadline {
+        publisher.publish(&sample_pose(seq)).unwrap();
+        seq += 1;
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    if child.try_wait().unwrap().is_none() {
+        child.kill().unwrap();
+    }
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert_eq!(stderr.lines().count(), 1, "{stderr}");
+    assert!(
+        stderr.starts_with("omnitrack: writing to output: ") && stderr.contains("No space left"),
+        "{stderr}"
+    );
+}

@@ -9,7 +9,7 @@ use omnitrack::frame::{FrameSet, ImageFault};
 use omnitrack::rig::Rig;
 use std::fmt::Write as _;
 use std::path::Path;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 use tempfile::TempDir;
 
 mod common;
@@ -331,6 +331,41 @@ fn real_time_pacing_keeps_the_recorded_spacing() {
     let start = Instant::now();
     while source.next_frame(&mut frame).unwrap() {}
     assert!(start.elapsed().as_secs_f64() < 30.0, "no sleeping");
+}
+
+/// Issue 50: a real-time replay waits for a frame far in the future (40 s, or `u64::MAX` ns, a
+/// corrupt timestamp) only until its caller stops it: the wait ends within a slice of the stop,
+/// nothing overflows, and the frame is not taken (the next call delivers it).
+#[test]
+fn a_stop_ends_the_wait_for_a_distant_frame() {
+    use omnitrack::capture::STOP_SLICE;
+    let dir = recording(&SMALL, 2);
+    for far_ns in [T0_NS + 40_000_000_000, u64::MAX] {
+        let rows: Vec<String> = (0..2u64)
+            .flat_map(|f| {
+                let t = if f == 0 { T0_NS } else { far_ns };
+                (0..2).map(move |s| format!("{f},{s},{t},{}", image_path(f, s)))
+            })
+            .collect();
+        write_index(dir.path(), &rows);
+        let mut source = ReplaySource::open(dir.path(), Pacing::RealTime).unwrap();
+        let mut frame = FrameSet::for_rig(source.rig());
+        assert!(source.next_frame_or_stop(&mut frame, &|| false).unwrap());
+        let started = Instant::now();
+        let stop_at = started + Duration::from_millis(100);
+        let got = source.next_frame_or_stop(&mut frame, &|| Instant::now() >= stop_at);
+        let took = started.elapsed();
+        assert!(!got.unwrap(), "{far_ns}: no frame when stopped");
+        assert!(
+            took >= Duration::from_millis(100) && took < Duration::from_millis(100) + 10 * STOP_SLICE,
+            "{far_ns}: stopped after {took:?}"
+        );
+        assert_eq!(
+            (source.remaining(), source.stats().frames_delivered),
+            (1, 1),
+            "{far_ns}"
+        );
+    }
 }
 
 // ---------------------------------------------------------------------------------------------

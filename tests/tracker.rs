@@ -1101,3 +1101,82 @@ fn a_volume_too_large_for_one_search_is_swept_over_several_until_every_cell_is_l
         "the truth, 4 m from the centre, found by search {found_at:?} of {searches}"
     );
 }
+
+/// Issue 50: a search a stop cuts short ([`Tracker::stop_searches_on`]) commits nothing, on its
+/// own frame or later: its best candidate may not have met the rival that would have refused it.
+/// The same frames without the stop commit the truth; stopped before the search starts, or late
+/// in it (when the part searched may well hold the truth), nothing is committed, and the search
+/// on the worker ends at once rather than after its budget.
+#[test]
+fn a_search_cut_short_by_a_stop_commits_nothing() {
+    use omnitrack::tracker::search_link;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    use std::sync::Arc;
+    use std::time::{Duration, Instant};
+    let f = fixture();
+    let frames: Vec<(u64, Vec<omnitrack::edges::Edge>)> = {
+        let (mut source, _, _, mut frame, mut detector) = replay(f);
+        std::iter::from_fn(|| {
+            source
+                .next_frame(&mut frame)
+                .unwrap()
+                .then(|| (frame.timestamp_ns().unwrap(), detector.detect(&frame).to_vec()))
+        })
+        .take(start_frames() + 2)
+        .collect()
+    };
+    let (_, rig, cfg, _, _) = replay(f);
+    // Every pose, on time or late, the stats, and how long it all took.
+    let run = |stop_after: Option<Duration>| {
+        let (link, worker) = search_link();
+        let flag = Arc::new(AtomicBool::new(false));
+        std::thread::scope(|scope| {
+            scope.spawn(move || worker.run());
+            let mut tracker = Tracker::new(&rig, &f.model, &f.table, &cfg, Some(hint(f)), 1);
+            tracker.attach_search_worker(link);
+            tracker.stop_searches_on(Arc::clone(&flag));
+            let mut poses = Vec::new();
+            let started = Instant::now();
+            for (k, (t, edges)) in frames.iter().enumerate() {
+                let r = tracker.process(edges, *t);
+                poses.extend(tracker.late().iter().filter_map(|(_, r)| r.pose));
+                poses.extend(r.pose);
+                if k == 0 {
+                    // The first search is on the worker now.
+                    if let Some(after) = stop_after {
+                        let flag = Arc::clone(&flag);
+                        scope.spawn(move || {
+                            std::thread::sleep(after);
+                            flag.store(true, Ordering::Relaxed);
+                        });
+                    }
+                }
+            }
+            tracker.finish();
+            poses.extend(tracker.late().iter().filter_map(|(_, r)| r.pose));
+            (poses, *tracker.stats(), started.elapsed())
+        })
+    };
+    let (poses, stats, whole) = run(None);
+    let first = stats.first_search.expect("the first search finished");
+    assert!(!poses.is_empty() && stats.searches_cancelled == 0, "{stats:?}");
+    // At once, then late in the search: a stop that comes after the search is done leaves it
+    // whole (none cut short), and it may commit; an earlier stop is tried then. (Late cuts are
+    // the ones that matter: without the rule, a cut at 0.9 of the search committed 5 poses.)
+    let mut late_cut = false;
+    for after in [Duration::ZERO, first.mul_f64(0.9), first.mul_f64(0.75), first / 2] {
+        if late_cut {
+            break;
+        }
+        let (poses, stats, took) = run(Some(after));
+        eprintln!("stopped after {after:?}: {took:?} (unstopped {whole:?}), {stats:?}");
+        if stats.searches_cancelled == 0 {
+            continue;
+        }
+        late_cut = after > Duration::ZERO;
+        assert!(poses.is_empty(), "stopped after {after:?}: {} poses", poses.len());
+        assert_eq!(stats.tracked + stats.late_poses, 0, "{stats:?}");
+        assert!(took < whole, "stopped after {after:?}: {took:?}, unstopped {whole:?}");
+    }
+    assert!(late_cut, "no stop came while the first search ran");
+}

@@ -224,6 +224,13 @@ pub fn run(a: Args) -> CommandResult {
         stats.relocalisations
     );
     eprintln!("omnitrack: {summary}");
+    if stats.searches_cancelled > 0 {
+        // Half a search may have missed the rival that would have refused its winner.
+        eprintln!(
+            "omnitrack: {} search(es) cut short by the stop: no pose from them",
+            stats.searches_cancelled
+        );
+    }
     if stats.tracked == 0 {
         eprintln!(
             "omnitrack: no pose: {}",

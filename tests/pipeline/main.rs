@@ -243,6 +243,26 @@ impl FrameSink for Recorder {
     }
 }
 
+/// A [`Recorder`] that also keeps the late records (a search's frame and those kept during it),
+/// each with the number of on-time records that came before it.
+struct WithLate {
+    inner: Recorder,
+    late: Vec<(usize, FrameRecord)>,
+}
+
+impl FrameSink for WithLate {
+    fn frame(&mut self, r: &FrameRecord) -> Result<(), SinkError> {
+        self.inner.frame(r)
+    }
+    fn late(&mut self, r: &FrameRecord) -> Result<(), SinkError> {
+        self.late.push((self.inner.records.len(), *r));
+        Ok(())
+    }
+    fn finish(&mut self) -> Result<(), SinkError> {
+        self.inner.finish()
+    }
+}
+
 // ---- tests -----------------------------------------------------------------------------------
 
 #[test]
@@ -254,10 +274,13 @@ fn every_processed_frame_is_published_and_equals_the_trajectory() {
     let done = Arc::new(AtomicBool::new(false));
     let samples = collect(move || subscriber.receive().unwrap(), Arc::clone(&done));
     let tum_path = f.dir.path().join("poses.tum");
-    let mut sink = Recorder {
-        records: Vec::new(),
-        tum: Some(TumSink::create(&tum_path).unwrap()),
-        stop_after: None,
+    let mut sink = WithLate {
+        inner: Recorder {
+            records: Vec::new(),
+            tum: Some(TumSink::create(&tum_path).unwrap()),
+            stop_after: None,
+        },
+        late: Vec::new(),
     };
     let summary = run_pipeline(
         replay(&f.rec),
@@ -270,7 +293,7 @@ fn every_processed_frame_is_published_and_equals_the_trajectory() {
     .unwrap();
     done.store(true, Ordering::Relaxed);
     let samples = samples.join().unwrap();
-    let records = sink.records;
+    let (records, late) = (sink.inner.records, sink.late);
     eprintln!("{summary}");
 
     assert_eq!(summary.reason, RunEnd::EndOfStream);
@@ -287,22 +310,45 @@ fn every_processed_frame_is_published_and_equals_the_trajectory() {
         records.len()
     );
 
-    // One sample per processed frame, in order, carrying the record.
+    // One sample per processed frame, in order, carrying the record. A frame without a pose
+    // carries the newest good pose known, late ones included (between a committed search and
+    // the first frame caught up on, the search's), with status lost and a finite covariance;
+    // before any pose, status initializing.
     assert_eq!(samples.len(), records.len(), "one pose sample per processed frame");
+    assert!(
+        late.iter().any(|(_, r)| r.result.pose.is_some()),
+        "the search's pose came late"
+    );
     let mut last_pose = None;
-    for (s, r) in samples.iter().zip(&records) {
+    let mut late = late.iter().peekable();
+    for (k, (s, r)) in samples.iter().zip(&records).enumerate() {
+        while let Some((_, l)) = late.next_if(|(before, _)| *before <= k) {
+            last_pose = l.result.pose.or(last_pose);
+        }
         assert_eq!(s.sequence, r.sequence);
         assert_eq!(s.timestamp_ns, r.timestamp_ns);
         assert_eq!(s.inliers, r.result.inliers);
         if let Some(p) = r.result.pose {
             last_pose = Some(p);
             assert_eq!(s.pose_status(), Ok(TrackerState::Tracking));
+        } else if last_pose.is_some() {
+            assert_eq!(s.pose_status(), Ok(TrackerState::Lost), "frame {}", r.sequence);
+            assert!(
+                s.covariance[0].is_finite(),
+                "frame {}: {:?}",
+                r.sequence,
+                s.covariance[0]
+            );
         } else {
-            assert_ne!(s.pose_status(), Ok(TrackerState::Tracking));
+            assert_eq!(s.pose_status(), Ok(TrackerState::Initialising), "frame {}", r.sequence);
         }
         if let Some(p) = last_pose {
             let got = s.pose().unwrap();
-            assert!((got.translation.vector - p.translation.vector).norm() < 1e-12);
+            assert!(
+                (got.translation.vector - p.translation.vector).norm() < 1e-12,
+                "frame {}",
+                r.sequence
+            );
             assert!(got.rotation.angle_to(&p.rotation) < 1e-9);
         }
     }

@@ -16,7 +16,9 @@
 //! estimated trajectory with the ground truth (ATE and RPE, evo's definitions) and prints a table.
 //!
 //! Every error is one line on stderr and exit code 2, so scripts can tell a bad input from a
-//! crash.
+//! crash. A reader of standard output that goes away (`omnitrack-desk eval … | head`) ends the
+//! tool quietly with success, as it ends `omnitrack`; standard output that cannot be written (a
+//! full disk) is an error like any other.
 
 mod jobs;
 mod look;
@@ -324,15 +326,48 @@ fn main() -> ExitCode {
     let cli: Cli =
         omnitrack::runtime::cli::parse_or_exit("omnitrack-desk", "omnitrack-desk extrude PLAN.geojson --out MODEL.obj");
     match run(cli.command) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(message) => {
+        // Nothing is left to say, and no one to say it to.
+        Ok(()) | Err(Failure::ReaderGone) => ExitCode::SUCCESS,
+        Err(Failure::Message(message)) => {
             eprintln!("omnitrack-desk: {message}");
             ExitCode::from(2)
         }
     }
 }
 
-fn run(command: Command) -> Result<(), String> {
+/// Why a command did not complete.
+#[derive(Debug)]
+enum Failure {
+    /// One line for standard error.
+    Message(String),
+    /// Standard output's reader went away.
+    ReaderGone,
+}
+
+impl From<String> for Failure {
+    fn from(message: String) -> Failure {
+        Failure::Message(message)
+    }
+}
+
+impl From<&str> for Failure {
+    fn from(message: &str) -> Failure {
+        Failure::Message(message.to_string())
+    }
+}
+
+/// Writes `text` to standard output, whole. `print!` would panic on a closed pipe (exit 101).
+fn print_out(text: &str) -> Result<(), Failure> {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    match out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
+        Ok(()) => Ok(()),
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Err(Failure::ReaderGone),
+        Err(e) => Err(Failure::Message(format!("cannot write to standard output: {e}"))),
+    }
+}
+
+fn run(command: Command) -> Result<(), Failure> {
     match command {
         Command::Overlay {
             recording,
@@ -371,7 +406,7 @@ fn run(command: Command) -> Result<(), String> {
                 "# Converted by `omnitrack-desk rig from-kalibr` from {file}; rig frame: {rig_frame} turned to\n\
                  # x forward, y left, z up, origin at its optical centre.\n"
             );
-            write_rig(&out, &rig, &header)
+            Ok(write_rig(&out, &rig, &header)?)
         }
         Command::Rig {
             command:
@@ -397,11 +432,11 @@ fn run(command: Command) -> Result<(), String> {
                 "# Converted by `omnitrack-desk rig from-opencv` from {shown}; rig frame: the camera's turned to\n\
                  # x forward, y left, z up, origin at its optical centre.\n"
             );
-            write_rig(&out, &rig, &header)
+            Ok(write_rig(&out, &rig, &header)?)
         }
         Command::Model {
             command: ModelCommand::FromIfc { file, out, storey },
-        } => from_ifc(&file, &out, storey.as_deref()),
+        } => Ok(from_ifc(&file, &out, storey.as_deref())?),
         Command::Model {
             command:
                 ModelCommand::Random {
@@ -424,8 +459,7 @@ fn run(command: Command) -> Result<(), String> {
                 std::fs::write(&p, omnitrack::trajectory::to_tum_string(&t))
                     .map_err(|e| format!("{}: cannot write: {e}", p.display()))?;
             }
-            println!("{out_name}: {b}; {} segments", model.segments.len());
-            Ok(())
+            print_out(&format!("{out_name}: {b}; {} segments\n", model.segments.len()))
         }
         Command::Extrude { plan, out } => {
             let plan_name = plan.display().to_string();
@@ -471,7 +505,7 @@ fn run(command: Command) -> Result<(), String> {
             let scenario = Scenario::get(name);
             let obj = scenario.model_obj().map_err(|e| e.to_string())?;
             let trajectory = scenario.trajectory(frames, look.seed);
-            render(&rig, &obj, &trajectory, &out, look.appearance()?)
+            Ok(render(&rig, &obj, &trajectory, &out, look.appearance()?)?)
         }
         Command::Render {
             rig,
@@ -488,7 +522,7 @@ fn run(command: Command) -> Result<(), String> {
             if trajectory.is_empty() {
                 return Err("the trajectory has no poses".into());
             }
-            render(&rig, &obj, &trajectory, &out, look.appearance()?)
+            Ok(render(&rig, &obj, &trajectory, &out, look.appearance()?)?)
         }
         Command::Eval {
             gt,
@@ -508,11 +542,10 @@ fn run(command: Command) -> Result<(), String> {
                 eprintln!("omnitrack-desk: {cut}");
             }
             if json {
-                println!("{}", eval_json(&evaluation));
+                print_out(&format!("{}\n", eval_json(&evaluation)))
             } else {
-                print!("{}", evaluation.table());
+                print_out(&evaluation.table())
             }
-            Ok(())
         }
     }
 }

@@ -56,7 +56,11 @@
 //! Stopping: [`PipelineOptions::stop`] (set it from anywhere; with `handle_signals` SIGINT and
 //! SIGTERM set it, and a second signal exits at once with status 1), the end of the source,
 //! `max_frames`, a sink error or a source error. Then the threads are joined, the sink is drained
-//! and [`FrameSink::finish`]ed (the trajectory flushed), and the services are dropped.
+//! and [`FrameSink::finish`]ed (the trajectory flushed), and the services are dropped. Nothing
+//! waits long for a stop: blocked threads look at it every `TICK` (20 ms), a source's own wait (a
+//! real-time replay's gap, a device waiting to be reopened) ends within a slice of it
+//! (`FrameSource::next_frame_or_stop`), and a search under way ends at its next check and is
+//! discarded, its frame without a pose (`Tracker::stop_searches_on`: no pose from half a search).
 //!
 //! Logs: [`init_logging`] (called by [`run_pipeline`] unless a subscriber is already set) writes
 //! `tracing` events to standard error, warnings only unless `OMNITRACK_LOG` or `RUST_LOG` (e.g.

@@ -35,7 +35,8 @@ pub struct RecordOptions {
     pub queue: usize,
     /// Wait for the writer instead of dropping (replays; live cameras would stall).
     pub lossless: bool,
-    /// Set from anywhere (a signal handler) to stop after the frame in hand.
+    /// Set from anywhere (a signal handler) to stop after the frame in hand; a source waiting
+    /// for its next frame (a real-time replay's gap, a camera being reopened) stops waiting.
     pub stop: Arc<AtomicBool>,
 }
 
@@ -156,7 +157,8 @@ fn capture(
     while opts.max_frames.is_none_or(|m| summary.frames_captured < m) && !opts.stop.load(Ordering::Relaxed) {
         // Never empty here (see `record`); `returns` keeps the channel open.
         let Ok(mut frame) = free.recv() else { return Ok(()) };
-        if !source.next_frame(&mut frame)? {
+        // A replay's wait for a distant frame, or a camera's reopening, ends at a stop.
+        if !source.next_frame_or_stop(&mut frame, &|| opts.stop.load(Ordering::Relaxed))? {
             break;
         }
         summary.frames_captured += 1;
@@ -303,5 +305,35 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("exists and is not empty"), "{e}");
+    }
+
+    /// Issue 50: recording a real-time replay that waits 40 s for its next frame stops within
+    /// a slice of the stop, not when the frame comes.
+    #[test]
+    fn a_stop_ends_the_wait_for_a_distant_frame() {
+        use omnitrack_io::capture::{Pacing, ReplaySource};
+        let dir = tempfile::tempdir().unwrap();
+        let src = dir.path().join("src");
+        record(&mut flood(1), &src, &RecordOptions::default()).unwrap();
+        let index = src.join("frames.csv");
+        let text = std::fs::read_to_string(&index).unwrap();
+        let row: Vec<&str> = text.lines().nth(1).unwrap().split(',').collect();
+        let next = row[0].parse::<u64>().unwrap() + 1;
+        let far = row[2].parse::<u64>().unwrap() + 40_000_000_000;
+        std::fs::write(&index, format!("{text}{next},0,{far},{}\n", row[3])).unwrap();
+        let mut replay = ReplaySource::open(&src, Pacing::RealTime).unwrap();
+        let opts = RecordOptions::default();
+        let stop = Arc::clone(&opts.stop);
+        let started = std::time::Instant::now();
+        let s = std::thread::scope(|scope| {
+            scope.spawn(|| {
+                std::thread::sleep(std::time::Duration::from_millis(100));
+                stop.store(true, Ordering::Relaxed);
+            });
+            record(&mut replay, &dir.path().join("out"), &opts).unwrap()
+        });
+        let took = started.elapsed();
+        assert_eq!((s.frames_captured, s.frames_written), (1, 1), "{s}");
+        assert!(took < std::time::Duration::from_secs(3), "stopped after {took:?}");
     }
 }

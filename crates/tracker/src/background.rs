@@ -109,6 +109,11 @@ impl<'m> SearchJob<'m> {
         self.polished = [None; STARTS];
     }
 
+    /// A flag that stops the job's search too ([`Initialiser::add_cancel`]).
+    pub(crate) fn add_cancel(&mut self, flag: &std::sync::Arc<std::sync::atomic::AtomicBool>) {
+        self.init.add_cancel(flag);
+    }
+
     /// Poses to polish on the job's edges once the search is done.
     pub(crate) fn set_starts(&mut self, starts: [Option<Pose>; STARTS]) {
         self.starts = starts;

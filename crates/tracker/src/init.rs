@@ -343,9 +343,9 @@ pub struct Initialiser<'m> {
     backstop_hit: bool,
     /// The backstop falls at this many times the budget ([`BACKSTOP_FACTOR`] by default).
     backstop_factor: u32,
-    /// Set by the owner to stop a search early (module `background`: a tracker shutting down
-    /// does not wait for a search nobody will read).
-    cancel: Option<Arc<AtomicBool>>,
+    /// Set by the owner to stop a search early (module `background`: a tracker shutting down,
+    /// or its pipeline stopping, does not wait for a search nobody will read).
+    cancel: Vec<Arc<AtomicBool>>,
     /// The segments in sight from a grid position: (angle they span in sight, index), and the
     /// longest kept.
     grid_order: Vec<(f64, u32)>,
@@ -421,7 +421,7 @@ impl<'m> Initialiser<'m> {
             backstop: Instant::now(),
             backstop_hit: false,
             backstop_factor: BACKSTOP_FACTOR,
-            cancel: None,
+            cancel: Vec::new(),
             grid_order: Vec::with_capacity(max_set),
             grid_segs: Vec::with_capacity(max_set),
             vanishing_rot: [UnitQuaternion::identity(); MAX_ROTATIONS],
@@ -493,10 +493,13 @@ impl<'m> Initialiser<'m> {
         self.backstop_factor = factor.max(1);
     }
 
-    /// A flag that, once set, stops this initialiser's searches at their next check (reported
-    /// as a backstop).
-    pub fn set_cancel(&mut self, flag: Arc<AtomicBool>) {
-        self.cancel = Some(flag);
+    /// One more flag that, once set, stops this initialiser's searches at their next check
+    /// (reported as a backstop, and as [`InitReport::cancelled`]). A flag given before is not
+    /// added twice.
+    pub fn add_cancel(&mut self, flag: &Arc<AtomicBool>) {
+        if !self.cancel.iter().any(|c| Arc::ptr_eq(c, flag)) {
+            self.cancel.push(Arc::clone(flag));
+        }
     }
 
     /// At most `threads` threads run the lanes of a whole-model search (`None`: one per core);
@@ -514,7 +517,7 @@ impl<'m> Initialiser<'m> {
     }
 
     fn cancelled(&self) -> bool {
-        self.cancel.as_ref().is_some_and(|c| c.load(Ordering::Relaxed))
+        self.cancel.iter().any(|c| c.load(Ordering::Relaxed))
     }
 
     /// The budget in work units.

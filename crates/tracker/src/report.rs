@@ -88,6 +88,9 @@ pub struct TrackerStats {
     /// Searches the wall clock stopped before their work budget did ([`InitReport::backstop`]):
     /// their answers depend on the machine's load.
     pub search_backstops: u64,
+    /// Searches a stop cut short ([`Tracker::stop_searches_on`](crate::Tracker::stop_searches_on)):
+    /// discarded, their frames with no pose.
+    pub searches_cancelled: u64,
     /// Adoption frames that had to wait for the search worker (module `background`), and how
     /// long in all: the machine was slower than the reference, or loaded.
     pub search_waits: u64,

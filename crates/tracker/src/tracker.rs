@@ -155,6 +155,8 @@ pub struct Tracker<'m> {
     late: Vec<(u64, FrameResult)>,
     /// Stops a search on the worker when the tracker goes (no one will read it).
     cancel: Arc<AtomicBool>,
+    /// The owner's flags that stop a search too ([`Tracker::stop_searches_on`]).
+    stops: Vec<Arc<AtomicBool>>,
 }
 
 impl Drop for Tracker<'_> {
@@ -183,7 +185,7 @@ impl<'m> Tracker<'m> {
         let init = Initialiser::new(rig, model, table, opts.clone(), solver.clone(), max_edges);
         let cancel = Arc::new(AtomicBool::new(false));
         let mut searcher = Initialiser::new(rig, model, table, opts, solver.clone(), max_edges);
-        searcher.set_cancel(cancel.clone());
+        searcher.add_cancel(&cancel);
         let job = Box::new(SearchJob::new(searcher, max_edges));
         let narrow = init.view_share() < NARROW_VIEW_SHARE;
         let max_set = (0..table.node_count() as u32)
@@ -239,6 +241,7 @@ impl<'m> Tracker<'m> {
             late: Vec::with_capacity(BACKLOG_FRAMES + 1),
             defer: false,
             cancel,
+            stops: Vec::new(),
         }
     }
 
@@ -258,6 +261,17 @@ impl<'m> Tracker<'m> {
     /// the search inline.
     pub fn defer_late_searches(&mut self, on: bool) {
         self.defer = on;
+    }
+
+    /// A search under way stops at its next check (a few milliseconds) once `flag` is set: a
+    /// pipeline's stop, so that a shutdown does not wait for the whole model's search. A search
+    /// so cut short is discarded, its frame answered with no pose and counted in
+    /// [`TrackerStats::searches_cancelled`]: its best candidate may not have met the rivals that
+    /// would have refused it, and a wrong pose is worse than none.
+    pub fn stop_searches_on(&mut self, flag: Arc<AtomicBool>) {
+        if !self.stops.iter().any(|s| Arc::ptr_eq(s, &flag)) {
+            self.stops.push(flag);
+        }
     }
 
     pub fn state(&self) -> TrackerState {

@@ -14,7 +14,7 @@
 //! (unplugged, I/O error, or [`LOST_AFTER_TIMEOUTS`] timeouts in a row) it is closed, reported on
 //! standard error, and reopened every [`SourceOptions::reopen_interval`] until it comes back
 //! (reported again); the other devices go on meanwhile. With no device connected, `next_frame`
-//! waits for the next reopening attempt instead of spinning.
+//! waits for the next reopening attempt instead of spinning (`next_frame_or_stop`: until a stop).
 //!
 //! Clock: image timestamps are nanoseconds of the host's monotonic clock: the drivers' own
 //! (V4L2 buffers stamped `CLOCK_MONOTONIC`) or, where a driver has none, [`host_time_ns`], the
@@ -25,7 +25,7 @@
 
 use super::device::{capture_devices, copy_window, CaptureDevice};
 use super::spec::SourceOptions;
-use super::{FrameSource, SourceError, SourceStats, WarningKind, WarningLimiter};
+use super::{sleep_until_or_stop, FrameSource, SourceError, SourceStats, WarningKind, WarningLimiter};
 use omnitrack_core::frame::{FrameSet, ImageFault, SensorImage};
 use omnitrack_core::rig::Rig;
 use std::fmt;
@@ -297,17 +297,23 @@ impl<C: LiveCamera> FrameSource for LiveSource<C> {
     }
 
     fn next_frame(&mut self, out: &mut FrameSet) -> Result<bool, SourceError> {
+        self.next_frame_or_stop(out, &|| false)
+    }
+
+    fn next_frame_or_stop(&mut self, out: &mut FrameSet, stop: &dyn Fn() -> bool) -> Result<bool, SourceError> {
         if !out.fits(&self.rig) {
             return Err(SourceError::FrameSetMismatch {
                 rig: self.rig.name.clone(),
             });
         }
         if self.connected() == 0 {
-            // Nothing to read: wait for the next reopening attempt rather than spin.
+            // Nothing to read: wait for the next reopening attempt rather than spin (a stop
+            // does not wait for it).
             let now = Instant::now();
             if let Some(at) = self.slots.iter().map(|s| s.retry_at).min() {
-                if at > now {
-                    std::thread::sleep((at - now).min(self.options.reopen_interval));
+                let at = at.min(now + self.options.reopen_interval);
+                if !sleep_until_or_stop(Some(at), stop) {
+                    return Ok(false);
                 }
             }
         }

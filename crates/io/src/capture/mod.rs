@@ -12,6 +12,8 @@
 //! `live` → `device`, `spec`, `convert`.
 //! Out: [`FrameSet`]s — one RGB8 image per rig sensor, with its capture time and whether the
 //! sensor delivered for this frame — plus [`SourceStats`] counting everything that went wrong.
+//! A caller that may be stopped asks through [`FrameSource::next_frame_or_stop`]: a source's own
+//! waits (pacing, reopening) then end within [`STOP_SLICE`] of the stop ([`sleep_until_or_stop`]).
 //! The frame types themselves are plain data of `omnitrack-core` ([`omnitrack_core::frame`]),
 //! re-exported here, so that the layers that only read frames (edges, tracker) do not link this
 //! crate and its transport.
@@ -50,6 +52,7 @@ use omnitrack_core::rig::{Rig, RigError};
 use omnitrack_core::trajectory::TumError;
 use std::fmt;
 use std::path::PathBuf;
+use std::time::{Duration, Instant};
 
 /// What one sensor delivered over the stream so far.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
@@ -225,8 +228,39 @@ pub trait FrameSource {
     /// source failed. A per-sensor failure is never an `Err`.
     fn next_frame(&mut self, out: &mut FrameSet) -> Result<bool, SourceError>;
 
+    /// [`FrameSource::next_frame`] for a caller that may be asked to stop: a wait of the
+    /// source's own (a replay paced at its recorded times, a live source with no camera waiting
+    /// to reopen one) looks at `stop` every [`STOP_SLICE`] and, once it says true, ends with
+    /// `Ok(false)`, no frame taken and `out` untouched. A source that never waits long need not
+    /// override it.
+    fn next_frame_or_stop(&mut self, out: &mut FrameSet, stop: &dyn Fn() -> bool) -> Result<bool, SourceError> {
+        let _ = stop;
+        self.next_frame(out)
+    }
+
     /// Counters so far.
     fn stats(&self) -> &SourceStats;
+}
+
+/// The longest a source's own wait goes without looking at its caller's stop
+/// ([`FrameSource::next_frame_or_stop`]): a stopping service must be gone within a tenth of a
+/// second, whatever gap a recording or a reopening interval asks for.
+pub const STOP_SLICE: Duration = Duration::from_millis(20);
+
+/// Sleeps until `until` (`None`: for ever) in slices of at most [`STOP_SLICE`]; false as soon as
+/// `stop` says true, true once `until` has come.
+pub fn sleep_until_or_stop(until: Option<Instant>, stop: &dyn Fn() -> bool) -> bool {
+    loop {
+        let now = Instant::now();
+        if until.is_some_and(|t| t <= now) {
+            return true;
+        }
+        if stop() {
+            return false;
+        }
+        let left = until.map_or(STOP_SLICE, |t| t - now);
+        std::thread::sleep(left.min(STOP_SLICE));
+    }
 }
 
 /// Writes capture warnings to standard error, at most `limit` per kind, counting the rest.

@@ -12,6 +12,9 @@
 //!
 //! Out: [`FrameSet`]s in frame-number order through [`FrameSource`], paced at the recorded
 //! timestamps ([`Pacing::RealTime`]) or as fast as decoding allows ([`Pacing::AsFastAsPossible`]).
+//! The pacing waits before a frame is read, so that a stop
+//! ([`FrameSource::next_frame_or_stop`]) cuts any gap short, a day's or `u64::MAX` ns, with no
+//! frame half delivered.
 //!
 //! Everything is parsed at [`ReplaySource::open`]: the index rows are checked and sorted once, and a
 //! bad row (wrong field count, non-numeric field, unknown sensor, duplicate (frame, sensor), empty
@@ -39,7 +42,7 @@
 mod index;
 
 use super::device::{crop_into, Window};
-use super::{FrameSource, SourceError, SourceStats, WarningKind, WarningLimiter};
+use super::{sleep_until_or_stop, FrameSource, SourceError, SourceStats, WarningKind, WarningLimiter};
 use image::codecs::png::PngDecoder;
 use image::{ColorType, ImageDecoder, ImageError, Limits};
 use index::{group_frames, parse_index, warn_missing_directories, FrameEntry, Row};
@@ -210,19 +213,22 @@ impl ReplaySource {
         self.clock = None;
     }
 
-    /// Sleeps until the recorded time of a frame, relative to the first delivered frame.
-    fn pace(&mut self, timestamp_ns: u64) {
+    /// Waits until the recorded time of a frame, relative to the first delivered frame; false
+    /// when `stop` said so first (the clock is then left as it was).
+    fn pace(&mut self, timestamp_ns: u64, stop: &dyn Fn() -> bool) -> bool {
         if self.pacing != Pacing::RealTime {
-            return;
+            return true;
         }
         match self.clock {
-            None => self.clock = Some((Instant::now(), timestamp_ns)),
+            None => {
+                self.clock = Some((Instant::now(), timestamp_ns));
+                true
+            }
             Some((start, t0)) => {
-                let target = start + Duration::from_nanos(timestamp_ns.saturating_sub(t0));
-                let now = Instant::now();
-                if target > now {
-                    std::thread::sleep(target - now);
-                }
+                // A gap beyond what the clock can hold (a corrupt timestamp) is waited out until
+                // a stop, like any gap too long to see the end of.
+                let target = start.checked_add(Duration::from_nanos(timestamp_ns.saturating_sub(t0)));
+                sleep_until_or_stop(target, stop)
             }
         }
     }
@@ -234,6 +240,10 @@ impl FrameSource for ReplaySource {
     }
 
     fn next_frame(&mut self, out: &mut FrameSet) -> Result<bool, SourceError> {
+        self.next_frame_or_stop(out, &|| false)
+    }
+
+    fn next_frame_or_stop(&mut self, out: &mut FrameSet, stop: &dyn Fn() -> bool) -> Result<bool, SourceError> {
         if !out.fits(&self.rig) {
             return Err(SourceError::FrameSetMismatch {
                 rig: self.rig.name.clone(),
@@ -243,6 +253,9 @@ impl FrameSource for ReplaySource {
             return Ok(false);
         };
         let (frame, rows, frame_time) = (entry.frame, entry.rows.clone(), entry.timestamp_ns);
+        if !self.pace(frame_time, stop) {
+            return Ok(false);
+        }
         self.next += 1;
 
         for img in out.sensors_mut() {
@@ -289,7 +302,6 @@ impl FrameSource for ReplaySource {
             }
         }
         out.sequence = frame;
-        self.pace(frame_time);
         self.stats.frames_delivered += 1;
         Ok(true)
     }

@@ -5,7 +5,7 @@
 //! In: the source. Out: frames in pool slots posted through the [`Handover`] (whole-rig), or
 //! [`Arrival`]s of images in each sensor's own buffers ([`SensorImages`], of [`super::images`])
 //! for the assembly, which posts the frames; faults and the source's failure are counted in the
-//! [`Shared`] state. Imports run one way: this file starts the assembly; the assembly and this
+//! [`Shared`] state. A source's own waits end at the pipeline's stop or halt. Imports run one way: this file starts the assembly; the assembly and this
 //! file both use the buffers of `images`, which use neither.
 
 use super::assembly;
@@ -30,7 +30,8 @@ fn capture_rig(source: &mut dyn FrameSource, shared: &Shared, pool: &Pool, hando
     while let Some(h) = pool.take(shared) {
         let mut slot = pool.slot(h);
         let started = Instant::now();
-        let got = source.next_frame(&mut slot.frame);
+        // A source's own wait (a real-time replay's gap, a reopening) ends at a stop.
+        let got = source.next_frame_or_stop(&mut slot.frame, &|| shared.stopping());
         shared.record_capture(started.elapsed());
         match got {
             Ok(true) => {
@@ -50,7 +51,9 @@ fn capture_rig(source: &mut dyn FrameSource, shared: &Shared, pool: &Pool, hando
             Ok(false) => {
                 drop(slot);
                 pool.release(h);
-                tracing::info!(frames = seq, "source ended");
+                if !shared.stopping() {
+                    tracing::info!(frames = seq, "source ended");
+                }
                 break;
             }
             Err(e) => {
@@ -99,7 +102,7 @@ fn capture_device(
         let got = {
             let mut imgs: heapless::Vec<&mut SensorImage, MAX_WINDOWS_PER_DEVICE> =
                 guards.iter_mut().map(|g| &mut **g).collect();
-            capture.capture(&mut imgs)
+            capture.capture(&mut imgs, &|| shared.stopping())
         };
         shared.record_capture(started.elapsed());
         match got {
@@ -130,7 +133,9 @@ fn capture_device(
                 for (sensor_images, &i) in images.iter().zip(&taken) {
                     sensor_images.release(i);
                 }
-                tracing::info!(?sensors, "capture stream ended");
+                if !shared.stopping() {
+                    tracing::info!(?sensors, "capture stream ended");
+                }
                 break;
             }
             Err(e) => {

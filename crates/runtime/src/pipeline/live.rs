@@ -5,7 +5,8 @@
 //! [`LiveDevice`] keeps the behaviour of the capture module's whole-rig `LiveSource`, per device:
 //! a failed read marks its sensors' images invalid with its fault; a device that is gone
 //! (unplugged, I/O error, [`LOST_AFTER_TIMEOUTS`] timeouts in a row) is closed, logged, and
-//! reopened every `reopen_interval` while the other devices go on; coming back is logged too.
+//! reopened every `reopen_interval` while the other devices go on (the wait for it ends at a
+//! stop); coming back is logged too.
 //! What every (re)opening shares (e.g. the USB context) sits behind a mutex, taken only to open.
 //! A device split into windows reads into a frame buffer sized at (re)opening and copies each
 //! window into its sensor's image.
@@ -18,7 +19,9 @@ use omnitrack_core::frame::{ImageFault, SensorImage};
 use omnitrack_core::rig::Rig;
 use omnitrack_io::capture::device::{capture_devices, copy_window, CaptureDevice};
 use omnitrack_io::capture::live::{open_device, FailureDetail, LiveCamera, LOST_AFTER_TIMEOUTS};
-use omnitrack_io::capture::{open_source_with, FrameSource, SourceError, SourceOptions, SourceSpec};
+use omnitrack_io::capture::{
+    open_source_with, sleep_until_or_stop, FrameSource, SourceError, SourceOptions, SourceSpec,
+};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
@@ -99,12 +102,14 @@ impl<C: LiveCamera> SensorCapture for LiveDevice<C> {
         &self.sensors
     }
 
-    fn capture(&mut self, imgs: &mut [&mut SensorImage]) -> Result<bool, SourceError> {
+    fn capture(&mut self, imgs: &mut [&mut SensorImage], stop: &dyn Fn() -> bool) -> Result<bool, SourceError> {
         let now = Instant::now();
         if self.camera.is_none() {
-            if now < self.retry_at {
-                // Nothing to read: wait for the reopening attempt rather than spin.
-                std::thread::sleep((self.retry_at - now).min(self.options.reopen_interval));
+            // Nothing to read: wait for the reopening attempt rather than spin (a stop does
+            // not wait for it).
+            let at = self.retry_at.min(now + self.options.reopen_interval);
+            if !sleep_until_or_stop(Some(at), stop) {
+                return Ok(false);
             }
             self.reopen(Instant::now());
         }

@@ -54,8 +54,10 @@ pub trait SensorCapture: Send {
     /// Reads the next images into `imgs` (one per sensor of [`SensorCapture::sensors`], in that
     /// order, each sized for its sensor) and marks each: valid with its capture time (ns, a clock
     /// shared by all sensors of the rig), or invalid with its fault. `Ok(false)`: this device's
-    /// stream has ended. A per-image failure is never an `Err`.
-    fn capture(&mut self, imgs: &mut [&mut SensorImage]) -> Result<bool, SourceError>;
+    /// stream has ended, or `stop` said true during a wait of its own (a device waiting to be
+    /// reopened looks at it every [`STOP_SLICE`](omnitrack_io::capture::STOP_SLICE)). A
+    /// per-image failure is never an `Err`.
+    fn capture(&mut self, imgs: &mut [&mut SensorImage], stop: &dyn Fn() -> bool) -> Result<bool, SourceError>;
 }
 
 /// The threads of the pipeline, for [`PipelineOptions::on_thread_start`].

@@ -2,8 +2,9 @@
 //! the pose sample; on schedule, the status sample.
 //!
 //! In: frame handles from the hand-over ([`Handover`](super::pool::Handover)). Out: the frame
-//! back to the pool before publishing, a [`PoseSample`] per frame (the last good pose while not
-//! tracking, its covariance grown by `[motion]`'s speed limits for the time since), a [`StatusSample`] every `budgets.status_interval_ms`, a [`FrameRecord`] per frame to
+//! back to the pool before publishing, a [`PoseSample`] per frame (the newest good pose known,
+//! late ones included, while the frame has none, its covariance grown by `[motion]`'s speed
+//! limits for the time since; initializing before any), a [`StatusSample`] every `budgets.status_interval_ms`, a [`FrameRecord`] per frame to
 //! the sink's channel, and the [`ProcessOutcome`] at the end (a type of `summary`, which turns
 //! it into the run's summary; this file uses it, not the other way).
 
@@ -32,11 +33,54 @@ use std::time::{Duration, Instant};
 /// Publish errors logged at `warn` before the rest are only counted.
 const WARN_LIMIT: u64 = 5;
 
-fn pose_status(r: &FrameResult) -> TrackerState {
-    match r.state {
-        TrackerState::Initialising => TrackerState::Initialising,
-        TrackerState::Tracking if r.pose.is_some() => TrackerState::Tracking,
-        TrackerState::Tracking | TrackerState::Lost => TrackerState::Lost,
+/// The newest good pose known, with its time and covariance: what a frame without a pose of
+/// its own publishes.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct LastGood {
+    timestamp_ns: u64,
+    pose: Pose,
+    covariance: Matrix6<f64>,
+}
+
+/// Folds a good pose of the frame at `timestamp_ns` into the newest known: a frame's own, or a
+/// late one (a search's frame and those kept during it, worked out after later frames came).
+/// After a committed search the late poses are the only good ones until the backlog is worked
+/// off, and the frames meanwhile must carry them, not the pose of before the search, or none.
+fn fold_good(last: &mut Option<LastGood>, timestamp_ns: u64, r: &FrameResult) {
+    let Some(pose) = r.pose else {
+        return;
+    };
+    if last.is_none_or(|l| timestamp_ns >= l.timestamp_ns) {
+        *last = Some(LastGood {
+            timestamp_ns,
+            pose,
+            covariance: r.covariance,
+        });
+    }
+}
+
+/// What the pose service says for a frame at `timestamp_ns` whose result is `r`, once `last`
+/// holds every good pose known (docs/interfaces.md, "PoseSample"): its own pose (tracking);
+/// else the last good one with its covariance grown for the time since (lost); else, before any
+/// pose, initializing (the pose fields meaningless, the covariance infinite).
+fn pose_sample(
+    r: &FrameResult,
+    timestamp_ns: u64,
+    last: Option<&LastGood>,
+    motion: &MotionConfig,
+) -> (TrackerState, Pose, Matrix6<f64>) {
+    match (r.pose, last) {
+        (Some(p), _) => (TrackerState::Tracking, p, r.covariance),
+        (None, Some(l)) => (
+            TrackerState::Lost,
+            l.pose,
+            grown_covariance(&l.covariance, timestamp_ns.saturating_sub(l.timestamp_ns), motion),
+        ),
+        (None, None) => (
+            TrackerState::Initialising,
+            Pose::identity(),
+            Matrix6::from_diagonal_element(f64::INFINITY),
+        ),
     }
 }
 
@@ -72,9 +116,9 @@ struct Processor<'a, 'o, 'm> {
     last_ts: u64,
     /// The sequence number of the last frame processed.
     last_sequence: u64,
-    last_pose: Pose,
-    /// The last good pose's time and covariance, which the samples after it grow.
-    last_good: Option<(u64, Matrix6<f64>)>,
+    /// The newest good pose known (of a frame or a late result), which the samples of frames
+    /// without a pose carry, their covariance grown.
+    last_good: Option<LastGood>,
     motion: MotionConfig,
     last_state: TrackerState,
     first_frame: Option<Instant>,
@@ -200,12 +244,10 @@ impl Processor<'_, '_, '_> {
             (_, true) => (self.search, self.search_widened_to_m) = (SearchState::None, 0.0),
             _ => {}
         }
-        if let Some(p) = &r.pose {
-            self.last_pose = *p;
-            self.last_good = Some((record.timestamp_ns, r.covariance));
-        }
-        self.last_state = pose_status(r);
-        let publish_time = self.publish_pose(&record);
+        fold_good(&mut self.last_good, record.timestamp_ns, r);
+        let (state, pose, covariance) = pose_sample(r, record.timestamp_ns, self.last_good.as_ref(), &self.motion);
+        self.last_state = state;
+        let publish_time = self.publish_pose(&record, &pose, &covariance);
         let done = Instant::now();
         self.first_frame.get_or_insert(done);
         self.last_frame = Some(done);
@@ -230,28 +272,23 @@ impl Processor<'_, '_, '_> {
             if let Some(TrackerEvent::Searched(rep)) = &r.event {
                 (self.search, self.search_widened_to_m) = search_state(rep);
             }
+            fold_good(&mut self.last_good, t, &r);
             let _ = self.records.send(FrameRecord::late(sequence, t, r));
         }
     }
 
-    /// Publishes the frame's pose sample; returns the time it took.
-    fn publish_pose(&mut self, record: &FrameRecord) -> Option<Duration> {
+    /// Publishes the frame's pose sample (of [`pose_sample`]); returns the time it took.
+    fn publish_pose(&mut self, record: &FrameRecord, pose: &Pose, covariance: &Matrix6<f64>) -> Option<Duration> {
         let publisher = self.poses.as_ref()?;
         let r = &record.result;
-        // A frame without a pose carries the last good one, as uncertain as the time since
-        // allows: its covariance grown by the fastest plausible motion.
-        let covariance = match (r.pose, self.last_good) {
-            (None, Some((ts, c))) => grown_covariance(&c, record.timestamp_ns.saturating_sub(ts), &self.motion),
-            _ => r.covariance,
-        };
         let started = Instant::now();
         let sent = publishing(|| {
             publisher.publish_pose(
                 record.timestamp_ns,
                 record.sequence,
                 self.last_state,
-                &self.last_pose,
-                &covariance,
+                pose,
+                covariance,
                 r.inliers,
                 r.xi_rad2,
             )
@@ -379,7 +416,14 @@ pub(super) fn run_process(
         ready: ready_rx,
         records: records_tx,
         detector: EdgeDetector::new(rig, &cfg.edges),
-        tracker: Tracker::new(rig, model, table, cfg, opts.run.hint, opts.run.seed),
+        tracker: {
+            let mut tracker = Tracker::new(rig, model, table, cfg, opts.run.hint, opts.run.seed);
+            // A stop is honoured within a tick, not after the whole model's search: the search
+            // ends at its next check and is discarded (no pose from half a search).
+            tracker.stop_searches_on(std::sync::Arc::clone(shared.stop));
+            tracker.stop_searches_on(std::sync::Arc::clone(&shared.halt));
+            tracker
+        },
         poses,
         status,
         clocks,
@@ -388,7 +432,6 @@ pub(super) fn run_process(
         processed: 0,
         last_sequence: 0,
         last_ts: 0,
-        last_pose: Pose::identity(),
         last_good: None,
         motion: cfg.motion.clone(),
         last_state: TrackerState::Initialising,
@@ -443,6 +486,60 @@ pub(super) fn run_process(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn result(state: TrackerState, pose: Option<Pose>) -> FrameResult {
+        let mut r = omnitrack_tracker::FrameResult {
+            state,
+            pose,
+            covariance: Matrix6::from_diagonal_element(f64::INFINITY),
+            inliers: 0,
+            states: Default::default(),
+            xi_rad2: f64::NAN,
+            explained: f32::NAN,
+            samples: 0,
+            match_time: Duration::ZERO,
+            solve_time: Duration::ZERO,
+            event: None,
+        };
+        if pose.is_some() {
+            r.covariance = Matrix6::from_diagonal_element(1e-4);
+        }
+        r
+    }
+
+    /// Issue 50: between a committed search and the first frame caught up on, the frames have no
+    /// pose of their own and the committed one comes late; they carry it (status lost, its
+    /// covariance grown), not 0,0,0 with an infinite covariance. Before any pose: initializing.
+    #[test]
+    fn a_frame_without_a_pose_carries_the_newest_good_one_late_ones_included() {
+        let motion = MotionConfig::default();
+        let mut last = None;
+        let searching = result(TrackerState::Initialising, None);
+        let (state, _, c) = pose_sample(&searching, 100, last.as_ref(), &motion);
+        assert_eq!(state, TrackerState::Initialising);
+        assert!(c[(0, 0)].is_infinite());
+
+        // The search committed on frame 100, handed over late on frame 400, which is being
+        // caught up on (tracking, no pose yet).
+        let committed = Pose::translation(1.0, 2.0, 1.5);
+        fold_good(&mut last, 100, &result(TrackerState::Tracking, Some(committed)));
+        let catching_up = result(TrackerState::Tracking, None);
+        let (state, pose, c) = pose_sample(&catching_up, 400, last.as_ref(), &motion);
+        assert_eq!(state, TrackerState::Lost);
+        assert_eq!(pose, committed);
+        assert!(c[(0, 0)] > 1e-4 && c[(0, 0)].is_finite(), "{}", c[(0, 0)]);
+        assert_eq!(c, grown_covariance(&Matrix6::from_diagonal_element(1e-4), 300, &motion));
+
+        // A frame's own pose wins, and a late pose older than the newest known changes nothing.
+        let own = Pose::translation(1.1, 2.0, 1.5);
+        let tracked = result(TrackerState::Tracking, Some(own));
+        fold_good(&mut last, 500, &tracked);
+        assert_eq!(pose_sample(&tracked, 500, last.as_ref(), &motion).1, own);
+        fold_good(&mut last, 200, &result(TrackerState::Tracking, Some(committed)));
+        assert_eq!(last.map(|l| (l.timestamp_ns, l.pose)), Some((500, own)));
+        let (state, pose, _) = pose_sample(&catching_up, 600, last.as_ref(), &motion);
+        assert_eq!((state, pose), (TrackerState::Lost, own));
+    }
 
     #[test]
     fn the_last_good_covariance_grows_with_the_time_since_it() {

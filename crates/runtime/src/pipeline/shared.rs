@@ -10,14 +10,15 @@ use super::{stage_budget, PipelineOptions, PipelineThread, Stage, StageClock};
 use omnitrack_config::BudgetConfig;
 use omnitrack_io::capture::SourceError;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::{Mutex, MutexGuard};
+use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Duration;
 
 /// State shared by all pipeline threads: flags and counters (atomics), the capture clock.
 pub(super) struct Shared<'o> {
-    pub(super) stop: &'o AtomicBool,
-    /// Set by the pipeline itself: processing ended, the sink or a sensor failed.
-    pub(super) halt: AtomicBool,
+    pub(super) stop: &'o Arc<AtomicBool>,
+    /// Set by the pipeline itself: processing ended, the sink or a sensor failed. Shared (like
+    /// `stop`) with the tracker, whose search ends at either.
+    pub(super) halt: Arc<AtomicBool>,
     pub(super) sensors: Box<[SensorCounters]>,
     pub(super) frames_captured: AtomicU64,
     pub(super) frames_dropped: AtomicU64,
@@ -35,7 +36,7 @@ impl<'o> Shared<'o> {
     pub(super) fn new(opts: &'o PipelineOptions, sensors: usize, budgets: &BudgetConfig) -> Shared<'o> {
         Shared {
             stop: &opts.stop,
-            halt: AtomicBool::new(false),
+            halt: Arc::new(AtomicBool::new(false)),
             sensors: (0..sensors).map(|_| SensorCounters::default()).collect(),
             frames_captured: AtomicU64::new(0),
             frames_dropped: AtomicU64::new(0),

@@ -177,6 +177,9 @@ impl Initialiser<'_> {
         report.work = self.work;
         report.backstop |= self.backstop_hit;
         report.timed_out |= self.work >= limit || report.backstop;
+        // A search that spent its whole budget is whole even if a cancel came after it; one
+        // the clock or a cancel stopped, with a cancel set now, is not to be trusted.
+        report.cancelled = report.backstop && self.cancelled();
         (&self.candidates, report)
     }
 

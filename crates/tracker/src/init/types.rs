@@ -158,6 +158,10 @@ pub struct InitReport {
     /// that a sweep looks at some cells twice rather than skip one). `None`: every cell of the
     /// volume has been looked at.
     pub swept_to_m: Option<f64>,
+    /// A cancel flag ([`Initialiser::add_cancel`](super::Initialiser::add_cancel)) stopped the
+    /// search before its work budget was spent: its candidates may not have met their rivals,
+    /// and a tracker commits none of them.
+    pub cancelled: bool,
 }
 
 impl InitReport {

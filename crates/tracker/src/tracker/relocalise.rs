@@ -182,6 +182,12 @@ impl Tracker<'_> {
             return self.conclude(reloc.tail);
         };
         let (found, report) = job.result();
+        if report.cancelled {
+            // Cut short by a stop: the frame concludes as maintenance left it.
+            self.stats.searches_cancelled += 1;
+            self.job = Some(job);
+            return self.conclude(reloc.tail);
+        }
         self.stats.search_backstops += u64::from(report.backstop);
         let mut candidates = [None; 3 + STARTS];
         for (slot, c) in candidates[..3].iter_mut().zip(found) {

@@ -5,7 +5,8 @@
 //! enough to commit one.
 //!
 //! In: a frame's [`Edge`]s while not tracking, a finished search's candidates. Out: a committed
-//! pose (tracking starts at it) or none yet.
+//! pose (tracking starts at it) or none yet; never one from a search a stop cut short
+//! ([`Tracker::stop_searches_on`]).
 
 use super::{Confirming, PendingSearch, Tracker};
 use crate::background::SearchJob;
@@ -125,6 +126,10 @@ impl<'m> Tracker<'m> {
 
     /// Sends a prepared job to the worker (or runs it here without one) and marks it under way.
     pub(super) fn launch(&mut self, mut job: Box<SearchJob<'m>>, pending: PendingSearch) {
+        // The job is at home only here: the owner's stop flags given since reach it now.
+        for stop in &self.stops {
+            job.add_cancel(stop);
+        }
         self.pending = Some(pending);
         match &self.link {
             Some(link) => {
@@ -254,6 +259,14 @@ impl<'m> Tracker<'m> {
         } = pending;
         let (candidates, report) = job.result();
         let report = *report;
+        if report.cancelled {
+            // Cut short by a stop: nothing of it is judged, and the search state stays as it
+            // was (the tracker is going away).
+            self.stats.searches_cancelled += 1;
+            self.job = Some(job);
+            self.last_time = started_ns;
+            return result;
+        }
         // A volume without a valid node was searched out to the nearest ones.
         let volume = SearchVolume {
             diameter_m: report.widened_to_m.or(volume.diameter_m),
