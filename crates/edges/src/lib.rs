@@ -20,7 +20,9 @@
 //! nothing: rays, not pixels, are fitted.
 //!
 //! Memory is fixed: every buffer is sized in [`EdgeDetector::new`] from the rig (resolution) and
-//! the [`EdgeConfig`] (edges per sensor); [`EdgeDetector::detect`] allocates nothing. Sensors are
+//! the [`EdgeConfig`] (edges per sensor) and written through there
+//! (`omnitrack_core::memory::resident`); [`EdgeDetector::detect`] allocates nothing, nor takes
+//! memory the detector did not hold from the start. Sensors are
 //! spread over a persistent pool of worker threads (the calling thread works too) fed through
 //! bounded crossbeam channels.
 //!
@@ -378,7 +380,7 @@ impl EdgeDetector {
             shared,
             workers,
             done,
-            all: Vec::with_capacity(n * max_edges),
+            all: omnitrack_core::memory::resident(Vec::with_capacity(n * max_edges)),
             offsets: vec![0; n + 1],
             stats: vec![ExtractionStats::default(); n],
         }
