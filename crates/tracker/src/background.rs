@@ -154,6 +154,18 @@ impl<'m> SearchJob<'m> {
 pub fn search_link<'m>() -> (SearchLink<'m>, SearchWorker<'m>) {
     let (jobs_tx, jobs_rx) = crossbeam::channel::bounded(1);
     let (done_tx, done_rx) = crossbeam::channel::bounded(1);
+    // Crossbeam allocates a channel side's list of waiting threads the first time a thread waits
+    // there, and the tracker may first wait for a search late in a run (the first search not
+    // done when due): a waiter registered on each receiving side now, and taken off at once
+    // (`try_select` registers without waiting), leaves the list its room. The sending sides never
+    // wait: one job is in flight at a time, and each channel holds one.
+    for rx in [&jobs_rx, &done_rx] {
+        let mut waiting = crossbeam::channel::Select::new();
+        waiting.recv(rx);
+        if let Ok(op) = waiting.try_select() {
+            let _ = op.recv(rx);
+        }
+    }
     (
         SearchLink {
             jobs: jobs_tx,
