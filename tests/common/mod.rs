@@ -89,6 +89,24 @@ pub fn allocations_in<T>(f: impl FnOnce() -> T) -> (T, u64) {
     (out, COUNT.with(Cell::get) - before)
 }
 
+/// Minor page faults this thread has taken so far: each is a page of memory it wrote first, so
+/// none over a stretch of work means the work took no memory beyond what it already held
+/// (`getrusage(RUSAGE_THREAD)`; Linux only, 0 elsewhere).
+pub fn minor_faults() -> u64 {
+    #[cfg(target_os = "linux")]
+    {
+        // SAFETY: `getrusage` only writes the struct it is given.
+        let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
+        let r = unsafe { libc::getrusage(libc::RUSAGE_THREAD, &mut usage) };
+        assert_eq!(r, 0, "getrusage");
+        usage.ru_minflt as u64
+    }
+    #[cfg(not(target_os = "linux"))]
+    {
+        0
+    }
+}
+
 /// The counter counts: one boxed value is one allocation (a test that cannot fail is no test).
 /// The box itself goes through `black_box`: once inlined, LLVM may drop an allocation whose
 /// pointer never escapes (it did without incremental compilation's many codegen units).

@@ -4,7 +4,8 @@
 //! types every layer above speaks — [`Pose`], [`geometry::Correspondence`] and
 //! [`geometry::EdgePlane`], the lenses, [`Rig`], [`Model`] with its segments and spatial index,
 //! timestamped poses, and the rig's frames ([`FrameSet`] of [`SensorImage`]s, plain data that
-//! capture fills and the edge stage reads).
+//! capture fills and the edge stage reads); and [`memory::resident`], which every layer's
+//! start-up buffers go through so that they take their memory when they are made.
 //!
 //! A rig of one 50° pinhole looking along the rig's x axis, and where a point 3 m ahead lands:
 //!
@@ -32,6 +33,7 @@
 pub mod frame;
 pub mod geometry;
 pub mod lines;
+pub mod memory;
 pub mod model;
 pub mod rig;
 pub mod status;

@@ -20,7 +20,9 @@
 //! nothing: rays, not pixels, are fitted.
 //!
 //! Memory is fixed: every buffer is sized in [`EdgeDetector::new`] from the rig (resolution) and
-//! the [`EdgeConfig`] (edges per sensor); [`EdgeDetector::detect`] allocates nothing. Sensors are
+//! the [`EdgeConfig`] (edges per sensor) and written through there
+//! (`omnitrack_core::memory::resident`); [`EdgeDetector::detect`] allocates nothing, nor takes
+//! memory the detector did not hold from the start. Sensors are
 //! spread over a persistent pool of worker threads (the calling thread works too) fed through
 //! bounded crossbeam channels.
 //!
@@ -273,12 +275,18 @@ impl Shared {
 }
 
 /// Crossbeam sets up a thread-local context (and std a thread-local destructor list) the first
-/// time a thread really blocks on a channel, which allocates. Frames usually arrive while the
-/// threads are still spinning, so that first block could fall on any later frame: force it here,
-/// at start-up, with a receive that must time out.
-fn warm_up_blocking() {
-    let (_tx, rx) = bounded::<()>(1);
-    let _ = rx.recv_timeout(std::time::Duration::from_micros(50));
+/// time a thread really blocks on a channel, and the list of waiting threads of a channel the
+/// first time one waits on it, both of which allocate. Frames usually arrive while the threads
+/// are still spinning, so that first block could fall on any later frame: force it here, at
+/// start-up, with a waiter registered on the empty `rx` and taken off at once (`try_select`
+/// registers without waiting, where a timed receive registers only if its spinning ends before
+/// the deadline).
+fn warm_up_blocking<T>(rx: &Receiver<T>) {
+    let mut waiting = crossbeam::channel::Select::new();
+    waiting.recv(rx);
+    if let Ok(op) = waiting.try_select() {
+        let _ = op.recv(rx);
+    }
 }
 
 struct Worker {
@@ -353,7 +361,7 @@ impl EdgeDetector {
                 let handle = std::thread::Builder::new()
                     .name(format!("edges-{k}"))
                     .spawn(move || {
-                        warm_up_blocking();
+                        warm_up_blocking(&rx);
                         let _ = done_tx.send(());
                         while let Ok(job) = rx.recv() {
                             shared.work(job);
@@ -373,12 +381,12 @@ impl EdgeDetector {
         for _ in 1..threads {
             let _ = done.recv();
         }
-        warm_up_blocking();
+        warm_up_blocking(&done);
         EdgeDetector {
             shared,
             workers,
             done,
-            all: Vec::with_capacity(n * max_edges),
+            all: omnitrack_core::memory::resident(Vec::with_capacity(n * max_edges)),
             offsets: vec![0; n + 1],
             stats: vec![ExtractionStats::default(); n],
         }

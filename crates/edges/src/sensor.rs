@@ -26,6 +26,7 @@ use chain::{LN_MAG, MAX_CHAIN};
 use nalgebra::{Point2, Point3, UnitQuaternion, Vector3};
 use omnitrack_core::frame::SensorImage;
 use omnitrack_core::geometry::Lens;
+use omnitrack_core::memory::resident;
 use omnitrack_core::rig::Sensor;
 use plane::Moments;
 use std::sync::Arc;
@@ -154,25 +155,27 @@ impl Workspace {
             max_edges,
             min_len_rad: min_len_deg.to_radians(),
             rows: Rows::new(w),
-            gx: vec![0; n],
-            gy: vec![0; n],
-            mag: vec![0; n],
-            map: vec![0; n],
-            fwd: Vec::with_capacity(MAX_CHAIN),
-            bwd: Vec::with_capacity(MAX_CHAIN),
-            pos: Vec::with_capacity(2 * MAX_CHAIN),
-            grad: Vec::with_capacity(2 * MAX_CHAIN),
-            emag: Vec::with_capacity(2 * MAX_CHAIN),
-            ray: Vec::with_capacity(2 * MAX_CHAIN),
-            prefix: Vec::with_capacity(2 * MAX_CHAIN + 1),
-            stack: Vec::with_capacity(2 * MAX_CHAIN),
-            pieces: Vec::with_capacity(2 * MAX_CHAIN),
-            cands: Vec::with_capacity(cand_cap),
-            normals: std::array::from_fn(|_| Vec::with_capacity(cand_cap)),
+            // Resident from the start (`omnitrack_core::memory`): a chain or a frame longer
+            // than any before would otherwise take new memory on the frame path.
+            gx: resident(vec![0; n]),
+            gy: resident(vec![0; n]),
+            mag: resident(vec![0; n]),
+            map: resident(vec![0; n]),
+            fwd: resident(Vec::with_capacity(MAX_CHAIN)),
+            bwd: resident(Vec::with_capacity(MAX_CHAIN)),
+            pos: resident(Vec::with_capacity(2 * MAX_CHAIN)),
+            grad: resident(Vec::with_capacity(2 * MAX_CHAIN)),
+            emag: resident(Vec::with_capacity(2 * MAX_CHAIN)),
+            ray: resident(Vec::with_capacity(2 * MAX_CHAIN)),
+            prefix: resident(Vec::with_capacity(2 * MAX_CHAIN + 1)),
+            stack: resident(Vec::with_capacity(2 * MAX_CHAIN)),
+            pieces: resident(Vec::with_capacity(2 * MAX_CHAIN)),
+            cands: resident(Vec::with_capacity(cand_cap)),
+            normals: std::array::from_fn(|_| resident(Vec::with_capacity(cand_cap))),
             // Pieces are sampled once a pixel: none is longer than a few image perimeters.
             // Trying both polarities doubles LSD's count of tests.
             contrario: Contrario::new(w, h, 2 * (w + h), 2.0),
-            edges: Vec::with_capacity(max_edges),
+            edges: resident(Vec::with_capacity(max_edges)),
             stats: ExtractionStats::default(),
         }
     }

@@ -47,8 +47,10 @@
 //! pose sample sent.
 //!
 //! Memory: the pool (`pool_size` frame sets, plus 4 images per sensor for per-sensor capture),
-//! channels, histograms (fixed buckets) and counters are allocated at start-up; after it the frame
-//! path allocates nothing — capture sources aside (the replay's PNG decoder allocates per image
+//! channels (with crossbeam's lists of waiting threads and each thread's wait context, which it
+//! would otherwise make at a first wait: `pool::warm_channel`), histograms (fixed buckets) and
+//! counters are allocated at start-up; after it the frame path and the search thread allocate
+//! nothing — capture sources aside (the replay's PNG decoder allocates per image
 //! inside `image`), and one allocation per published sample inside iceoryx2 0.10 (see
 //! [`omnitrack_io::publish`]). [`inside_publish`] tells an allocation counter that the current thread
 //! is in such a publish call, so a test can account for those exactly (`tests/pipeline/`).
@@ -106,6 +108,7 @@ use omnitrack_config::TrackerConfig;
 use omnitrack_core::model::Model;
 use omnitrack_io::capture::SourceError;
 use omnitrack_tracker::visibility::VisibilityTable;
+use omnitrack_tracker::{FrameResult, TrackerState};
 use pool::{Handover, Pool};
 use shared::{lock, Shared};
 use std::sync::atomic::Ordering;
@@ -169,6 +172,9 @@ pub fn run_pipeline(
     };
     let (ready_tx, ready_rx) = bounded::<usize>(1);
     let (records_tx, records_rx) = bounded::<FrameRecord>(SINK_BUFFER);
+    pool::warm_channel(&ready_tx, &ready_rx, || 0);
+    let no_record = || FrameRecord::late(0, 0, FrameResult::empty(TrackerState::Initialising));
+    pool::warm_channel(&records_tx, &records_rx, no_record);
     tracing::info!(
         rig = %rig.name,
         sensors = n,

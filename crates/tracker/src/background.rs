@@ -36,13 +36,15 @@
 //! and the older kept frames are dropped (counted): the lag stays bounded.
 //!
 //! Memory: the job (its own [`Initialiser`], an edge buffer for the largest frame) and the
-//! backlog's slots are made once in [`Tracker::new`](crate::Tracker::new); the job travels by
-//! `Box` through bounded channels: nothing is allocated per search or per kept frame.
+//! backlog's slots are made once in [`Tracker::new`](crate::Tracker::new), and written through
+//! then (`omnitrack_core::memory::resident`); the job travels by `Box` through bounded channels:
+//! nothing is allocated, and no memory first written, per search or per kept frame.
 
 use crate::init::{Candidate, InitReport, Initialiser, SearchVolume};
 use crossbeam::channel::{Receiver, Sender};
 use nalgebra::UnitQuaternion;
 use omnitrack_core::geometry::Pose;
+use omnitrack_core::memory::resident;
 use omnitrack_edges::Edge;
 use rand::rngs::SmallRng;
 use std::time::Duration;
@@ -69,13 +71,13 @@ impl<'m> SearchJob<'m> {
     pub fn new(init: Initialiser<'m>, max_edges: usize) -> SearchJob<'m> {
         SearchJob {
             init,
-            edges: Vec::with_capacity(max_edges),
+            edges: resident(Vec::with_capacity(max_edges)),
             volume: SearchVolume {
                 centre: nalgebra::Point3::origin(),
                 diameter_m: None,
             },
             rng: None,
-            found: Vec::with_capacity(crate::init::MAX_CANDIDATES),
+            found: resident(Vec::with_capacity(crate::init::MAX_CANDIDATES)),
             report: InitReport::default(),
             starts: [None; STARTS],
             polished: [None; STARTS],
@@ -157,6 +159,18 @@ impl<'m> SearchJob<'m> {
 pub fn search_link<'m>() -> (SearchLink<'m>, SearchWorker<'m>) {
     let (jobs_tx, jobs_rx) = crossbeam::channel::bounded(1);
     let (done_tx, done_rx) = crossbeam::channel::bounded(1);
+    // Crossbeam allocates a channel side's list of waiting threads the first time a thread waits
+    // there, and the tracker may first wait for a search late in a run (the first search not
+    // done when due): a waiter registered on each receiving side now, and taken off at once
+    // (`try_select` registers without waiting), leaves the list its room. The sending sides never
+    // wait: one job is in flight at a time, and each channel holds one.
+    for rx in [&jobs_rx, &done_rx] {
+        let mut waiting = crossbeam::channel::Select::new();
+        waiting.recv(rx);
+        if let Ok(op) = waiting.try_select() {
+            let _ = op.recv(rx);
+        }
+    }
     (
         SearchLink {
             jobs: jobs_tx,
@@ -221,7 +235,12 @@ impl Backlog {
     /// Room for `frames` frames of up to `max_edges` edges each.
     pub(crate) fn new(frames: usize, max_edges: usize) -> Backlog {
         Backlog {
-            slots: (0..frames.max(2)).map(|_| (0, Vec::with_capacity(max_edges))).collect(),
+            // Resident from the start (`omnitrack_core::memory`): each search keeps its frames
+            // in the slots after the last one's, and a slot written for the first time took
+            // new memory, about 90 KB a relocalisation (issue 50).
+            slots: (0..frames.max(2))
+                .map(|_| (0, resident(Vec::with_capacity(max_edges))))
+                .collect(),
             head: 0,
             len: 0,
             dropped: 0,

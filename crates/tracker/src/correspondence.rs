@@ -183,8 +183,8 @@ impl CorrespondenceTable {
     pub fn new(capacity: usize) -> CorrespondenceTable {
         let capacity = capacity.max(1);
         CorrespondenceTable {
-            tracks: Vec::with_capacity(capacity),
-            scratch: Vec::with_capacity(capacity),
+            tracks: omnitrack_core::memory::resident(Vec::with_capacity(capacity)),
+            scratch: omnitrack_core::memory::resident(Vec::with_capacity(capacity)),
             capacity,
             overflow: 0,
         }

@@ -26,6 +26,7 @@
 //! allocate nothing.
 
 use nalgebra::Vector3;
+use omnitrack_core::memory::resident;
 use omnitrack_edges::Edge;
 use std::f64::consts::{PI, TAU};
 
@@ -63,9 +64,9 @@ impl EdgeIndex {
     pub fn new(max_edges: usize, sensors: usize) -> EdgeIndex {
         let sensors = sensors.max(1);
         EdgeIndex {
-            order: Vec::with_capacity(max_edges.min(1 << 16)),
-            start: vec![0; sensors * BUCKETS + 1],
-            key: Vec::with_capacity(max_edges.min(1 << 16)),
+            order: resident(Vec::with_capacity(max_edges.min(1 << 16))),
+            start: resident(vec![0; sensors * BUCKETS + 1]),
+            key: resident(Vec::with_capacity(max_edges.min(1 << 16))),
             sensors,
         }
     }

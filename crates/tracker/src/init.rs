@@ -153,6 +153,7 @@ use crate::visibility::VisibilityTable;
 use grid_scan::{GridLane, MeritScratch};
 use nalgebra::{Point3, UnitQuaternion, Vector3};
 use omnitrack_core::geometry::{Correspondence, Pose};
+use omnitrack_core::memory::resident;
 use omnitrack_core::model::Model;
 use omnitrack_core::rig::{Rig, ViewMap};
 use omnitrack_edges::Edge;
@@ -255,13 +256,13 @@ impl CellScratch {
     /// For m edges, n segments and visibility sets of at most `max_set` segments.
     fn new(m: usize, n: usize, max_set: usize) -> CellScratch {
         CellScratch {
-            seg_order: Vec::with_capacity(max_set),
-            segs: Vec::with_capacity(n),
-            seg_normals: vec![Vector3::zeros(); n * 9],
-            ranges: vec![(0.0, 0.0); n * n],
-            score: vec![0.0; n * m],
-            best: vec![[(0.0, 0); 3]; n],
-            weights: vec![0.0; n],
+            seg_order: resident(Vec::with_capacity(max_set)),
+            segs: resident(Vec::with_capacity(n)),
+            seg_normals: resident(vec![Vector3::zeros(); n * 9]),
+            ranges: resident(vec![(0.0, 0.0); n * n]),
+            score: resident(vec![0.0; n * m]),
+            best: resident(vec![[(0.0, 0); 3]; n]),
+            weights: resident(vec![0.0; n]),
             corr: Vec::with_capacity(3),
             pool: Pool::new(),
         }
@@ -392,18 +393,22 @@ impl<'m> Initialiser<'m> {
             centres: rig.sensors.iter().map(|s| s.centre()).collect(),
             opts,
             solver,
-            edge_order: Vec::with_capacity(max_edges),
-            top: Vec::with_capacity(m),
-            dihedral: vec![0.0; m * m],
-            le_mask: vec![0; m * BINS],
-            pairs: Vec::with_capacity(m * m),
-            cells: Vec::with_capacity(table.node_count()),
-            plan_cells: Vec::with_capacity((table.header.dims[0] as usize) * (table.header.dims[1] as usize)),
+            // Every buffer resident from the start (`omnitrack_core::memory`): a search that
+            // reaches further into one than the searches before would otherwise take memory.
+            edge_order: resident(Vec::with_capacity(max_edges)),
+            top: resident(Vec::with_capacity(m)),
+            dihedral: resident(vec![0.0; m * m]),
+            le_mask: resident(vec![0; m * BINS]),
+            pairs: resident(Vec::with_capacity(m * m)),
+            cells: resident(Vec::with_capacity(table.node_count())),
+            plan_cells: resident(Vec::with_capacity(
+                (table.header.dims[0] as usize) * (table.header.dims[1] as usize),
+            )),
             scratch: (0..LANES).map(|_| CellScratch::new(m, n, max_set)).collect(),
             pool: Pool::new(),
-            corr: Vec::with_capacity(max_set),
-            alphas: Vec::with_capacity(max_set),
-            candidates: Vec::with_capacity(MAX_CANDIDATES),
+            corr: resident(Vec::with_capacity(max_set)),
+            alphas: resident(Vec::with_capacity(max_set)),
+            candidates: resident(Vec::with_capacity(MAX_CANDIDATES)),
             vote: TranslationVote::new(model.segments.len()),
             vote_edges: heapless::Vec::new(),
             vote_index: EdgeIndex::new(VOTE_EDGES, rig.sensors.len().min(crate::matching::MAX_SENSORS)),
@@ -415,15 +420,15 @@ impl<'m> Initialiser<'m> {
             grid_best: std::array::from_fn(|_| GridBest::new()),
             at_pose: PoseVisibility::new(model),
             view: ViewMap::new(rig),
-            support_pred: Vec::with_capacity(max_set),
+            support_pred: resident(Vec::with_capacity(max_set)),
             work: 0,
             rays_charged: 0,
             backstop: Instant::now(),
             backstop_hit: false,
             backstop_factor: BACKSTOP_FACTOR,
             cancel: Vec::new(),
-            grid_order: Vec::with_capacity(max_set),
-            grid_segs: Vec::with_capacity(max_set),
+            grid_order: resident(Vec::with_capacity(max_set)),
+            grid_segs: resident(Vec::with_capacity(max_set)),
             vanishing_rot: [UnitQuaternion::identity(); MAX_ROTATIONS],
             vanishing_count: 0,
             yaw_twins: true,

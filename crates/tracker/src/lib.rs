@@ -23,8 +23,10 @@
 //! jumps more than `max_jump_m` / `max_jump_deg` from the motion prior; `lost_after_frames`
 //! consecutive bad frames lose lock.
 //!
-//! Memory: everything is sized in [`Tracker::new`]; [`Tracker::process`] allocates nothing in
-//! the tracking state (counted by a test). The initialisation's tables are also preallocated.
+//! Memory: everything is sized in [`Tracker::new`], and written through there
+//! (`omnitrack_core::memory::resident`): [`Tracker::process`] allocates nothing, and writes no
+//! memory not held from the start, while tracking or searching, relocalisations included
+//! (counted by a test, page faults too).
 //!
 //! Where things are: [`Tracker`] (module `tracker`: the state machine and the frame loop, with
 //! the search scheduling and the commit decision in `tracker::search` and Figure 7 in

@@ -50,7 +50,7 @@ pub struct FrameResult {
 }
 
 impl FrameResult {
-    pub(crate) fn empty(state: TrackerState) -> FrameResult {
+    pub fn empty(state: TrackerState) -> FrameResult {
         FrameResult {
             state,
             pose: None,

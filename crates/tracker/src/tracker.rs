@@ -19,6 +19,7 @@ use crate::visibility::VisibilityTable;
 use nalgebra::{Point3, UnitQuaternion};
 use omnitrack_config::TrackerConfig;
 use omnitrack_core::geometry::{Correspondence, Pose};
+use omnitrack_core::memory::resident;
 use omnitrack_core::model::Model;
 use omnitrack_core::rig::Rig;
 use omnitrack_edges::Edge;
@@ -37,7 +38,7 @@ const NARROW_VIEW_SHARE: f64 = 0.5;
 /// Frames kept while a search runs (module `background`): a 950 ms search at 30 Hz keeps all
 /// of its 29; a longer one (the whole model) keeps every other, every fourth… A slot holds the
 /// rig's most edges (the shipped rig: 1,536 of 248 bytes, 0.38 MB), so the backlog is about
-/// 12 MB, made at start-up.
+/// 12 MB, made and written through at start-up (module `background`).
 const BACKLOG_FRAMES: usize = 32;
 
 /// Kept frames tracked per arriving frame once a search is taken up: one more than arrive, so the
@@ -205,10 +206,10 @@ impl<'m> Tracker<'m> {
             init,
             tracks: CorrespondenceTable::new(capacity),
             sampler: ConsensusSampler::new(capacity, lambda, m.max_samples as u64),
-            set: Vec::with_capacity(capacity),
-            set_track: Vec::with_capacity(capacity),
+            set: resident(Vec::with_capacity(capacity)),
+            set_track: resident(Vec::with_capacity(capacity)),
             matched: vec![None; capacity],
-            robust_scratch: vec![0.0; 2 * capacity],
+            robust_scratch: resident(vec![0.0; 2 * capacity]),
             rng: SmallRng::seed_from_u64(seed),
             state: TrackerState::Initialising,
             hint,
@@ -237,7 +238,7 @@ impl<'m> Tracker<'m> {
             link: None,
             pending: None,
             backlog: Backlog::new(BACKLOG_FRAMES, max_edges),
-            scratch: Vec::with_capacity(max_edges),
+            scratch: resident(Vec::with_capacity(max_edges)),
             late: Vec::with_capacity(BACKLOG_FRAMES + 1),
             defer: false,
             cancel,

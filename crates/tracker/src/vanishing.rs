@@ -101,7 +101,7 @@ impl VanishingDirections {
                 .map(|&b| refine(bin_azimuth(b), directions()))
                 .collect(),
             hist,
-            longest: Vec::with_capacity(max_edges),
+            longest: omnitrack_core::memory::resident(Vec::with_capacity(max_edges)),
         }
     }
 

@@ -25,6 +25,7 @@
 
 use nalgebra::{Point3, Translation3, UnitQuaternion, Vector3};
 use omnitrack_core::geometry::Pose;
+use omnitrack_core::memory::resident;
 use omnitrack_core::model::Model;
 use omnitrack_edges::Edge;
 
@@ -113,10 +114,10 @@ impl TranslationVote {
     pub fn new(model_segments: usize) -> TranslationVote {
         let cells = MAX_XY * MAX_XY;
         TranslationVote {
-            count: vec![0; cells],
-            stamp: vec![0; cells],
-            segs: Vec::with_capacity(model_segments),
-            seen: vec![0; model_segments],
+            count: resident(vec![0; cells]),
+            stamp: resident(vec![0; cells]),
+            segs: resident(Vec::with_capacity(model_segments)),
+            seen: resident(vec![0; model_segments]),
             mark: 0,
         }
     }

@@ -177,6 +177,12 @@ pub(super) fn spawn_capture<'scope>(
         }
         PipelineSource::Sensors { sensors, .. } => {
             let (arrivals_tx, arrivals_rx) = bounded::<Arrival>(n * IMAGES_PER_SENSOR);
+            let arrived = Instant::now();
+            super::pool::warm_channel(&arrivals_tx, &arrivals_rx, || Arrival {
+                sensor: 0,
+                slot: 0,
+                arrived,
+            });
             for capture in sensors.iter_mut() {
                 let capture: &mut dyn SensorCapture = capture.as_mut();
                 let ids = capture.sensors();

@@ -8,7 +8,7 @@
 use super::shared::{lock, Shared};
 use super::stats::SensorCounters;
 use super::TICK;
-use crossbeam::channel::{bounded, Receiver, RecvTimeoutError, SendTimeoutError, Sender, TrySendError};
+use crossbeam::channel::{bounded, Receiver, RecvTimeoutError, Select, SendTimeoutError, Sender, TrySendError};
 use omnitrack_core::frame::FrameSet;
 use omnitrack_core::rig::Rig;
 use std::sync::atomic::Ordering;
@@ -34,6 +34,7 @@ pub(super) struct Pool {
 impl Pool {
     pub(super) fn new(rig: &Rig, size: usize) -> Pool {
         let (free_tx, free_rx) = bounded(size);
+        warm_channel(&free_tx, &free_rx, || 0);
         let now = Instant::now();
         let slots = (0..size)
             .map(|i| {
@@ -74,6 +75,30 @@ impl Pool {
         // Never full: there are as many places as handles.
         let _ = self.free_tx.try_send(h);
     }
+}
+
+/// Takes, now, the memory a thread blocking on either side of the new, empty channel `tx`/`rx`
+/// would take: crossbeam allocates a channel side's list of waiting threads the first time one
+/// waits there, and a thread's wait context the first time it waits anywhere, so a first wait
+/// falling late in a run (capture slower than the tracker for once, the sink stalled by the
+/// disk, a search not done when due) allocated on the frame path (`tests/pipeline`). A waiter is
+/// registered on each side and taken off at once (`Select::try_select`, which registers without
+/// waiting): the list keeps its room, enough for four waiters. `fill` makes values to fill the
+/// channel with so that a sender must wait; the channel is left empty. The calling thread's
+/// context is made too.
+pub(crate) fn warm_channel<T>(tx: &Sender<T>, rx: &Receiver<T>, mut fill: impl FnMut() -> T) {
+    let mut waiting = Select::new();
+    waiting.recv(rx);
+    if let Ok(op) = waiting.try_select() {
+        let _ = op.recv(rx);
+    }
+    while tx.try_send(fill()).is_ok() {}
+    let mut waiting = Select::new();
+    waiting.send(tx);
+    if let Ok(op) = waiting.try_select() {
+        let _ = op.send(tx, fill());
+    }
+    while rx.try_recv().is_ok() {}
 }
 
 /// The producer's side of the hand-over to the tracker: a channel of one handle, and a receiver

@@ -61,8 +61,12 @@ impl Shared<'_> {
         self.halt.load(Ordering::Relaxed) || self.stop.load(Ordering::Relaxed)
     }
 
-    /// Sets the thread's scheduling for its role (`priority`), then calls the caller's hook.
+    /// Sets the thread's scheduling for its role (`priority`) and makes its channel wait context
+    /// (`pool::warm_channel`: crossbeam makes it on a thread's first wait, which allocates and
+    /// could come late in the run), then calls the caller's hook.
     pub(super) fn thread_started(&self, t: PipelineThread) {
+        let (tx, rx) = crossbeam::channel::bounded::<()>(1);
+        super::pool::warm_channel(&tx, &rx, || ());
         if let Err(reason) = priority::apply(t, self.realtime_priority) {
             let mut realtime = lock(&self.realtime);
             if !matches!(*realtime, Realtime::Refused { .. }) {

@@ -37,6 +37,7 @@
 
 use crate::SolveError;
 use omnitrack_core::geometry::{xi, Correspondence, Pose};
+use omnitrack_core::memory::resident;
 use rand::rngs::SmallRng;
 use rand::Rng;
 use serde::{Deserialize, Serialize};
@@ -155,11 +156,13 @@ impl ConsensusSampler {
             capacity,
             lambda,
             max_samples,
-            order: vec![0; capacity],
+            // Resident from the start (`omnitrack_core::memory`): a frame with more
+            // correspondences than any before would otherwise take new memory.
+            order: resident(vec![0; capacity]),
             sample: vec![filler; lambda],
-            inliers: vec![0; capacity],
+            inliers: resident(vec![0; capacity]),
             inlier_set: vec![filler; capacity],
-            squares: vec![0.0; capacity],
+            squares: resident(vec![0.0; capacity]),
         }
     }
 

@@ -34,6 +34,7 @@ use crate::vanishing::MAX_ROTATIONS;
 use crate::visibility::at_pose::SightBuffers;
 use nalgebra::{Point3, Translation3};
 use omnitrack_core::geometry::Pose;
+use omnitrack_core::memory::resident;
 use omnitrack_core::model::Model;
 use omnitrack_edges::Edge;
 use std::time::Instant;
@@ -88,8 +89,8 @@ impl GridLane {
     pub(super) fn new(model: &Model) -> GridLane {
         GridLane {
             sight: SightBuffers::new(model),
-            order: Vec::with_capacity(GRID_SEGMENTS),
-            segs: Vec::with_capacity(GRID_SEGMENTS),
+            order: resident(Vec::with_capacity(GRID_SEGMENTS)),
+            segs: resident(Vec::with_capacity(GRID_SEGMENTS)),
             merit: MeritScratch::new(GRID_SEGMENTS),
             best: std::array::from_fn(|_| GridBest::new()),
             work: 0,

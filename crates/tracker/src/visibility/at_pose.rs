@@ -30,6 +30,7 @@
 
 use super::VisibilityTable;
 use nalgebra::Point3;
+use omnitrack_core::memory::resident;
 use omnitrack_core::model::bvh::{model_triangles, Ray, TriangleBvh};
 use omnitrack_core::model::Model;
 
@@ -92,9 +93,9 @@ impl SightBuffers {
     /// Room for all of `model`'s segments.
     pub fn new(model: &Model) -> SightBuffers {
         SightBuffers {
-            stamp: vec![0; model.segments.len()],
+            stamp: resident(vec![0; model.segments.len()]),
             query: 0,
-            ranked: Vec::with_capacity(model.segments.len()),
+            ranked: resident(Vec::with_capacity(model.segments.len())),
             rays: 0,
         }
     }
@@ -143,7 +144,7 @@ impl PoseVisibility {
         PoseVisibility {
             bvh: TriangleBvh::build(&tris, &faces),
             own: SightBuffers::new(model),
-            seen: Vec::with_capacity(model.segments.len()),
+            seen: resident(Vec::with_capacity(model.segments.len())),
             last: None,
         }
     }
