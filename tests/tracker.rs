@@ -66,6 +66,19 @@ fn config() -> TrackerConfig {
     cfg
 }
 
+/// The first `n` frames of the fixture's replay: each one's timestamp and detected edges.
+fn detected_frames(f: &LabRecording, n: usize) -> Vec<(u64, Vec<omnitrack::edges::Edge>)> {
+    let (mut source, _, _, mut frame, mut detector) = replay(f);
+    std::iter::from_fn(|| {
+        source
+            .next_frame(&mut frame)
+            .unwrap()
+            .then(|| (frame.timestamp_ns().unwrap(), detector.detect(&frame).to_vec()))
+    })
+    .take(n)
+    .collect()
+}
+
 /// The fixture's replay, its rig, the test configuration, a frame buffer and a detector.
 fn replay(f: &LabRecording) -> (ReplaySource, Rig, TrackerConfig, FrameSet, EdgeDetector) {
     let source = ReplaySource::open(&f.rec, Pacing::AsFastAsPossible).unwrap();
@@ -880,17 +893,7 @@ fn the_true_pose_draws_fewer_lines_across_plain_surfaces_than_a_wrong_one() {
 fn a_search_on_a_worker_thread_answers_every_frame_as_one_inline() {
     use omnitrack::tracker::search_link;
     let f = fixture();
-    let frames: Vec<(u64, Vec<omnitrack::edges::Edge>)> = {
-        let (mut source, _, _, mut frame, mut detector) = replay(f);
-        std::iter::from_fn(|| {
-            source
-                .next_frame(&mut frame)
-                .unwrap()
-                .then(|| (frame.timestamp_ns().unwrap(), detector.detect(&frame).to_vec()))
-        })
-        .take(30)
-        .collect()
-    };
+    let frames = detected_frames(f, 30);
     let (_, rig, cfg, _, _) = replay(f);
     type Answers = Vec<(Option<omnitrack::Pose>, Vec<(u64, Option<omnitrack::Pose>)>)>;
     let answer = |tracker: &mut Tracker| -> Answers {
@@ -1142,17 +1145,7 @@ fn a_search_cut_short_by_a_stop_commits_nothing() {
     use std::sync::Arc;
     use std::time::{Duration, Instant};
     let f = fixture();
-    let frames: Vec<(u64, Vec<omnitrack::edges::Edge>)> = {
-        let (mut source, _, _, mut frame, mut detector) = replay(f);
-        std::iter::from_fn(|| {
-            source
-                .next_frame(&mut frame)
-                .unwrap()
-                .then(|| (frame.timestamp_ns().unwrap(), detector.detect(&frame).to_vec()))
-        })
-        .take(start_frames() + 2)
-        .collect()
-    };
+    let frames = detected_frames(f, start_frames() + 2);
     let (_, rig, cfg, _, _) = replay(f);
     // Every pose, on time or late, the stats, and how long it all took.
     let run = |stop_after: Option<Duration>| {

@@ -488,19 +488,8 @@ mod tests {
     use super::*;
 
     fn result(state: TrackerState, pose: Option<Pose>) -> FrameResult {
-        let mut r = omnitrack_tracker::FrameResult {
-            state,
-            pose,
-            covariance: Matrix6::from_diagonal_element(f64::INFINITY),
-            inliers: 0,
-            states: Default::default(),
-            xi_rad2: f64::NAN,
-            explained: f32::NAN,
-            samples: 0,
-            match_time: Duration::ZERO,
-            solve_time: Duration::ZERO,
-            event: None,
-        };
+        let mut r = FrameResult::empty(state);
+        r.pose = pose;
         if pose.is_some() {
             r.covariance = Matrix6::from_diagonal_element(1e-4);
         }
