@@ -9,6 +9,7 @@
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 use std::process::Command;
+use std::sync::atomic::{AtomicBool, AtomicI64, Ordering};
 
 /// The shipped rig's file (`firmware_config/ladybug2.toml`), the rig most tests look through.
 pub const SHIPPED_RIG: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/firmware_config/ladybug2.toml");
@@ -51,31 +52,51 @@ pub struct Counting;
 thread_local! {
     static ON: Cell<bool> = const { Cell::new(false) };
     static COUNT: Cell<u64> = const { Cell::new(0) };
+    /// Bytes this thread allocated minus those it freed while counting, and the most it reached.
+    static LIVE: Cell<i64> = const { Cell::new(0) };
+    static PEAK: Cell<i64> = const { Cell::new(0) };
 }
 
-fn note() {
+/// Whether every thread's allocations are summed into [`ALL_LIVE`] and [`ALL_PEAK`].
+static ALL_ON: AtomicBool = AtomicBool::new(false);
+static ALL_LIVE: AtomicI64 = AtomicI64::new(0);
+static ALL_PEAK: AtomicI64 = AtomicI64::new(0);
+
+/// An allocation (`grown` > 0) or a free (< 0) of `grown` bytes; `new` counts it as a call.
+fn note_bytes(grown: i64, new: bool) {
+    if ALL_ON.load(Ordering::Relaxed) {
+        let live = ALL_LIVE.fetch_add(grown, Ordering::Relaxed) + grown;
+        ALL_PEAK.fetch_max(live, Ordering::Relaxed);
+    }
     // `try_with`: the allocator also runs while thread-locals are being torn down.
     let _ = ON.try_with(|on| {
         if on.get() {
-            let _ = COUNT.try_with(|n| n.set(n.get() + 1));
+            if new {
+                let _ = COUNT.try_with(|n| n.set(n.get() + 1));
+            }
+            let _ = LIVE.try_with(|live| {
+                live.set(live.get() + grown);
+                let _ = PEAK.try_with(|peak| peak.set(peak.get().max(live.get())));
+            });
         }
     });
 }
 
 unsafe impl GlobalAlloc for Counting {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        note();
+        note_bytes(layout.size() as i64, true);
         unsafe { System.alloc(layout) }
     }
     unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
-        note();
+        note_bytes(layout.size() as i64, true);
         unsafe { System.alloc_zeroed(layout) }
     }
     unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        note();
+        note_bytes(new_size as i64 - layout.size() as i64, true);
         unsafe { System.realloc(ptr, layout, new_size) }
     }
     unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        note_bytes(-(layout.size() as i64), false);
         unsafe { System.dealloc(ptr, layout) }
     }
 }
@@ -87,6 +108,28 @@ pub fn allocations_in<T>(f: impl FnOnce() -> T) -> (T, u64) {
     let out = f();
     ON.with(|c| c.set(false));
     (out, COUNT.with(Cell::get) - before)
+}
+
+/// The heap this thread used while running `f`: the most it held at once beyond what it held
+/// before, and what it still held at the end (bytes).
+pub fn heap_in<T>(f: impl FnOnce() -> T) -> (T, i64, i64) {
+    LIVE.with(|c| c.set(0));
+    PEAK.with(|c| c.set(0));
+    ON.with(|c| c.set(true));
+    let out = f();
+    ON.with(|c| c.set(false));
+    (out, PEAK.with(Cell::get), LIVE.with(Cell::get))
+}
+
+/// The most heap all threads of the process held at once while `f` ran, beyond what they held
+/// before (bytes): for work spread over a thread pool. One such measurement at a time.
+pub fn peak_heap_of_all_threads_in<T>(f: impl FnOnce() -> T) -> (T, i64) {
+    ALL_LIVE.store(0, Ordering::SeqCst);
+    ALL_PEAK.store(0, Ordering::SeqCst);
+    ALL_ON.store(true, Ordering::SeqCst);
+    let out = f();
+    ALL_ON.store(false, Ordering::SeqCst);
+    (out, ALL_PEAK.load(Ordering::SeqCst))
 }
 
 /// Minor page faults this thread has taken so far: each is a page of memory it wrote first, so

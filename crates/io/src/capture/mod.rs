@@ -116,11 +116,19 @@ pub struct BadRowStats {
     /// A path that leaves the recording (absolute, or with `..`): a recording reads only what
     /// is inside its folder.
     pub outside: u64,
+    /// Not a line of text: not UTF-8, or longer than any row of the format can be.
+    pub unreadable: u64,
 }
 
 impl BadRowStats {
     pub fn total(&self) -> u64 {
-        self.field_count + self.not_a_number + self.unknown_sensor + self.duplicate + self.empty_path + self.outside
+        self.field_count
+            + self.not_a_number
+            + self.unknown_sensor
+            + self.duplicate
+            + self.empty_path
+            + self.outside
+            + self.unreadable
     }
 }
 

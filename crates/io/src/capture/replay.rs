@@ -16,10 +16,12 @@
 //! ([`FrameSource::next_frame_or_stop`]) cuts any gap short, a day's or `u64::MAX` ns, with no
 //! frame half delivered.
 //!
-//! Everything is parsed at [`ReplaySource::open`]: the index rows are checked and sorted once, and a
-//! bad row (wrong field count, non-numeric field, unknown sensor, duplicate (frame, sensor), empty
-//! path) is skipped, counted in [`SourceStats::bad_rows`] and warned with its line number. A missing
-//! rig file, index file or malformed index header is an `Err` naming the file.
+//! The index is checked in one pass at [`ReplaySource::open`], as a stream: a bad row (wrong field
+//! count, non-numeric field, unknown sensor, duplicate (frame, sensor), empty path, not a line of
+//! text) is skipped, counted in [`SourceStats::bad_rows`] and warned with its line number; what is
+//! kept is a small entry per frame, and each frame's rows are read back from the file when it is
+//! replayed, so a day-long index costs megabytes, not gigabytes (see `index`). A missing rig file,
+//! index file or malformed index header is an `Err` naming the file.
 //!
 //! Per frame, each sensor's PNG is read into a scratch byte buffer sized at open and decoded
 //! straight into the frame set's preallocated RGB8 buffer (grey, grey+alpha and RGBA PNGs are
@@ -45,15 +47,13 @@ use super::device::{crop_into, Window};
 use super::{sleep_until_or_stop, FrameSource, SourceError, SourceStats, WarningKind, WarningLimiter};
 use image::codecs::png::PngDecoder;
 use image::{ColorType, ImageDecoder, ImageError, Limits};
-use index::{group_frames, parse_index, warn_missing_directories, FrameEntry, Row};
+use index::{FrameIndex, Row};
 use omnitrack_core::frame::{FrameSet, ImageFault, SensorImage};
 use omnitrack_core::rig::Rig;
 use omnitrack_core::trajectory::{load_tum, Trajectory};
-use std::collections::HashSet;
 use std::fmt;
 use std::fs::File;
 use std::io::{self, Cursor, Read};
-use std::ops::Range;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
@@ -86,8 +86,9 @@ pub struct ReplaySource {
     root: PathBuf,
     rig: Rig,
     pacing: Pacing,
+    index: FrameIndex,
+    /// The rows of the frame being read (one per sensor at most; sized at open).
     rows: Vec<Row>,
-    frames: Vec<FrameEntry>,
     next: usize,
     ground_truth: Option<Trajectory>,
     model_path: Option<PathBuf>,
@@ -119,16 +120,7 @@ impl ReplaySource {
         let mut warnings = WarningLimiter::new(WARN_LIMIT);
 
         let index_path = dir.join("frames.csv");
-        let text = omnitrack_core::text_file::read_text(&index_path, omnitrack_core::text_file::LARGE_FILE_LIMIT)
-            .map_err(|e| SourceError::Io {
-                path: index_path.clone(),
-                message: format!("cannot read frame index: {e}"),
-            })?;
-        let mut rows = parse_index(&text, &index_path, dir, &rig, &mut stats, &mut warnings)?;
-        // Frame-number order, then sensor order; the sort is stable and (frame, sensor) unique.
-        rows.sort_by_key(|r| (r.frame, r.sensor));
-        let frames = group_frames(&rows);
-        warn_missing_directories(&rows, &mut stats, &mut warnings);
+        let index = FrameIndex::open(&index_path, dir, &rig, &mut stats, &mut warnings)?;
 
         let gt_path = dir.join("groundtruth.tum");
         let ground_truth = if gt_path.exists() {
@@ -157,10 +149,10 @@ impl ReplaySource {
             device_frame: DeviceFrame::for_rig(&rig),
             root,
             dir: dir.to_path_buf(),
+            rows: Vec::with_capacity(rig.sensors.len()),
             rig,
             pacing,
-            rows,
-            frames,
+            index,
             next: 0,
             ground_truth,
             model_path,
@@ -183,12 +175,12 @@ impl ReplaySource {
 
     /// Number of frames in the recording (frames with at least one valid index row).
     pub fn frame_count(&self) -> usize {
-        self.frames.len()
+        self.index.frames().len()
     }
 
     /// Frames not yet delivered.
     pub fn remaining(&self) -> usize {
-        self.frames.len() - self.next
+        self.index.frames().len() - self.next
     }
 
     /// `groundtruth.tum` (`T_world_rig`), if the recording has one.
@@ -209,7 +201,7 @@ impl ReplaySource {
 
     /// Goes on from frame `frame` (the last frame's end if past it); the real-time clock restarts.
     pub fn seek(&mut self, frame: usize) {
-        self.next = frame.min(self.frames.len());
+        self.next = frame.min(self.index.frames().len());
         self.clock = None;
     }
 
@@ -249,20 +241,21 @@ impl FrameSource for ReplaySource {
                 rig: self.rig.name.clone(),
             });
         }
-        let Some(entry) = self.frames.get(self.next) else {
+        let Some(&entry) = self.index.frames().get(self.next) else {
             return Ok(false);
         };
-        let (frame, rows, frame_time) = (entry.frame, entry.rows.clone(), entry.timestamp_ns);
+        let (frame, frame_time) = (entry.frame, entry.timestamp_ns);
         if !self.pace(frame_time, stop) {
             return Ok(false);
         }
+        let used = self.index.rows(&entry, &mut self.rows)?;
         self.next += 1;
 
         for img in out.sensors_mut() {
             img.set_invalid(ImageFault::Dropped, 0);
         }
         self.device_frame.forget();
-        for row in &self.rows[rows] {
+        for row in &self.rows[..used] {
             let img = out.sensor_mut(row.sensor);
             let loaded = match self.rig.sensors[row.sensor].crop {
                 None => load_png(&row.path, &self.root, &mut self.file_buf, &mut self.rgba_buf, img),
