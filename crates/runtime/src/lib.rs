@@ -205,9 +205,9 @@ fn build_and_cache(
     cache: &Path,
     cfg: &TrackerConfig,
 ) -> Result<(VisibilityTable, String), VisibilityError> {
-    use omnitrack_tracker::visibility::build::{build_table, check_grid, BuildOptions};
+    use omnitrack_tracker::visibility::build::{build_table, check_build, BuildOptions};
     let mut opts = BuildOptions::from_config(&cfg.visibility);
-    check_grid(model, &opts).map_err(|message| VisibilityError::Invalid {
+    check_build(model, &opts).map_err(|message| VisibilityError::Invalid {
         file: cache.display().to_string(),
         message,
     })?;

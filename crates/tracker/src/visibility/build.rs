@@ -52,9 +52,11 @@ use std::path::Path;
 use std::time::Instant;
 
 mod cubemap;
+mod estimate;
 mod occluders;
 
 pub use cubemap::CubeMap;
+pub use estimate::{available_memory, check_memory, estimate, BuildEstimate};
 pub use occluders::Occluders;
 
 /// How to build a table.
@@ -132,6 +134,15 @@ impl Default for BuildOptions {
 /// [`super::check_grid`] with a build's options.
 pub fn check_grid(model: &Model, opts: &BuildOptions) -> Result<(), String> {
     super::check_grid(model, opts.spacing_m, opts.heights_m.len())
+}
+
+/// Whether a build of `model` with `opts` can run here: the grid no larger than
+/// [`super::MAX_GRID_CELLS`], then its estimated peak memory no more than the machine has free
+/// ([`check_memory`]). Called before a byte of the table is allocated, by `visibility build`,
+/// `run`'s own build and `check`.
+pub fn check_build(model: &Model, opts: &BuildOptions) -> Result<BuildEstimate, String> {
+    check_grid(model, opts)?;
+    check_memory(model, opts, available_memory())
 }
 
 /// The node grid over a model's bounds ([`super::grid`]).
@@ -531,7 +542,7 @@ pub fn run_build(
             message: "[visibility] needs node_heights_m and a cube_map_resolution > 0".into(),
         });
     }
-    check_grid(&model, &opts).map_err(|message| super::VisibilityError::Invalid {
+    check_build(&model, &opts).map_err(|message| super::VisibilityError::Invalid {
         file: out.display().to_string(),
         message,
     })?;

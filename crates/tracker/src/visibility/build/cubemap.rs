@@ -67,6 +67,23 @@ fn face_bit(id: u32) -> u64 {
 }
 
 impl CubeMap {
+    /// Bytes its buffers hold on the heap now (for a build's memory estimate).
+    pub fn heap_bytes(&self) -> usize {
+        fn bytes<T>(v: &Vec<T>) -> usize {
+            v.capacity() * std::mem::size_of::<T>()
+        }
+        bytes(&self.inv_z)
+            + bytes(&self.id)
+            + bytes(&self.face_stamp)
+            + bytes(&self.poly)
+            + bytes(&self.clipped)
+            + bytes(&self.near)
+            + bytes(&self.tiles)
+            + bytes(&self.depth_min)
+            + bytes(&self.depth_dirty)
+            + bytes(&self.order)
+    }
+
     pub fn new(res: usize, faces: usize) -> CubeMap {
         CubeMap {
             res,

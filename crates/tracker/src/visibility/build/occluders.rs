@@ -143,6 +143,22 @@ pub struct Occluders<'m> {
 }
 
 impl<'m> Occluders<'m> {
+    /// Bytes its buffers hold on the heap (for a build's memory estimate).
+    pub fn heap_bytes(&self) -> usize {
+        fn bytes<T>(v: &Vec<T>) -> usize {
+            v.capacity() * std::mem::size_of::<T>()
+        }
+        let bins = |b: &Bins| bytes(&b.start) + bytes(&b.items) + bytes(&b.ranges);
+        bytes(&self.tris)
+            + bytes(&self.boxes)
+            + bytes(&self.bvh.bvh.nodes)
+            + bytes(&self.bvh.bvh.order)
+            + bytes(&self.bvh.triangles)
+            + bytes(&self.bvh.payload)
+            + bins(&self.tri_bins)
+            + bins(&self.segment_bins)
+    }
+
     pub fn new(model: &'m Model) -> Occluders<'m> {
         let mut tris = Vec::new();
         for (fi, face) in model.faces.iter().enumerate() {
