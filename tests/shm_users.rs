@@ -274,6 +274,30 @@ impl Running {
     }
 }
 
+impl Running {
+    /// Waits at most `timeout` for the process to end (killed after): its exit code (`None`
+    /// when killed), its standard output's lines and its standard error.
+    fn end(mut self, timeout: Duration) -> (Option<i32>, Vec<String>, String) {
+        let start = Instant::now();
+        let code = loop {
+            if let Some(status) = self.child.try_wait().unwrap() {
+                break status.code();
+            }
+            if start.elapsed() > timeout {
+                let _ = self.child.kill();
+                let _ = self.child.wait();
+                break None;
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        };
+        let lines: Vec<String> =
+            std::iter::from_fn(|| self.lines.recv_timeout(Duration::from_millis(200)).ok()).collect();
+        let mut err = String::new();
+        let _ = std::io::Read::read_to_string(self.child.stderr.as_mut().unwrap(), &mut err);
+        (code, lines, err)
+    }
+}
+
 impl Drop for Running {
     fn drop(&mut self) {
         let _ = self.child.kill();
@@ -543,11 +567,12 @@ fn only_the_trackers_group_and_root_reach_its_files() {
         "tools/deploy/omnitrack.tmpfiles makes the folders and counters"
     );
     // A consumer of the group that starts before the tracker.
-    let early = d
-        .command(Path::new(env!("CARGO_BIN_EXE_omnitrack")), Some(MEMBER))
-        .args(["listen", "--count", "2"])
-        .spawn()
-        .unwrap();
+    let early = Running::new(
+        d.command(Path::new(env!("CARGO_BIN_EXE_omnitrack")), Some(MEMBER))
+            .args(["listen", "--count", "2"])
+            .spawn()
+            .unwrap(),
+    );
     std::thread::sleep(Duration::from_millis(300));
     // An outsider cannot take the service before the tracker.
     let squatter = d.helper(Some(OUTSIDER), "publish omnitrack/pose");
@@ -560,9 +585,9 @@ fn only_the_trackers_group_and_root_reach_its_files() {
     );
     let tracker = d.helper(Some(TRACKER), "publish omnitrack/pose");
     assert_eq!(tracker.said(Duration::from_secs(10)).as_deref(), Some("ready"));
-    let (code, out, err) = finish(early, Duration::from_secs(10));
+    let (code, lines, err) = early.end(Duration::from_secs(10));
     assert_eq!(code, Some(0), "the consumer that started first: {err}");
-    assert_eq!(out.lines().count(), 2, "{out}");
+    assert_eq!(lines.len(), 2, "{lines:?}");
     for (who, user) in [("a member of the group", Some(MEMBER)), ("root", None)] {
         let (code, out, err) = d.omnitrack(user, &["listen", "--count", "3"], Duration::from_secs(10));
         assert_eq!(code, Some(0), "{who}: {err}");
@@ -607,4 +632,65 @@ fn only_the_trackers_group_and_root_reach_its_files() {
     for p in &counters {
         assert_eq!(fs::metadata(p).unwrap().len(), 16, "{} not filled", p.display());
     }
+}
+
+/// The tracker killed (SIGKILL, the OOM killer) and started again, as systemd does, with a
+/// consumer of another user in its group listening throughout: the new tracker cleans up what
+/// the dead one left (its own files; the consumer cannot see whether another user's node is
+/// dead, so it leaves them alone) and the consumer receives from it without reconnecting.
+#[test]
+fn a_consumer_of_the_group_outlives_a_tracker_crash() {
+    if !can_switch_users("a_consumer_of_the_group_outlives_a_tracker_crash") {
+        return;
+    }
+    let d = TestDomain::new("k");
+    apply_tmpfiles(&d);
+    let first = d.helper(Some(TRACKER), "publish omnitrack/pose");
+    assert_eq!(first.said(Duration::from_secs(10)).as_deref(), Some("ready"));
+    let consumer = Running::new(
+        d.command(Path::new(env!("CARGO_BIN_EXE_omnitrack")), Some(MEMBER))
+            .args(["listen"])
+            .spawn()
+            .unwrap(),
+    );
+    let seq = |line: &str| -> u64 {
+        line.strip_prefix("seq=")
+            .and_then(|r| r.split(' ').next())
+            .unwrap()
+            .parse()
+            .unwrap()
+    };
+    let line = consumer
+        .lines
+        .recv_timeout(Duration::from_secs(10))
+        .expect("a pose from the first tracker");
+    let before = seq(&line);
+    // Well into the first tracker's sequence, so that the second one's (from 0) tells them apart.
+    std::thread::sleep(Duration::from_millis(500));
+    drop(first);
+    let second = d.helper(Some(TRACKER), "publish omnitrack/pose");
+    assert_eq!(second.said(Duration::from_secs(10)).as_deref(), Some("ready"));
+    let deadline = Instant::now() + Duration::from_secs(10);
+    let mut from_second = None;
+    while let Some(left) = deadline.checked_duration_since(Instant::now()) {
+        match consumer.lines.recv_timeout(left) {
+            Ok(l) if seq(&l) < 20 => {
+                from_second = Some(l);
+                break;
+            }
+            Ok(_) => continue,
+            Err(_) => break,
+        }
+    }
+    assert!(
+        from_second.is_some(),
+        "the consumer got nothing from the restarted tracker (first: seq {before})"
+    );
+    // Nothing of the dead tracker is left in /dev/shm: one data segment per live publisher.
+    let data = d
+        .shm_files()
+        .into_iter()
+        .filter(|p| p.to_string_lossy().ends_with(".data"))
+        .count();
+    assert_eq!(data, 1, "{:?}", d.shm_files());
 }

@@ -293,17 +293,15 @@ impl Domain {
             ));
         }
         if !self.me.is_root() && (!shared || mode & 0o070 != 0o070) {
-            let why = if mode & 0o070 != 0o070 {
-                format!(
-                    "its group cannot write into it (a process of {} with iceoryx2's defaults made it): remove it as root \
-                     (sudo rm -r {p}) and start again; {REMEDY}",
-                    user(m.uid())
-                )
+            // Here the folder is root's, or its group may not write: made with iceoryx2's own
+            // rights (0750) by a process that does not share.
+            let why = if m.uid() == 0 {
+                format!("a process of root made it first: remove it as root (sudo rm -r {p}) and start again; {REMEDY}")
             } else {
                 format!(
-                    "only members of group {g} use this iceoryx2 domain: add {u} to it (sudo usermod -aG {g} USER)",
-                    g = group(m.gid()),
-                    u = user(self.me.uid)
+                    "{} made it with iceoryx2's own rights (group read-only): the tracker, running as that user, opens it \
+                     to its group when it starts; or remove it as root (sudo rm -r {p}) and start again; {REMEDY}",
+                    user(m.uid())
                 )
             };
             return Err(format!(
@@ -489,6 +487,13 @@ impl Domain {
         };
         let mode = m.mode() & 0o7777;
         if m.uid() != self.me.uid || m.file_type().is_symlink() || mode & 0o400 == 0 {
+            return Ok(Some(m));
+        }
+        // A regular file of 0600 in the root folder is either a node's monitor (whose lock tells
+        // the node's death: kept private, so that only its own user, restarting, cleans up after a
+        // crash, never a consumer that could not remove another user's files in /dev/shm and
+        // would leave them behind) or a static file iceoryx2 is still writing (0600 until done).
+        if mode == 0o600 && m.file_type().is_file() && path.starts_with(&self.root) {
             return Ok(Some(m));
         }
         let owner = mode & 0o700;
