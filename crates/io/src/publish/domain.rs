@@ -280,8 +280,8 @@ impl Domain {
         if !(m.uid() == 0 || shared || self.me.is_root()) {
             let (owner, g, me) = (user(m.uid()), group(m.gid()), user(self.me.uid));
             return Err(format!(
-                "{p} is owned by {owner} (group {g}, mode {mode:04o}), and {me} is neither its owner, root, nor in group \
-                 {g}: if {owner} runs the tracker, add this user to group {g} (sudo usermod -aG {g} USER); if not, \
+                "{p} is owned by {owner}, group {g}, mode {mode:04o}; {me} is neither its owner, root, nor in group {g}: \
+                 if {owner} runs the tracker, add this user to group {g} (sudo usermod -aG {g} USER); if not, \
                  another user's iceoryx2 process made it first: stop it, remove the folder as root (sudo rm -r {p}) \
                  and start again; {REMEDY}"
             ));
