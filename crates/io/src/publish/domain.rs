@@ -26,7 +26,7 @@
 //!   left open to other users.
 
 use std::fs::{self, File, Metadata, OpenOptions};
-use std::io::{ErrorKind, Read};
+use std::io::ErrorKind;
 use std::os::unix::ffi::OsStrExt;
 use std::os::unix::fs::{DirBuilderExt, FileExt, FileTypeExt, MetadataExt, OpenOptionsExt, PermissionsExt};
 use std::path::{Path, PathBuf};
@@ -585,9 +585,9 @@ fn counter_bytes(counter: u32) -> [u8; COUNTER_BYTES] {
 fn repair_counter(file: &File) -> std::io::Result<bool> {
     let mut head = [0u8; COUNTER_BYTES];
     let mut read = 0;
-    let mut reader = file;
+    // At its offset, not the file's position: the check may run again on the same open file.
     while read < COUNTER_BYTES {
-        match reader.read(&mut head[read..])? {
+        match file.read_at(&mut head[read..], read as u64)? {
             0 => break,
             n => read += n,
         }
