@@ -56,6 +56,26 @@ const OUTSIDER: User = User {
     groups: &[],
 };
 
+/// How the error lines name a user: `name (uid N)` from /etc/passwd, or `uid N`.
+fn user_named(uid: u32) -> String {
+    match id_name("/etc/passwd", uid) {
+        Some(name) => format!("{name} (uid {uid})"),
+        None => format!("uid {uid}"),
+    }
+}
+
+/// How the error lines name a group: its name from /etc/group, or its number.
+fn group_named(gid: u32) -> String {
+    id_name("/etc/group", gid).unwrap_or_else(|| gid.to_string())
+}
+
+fn id_name(file: &str, id: u32) -> Option<String> {
+    fs::read_to_string(file).ok()?.lines().find_map(|l| {
+        let f: Vec<&str> = l.split(':').collect();
+        (f.get(2)?.parse::<u32>().ok()? == id).then(|| f[0].to_string())
+    })
+}
+
 /// Whether processes can be run as other users here; says why not when they cannot.
 fn can_switch_users(test: &str) -> bool {
     // SAFETY: reads this process's effective user id.
@@ -504,7 +524,7 @@ fn a_user_who_makes_the_domain_first_is_named_and_refused() {
     let root = d.root();
     assert!(
         said.starts_with("error: ")
-            && said.contains(&format!("{} is owned by nobody (uid 65534)", root.display()))
+            && said.contains(&format!("{} is owned by {}", root.display(), user_named(OUTSIDER.uid)))
             && said.contains(&format!("sudo rm -r {}", root.display()))
             && said.contains("tools/deploy/omnitrack.tmpfiles"),
         "{said}"
@@ -513,7 +533,10 @@ fn a_user_who_makes_the_domain_first_is_named_and_refused() {
     let (code, _, err) = d.omnitrack(Some(MEMBER), &["listen", "--count", "1"], Duration::from_secs(10));
     assert_eq!(code, Some(2), "{err}");
     assert_eq!(err.lines().count(), 1, "{err}");
-    assert!(err.contains("is owned by nobody (uid 65534)"), "{err}");
+    assert!(
+        err.contains(&format!("is owned by {}", user_named(OUTSIDER.uid))),
+        "{err}"
+    );
     drop(outsider);
 }
 
@@ -579,8 +602,8 @@ fn only_the_trackers_group_and_root_reach_its_files() {
     let said = squatter.said(Duration::from_secs(10)).unwrap_or_default();
     assert!(
         said.starts_with("error: ")
-            && said.contains("is owned by daemon (uid 1)")
-            && said.contains("nor in group daemon"),
+            && said.contains(&format!("is owned by {}", user_named(TRACKER.uid)))
+            && said.contains(&format!("nor in group {}", group_named(TRACKER.gid))),
         "{said}"
     );
     let tracker = d.helper(Some(TRACKER), "publish omnitrack/pose");
@@ -603,7 +626,10 @@ fn only_the_trackers_group_and_root_reach_its_files() {
     let (code, _, err) = d.omnitrack(Some(OUTSIDER), &["listen", "--count", "1"], Duration::from_secs(10));
     assert_eq!(code, Some(2), "{err}");
     assert_eq!(err.lines().count(), 1, "{err}");
-    assert!(err.contains("sudo usermod -aG daemon USER"), "{err}");
+    assert!(
+        err.contains(&format!("sudo usermod -aG {} USER", group_named(TRACKER.gid))),
+        "{err}"
+    );
     for f in d.counter_files() {
         let what = d.helper(Some(OUTSIDER), &format!("damage {} truncate", f.display()));
         let said = what.said(Duration::from_secs(5)).unwrap_or_default();

@@ -24,6 +24,13 @@
 //! on every publish, or on [`SamplePublisher::update_connections`], which a publisher that has
 //! nothing to send for a while should call now and then.
 //!
+//! Who may reach the services: before a node is made, iceoryx2's folders and node counter file are
+//! checked and made group-only where missing, a file of another user is refused in one line, a
+//! damaged counter is repaired; omnitrack's nodes count in a counter file of their own; after the
+//! ports are made, every file the process owns in the domain is given to the domain's group
+//! (`domain.rs`; README, "Who can subscribe to poses"). Service names, iceoryx2's root folder and
+//! prefix stay its defaults, so a default-config consumer finds the services.
+//!
 //! Creating a publisher or subscriber first removes what crashed earlier runs left in `/dev/shm`
 //! (dead nodes and their ports), and sets iceoryx2's log level to `Error` unless `IOX2_LOG_LEVEL`
 //! says otherwise (so no process warns about the optional config file). The ports use
@@ -344,6 +351,11 @@ impl<T: Message> SampleSubscriber<T> {
             .create()
             .map_err(|e| PublishError::new("create listener", service, e))?;
         domain.share_with_group().map_err(|e| PublishError::files(service, e))?;
+        // A tracker of another user that met the listener in the instant before it was shared
+        // could not connect (its notifier, unlike its publisher, does not wait for a file's
+        // rights) and would not try again until the listeners change: a listener made and
+        // dropped here changes them, so it connects to this one too.
+        drop(events.listener_builder().create());
         Ok(SampleSubscriber {
             subscriber,
             listener,
