@@ -24,12 +24,20 @@
 //! on every publish, or on [`SamplePublisher::update_connections`], which a publisher that has
 //! nothing to send for a while should call now and then.
 //!
+//! Who may reach the services: before a node is made, iceoryx2's folders and node counter file are
+//! checked and made group-only where missing, a file of another user is refused in one line, a
+//! damaged counter is repaired; omnitrack's nodes count in a counter file of their own; after the
+//! ports are made, every file the process owns in the domain is given to the domain's group
+//! (`domain.rs`; README, "Who can subscribe to poses"). Service names, iceoryx2's root folder and
+//! prefix stay its defaults, so a default-config consumer finds the services.
+//!
 //! Creating a publisher or subscriber first removes what crashed earlier runs left in `/dev/shm`
 //! (dead nodes and their ports), and sets iceoryx2's log level to `Error` unless `IOX2_LOG_LEVEL`
 //! says otherwise (so no process warns about the optional config file). The ports use
 //! `ipc_threadsafe` services: a publisher may be created on one thread and moved to another.
 //! No signal handlers are installed: Ctrl-C ends a process as usual, and the next start cleans up.
 
+mod domain;
 mod listen;
 mod sample;
 
@@ -48,6 +56,9 @@ use iceoryx2::prelude::{
 };
 use iceoryx2::service::port_factory::{event as event_factory, publish_subscribe as pubsub_factory};
 
+use domain::Domain;
+
+pub use domain::{COUNTER_SUFFIX, SHM_DIR};
 pub use listen::{format_pose_line, format_status_line, listen, listen_status, ListenError};
 pub use sample::{
     PoseSample, SearchKind, SearchState, Stage, StatusSample, TrackerState, WireError, POSE_WIRE_BYTES,
@@ -96,6 +107,24 @@ impl PublishError {
             detail: format!("{detail:?}"),
         }
     }
+
+    /// A refusal of the domain's files ([`domain`]): already one line that says what to do.
+    fn files(service: &str, detail: String) -> Self {
+        PublishError {
+            step: "shared-memory files",
+            service: service.to_string(),
+            detail,
+        }
+    }
+
+    /// iceoryx2's error, with the files of other users that may be the cause.
+    fn in_domain(step: &'static str, service: &str, detail: impl Debug, domain: &Domain) -> Self {
+        PublishError {
+            step,
+            service: service.to_string(),
+            detail: format!("{detail:?}{}", domain.foreign_files()),
+        }
+    }
 }
 
 static LOG_LEVEL: Once = Once::new();
@@ -106,18 +135,36 @@ pub fn quiet_iceoryx2_logs() {
     LOG_LEVEL.call_once(|| set_log_level_from_env_or(LogLevel::Error));
 }
 
-/// Creates a node (no signal handlers) and removes the resources of dead nodes (crashed earlier
-/// runs). Returns the node and how many dead nodes were cleaned.
-fn create_node(name: &str, service: &str) -> Result<(Node<Ipc>, u64), PublishError> {
+/// Checks the domain's files ([`Domain::prepare`]), creates a node (no signal handlers) that counts
+/// in omnitrack's own node counter file, and removes the resources of dead nodes (crashed earlier
+/// runs). Returns the node, how many dead nodes were cleaned, and the domain.
+fn create_node(name: &str, service: &str) -> Result<(Node<Ipc>, u64, Domain), PublishError> {
     quiet_iceoryx2_logs();
+    let domain = Domain::prepare().map_err(|e| PublishError::files(service, e))?;
     let node_name = NodeName::new(name).map_err(|e| PublishError::new("node name", service, e))?;
     let node = NodeBuilder::new()
         .name(&node_name)
+        .config(domain.node_config())
         .signal_handling_mode(SignalHandlingMode::Disabled)
         .create::<Ipc>()
-        .map_err(|e| PublishError::new("create node", service, e))?;
+        .map_err(|e| PublishError::in_domain("create node", service, e, &domain))?;
     let cleaned = node.try_cleanup_dead_nodes();
-    Ok((node, cleaned.cleanups))
+    Ok((node, cleaned.cleanups, domain))
+}
+
+/// Retries `open` while iceoryx2 reports missing permissions, for at most a second: a file
+/// another process of the group has just made is owner-only until that process shares it
+/// ([`Domain::share_with_group`]), a few milliseconds later.
+fn retry_permissions<T, E: Debug>(mut open: impl FnMut() -> Result<T, E>) -> Result<T, E> {
+    let deadline = Instant::now() + Duration::from_secs(1);
+    loop {
+        match open() {
+            Err(e) if format!("{e:?}").contains("InsufficientPermissions") && Instant::now() < deadline => {
+                std::thread::sleep(Duration::from_millis(10));
+            }
+            other => return other,
+        }
+    }
 }
 
 fn service_name(service: &str) -> Result<ServiceName, PublishError> {
@@ -127,23 +174,30 @@ fn service_name(service: &str) -> Result<ServiceName, PublishError> {
 fn open_pubsub<T: Message>(
     node: &Node<Ipc>,
     service: &str,
+    domain: &Domain,
 ) -> Result<pubsub_factory::PortFactory<Ipc, T, ()>, PublishError> {
-    node.service_builder(&service_name(service)?)
-        .publish_subscribe::<T>()
-        .history_size(HISTORY_SIZE)
-        .subscriber_max_buffer_size(SUBSCRIBER_BUFFER)
-        .enable_safe_overflow(true)
-        .max_subscribers(MAX_SUBSCRIBERS)
-        .max_publishers(MAX_PUBLISHERS)
-        .open_or_create()
-        .map_err(|e| PublishError::new("open or create publish-subscribe service", service, e))
+    let name = service_name(service)?;
+    retry_permissions(|| {
+        node.service_builder(&name)
+            .publish_subscribe::<T>()
+            .history_size(HISTORY_SIZE)
+            .subscriber_max_buffer_size(SUBSCRIBER_BUFFER)
+            .enable_safe_overflow(true)
+            .max_subscribers(MAX_SUBSCRIBERS)
+            .max_publishers(MAX_PUBLISHERS)
+            .open_or_create()
+    })
+    .map_err(|e| PublishError::in_domain("open or create publish-subscribe service", service, e, domain))
 }
 
-fn open_event(node: &Node<Ipc>, service: &str) -> Result<event_factory::PortFactory<Ipc>, PublishError> {
-    node.service_builder(&service_name(service)?)
-        .event()
-        .open_or_create()
-        .map_err(|e| PublishError::new("open or create event service", service, e))
+fn open_event(
+    node: &Node<Ipc>,
+    service: &str,
+    domain: &Domain,
+) -> Result<event_factory::PortFactory<Ipc>, PublishError> {
+    let name = service_name(service)?;
+    retry_permissions(|| node.service_builder(&name).event().open_or_create())
+        .map_err(|e| PublishError::in_domain("open or create event service", service, e, domain))
 }
 
 /// Publishes samples of one message type on one service. Create once at start-up; every
@@ -168,8 +222,8 @@ impl<T: Message> SamplePublisher<T> {
     /// Opens (or creates) `service` with history 1, a subscriber buffer of [`SUBSCRIBER_BUFFER`]
     /// and overflow on, plus its event service, and creates the publisher and notifier ports.
     pub fn create(service: &str) -> Result<Self, PublishError> {
-        let (node, dead_nodes_cleaned) = create_node("omnitrack-publisher", service)?;
-        let pubsub = open_pubsub::<T>(&node, service)?;
+        let (node, dead_nodes_cleaned, domain) = create_node("omnitrack-publisher", service)?;
+        let pubsub = open_pubsub::<T>(&node, service, &domain)?;
         // One tracker per service: a second one would interleave its poses with the first's and
         // nothing in a sample tells them apart. (Publishers of crashed runs were cleaned above.)
         let others = iceoryx2::service::port_factory::PortFactory::dynamic_config(&pubsub).number_of_publishers();
@@ -180,7 +234,7 @@ impl<T: Message> SamplePublisher<T> {
                 format_args!("another process publishes on it ({others}): one tracker per service"),
             ));
         }
-        let events = open_event(&node, service)?;
+        let events = open_event(&node, service, &domain)?;
         let publisher = pubsub
             .publisher_builder()
             .max_loaned_samples(1)
@@ -190,6 +244,7 @@ impl<T: Message> SamplePublisher<T> {
             .notifier_builder()
             .create()
             .map_err(|e| PublishError::new("create notifier", service, e))?;
+        domain.share_with_group().map_err(|e| PublishError::files(service, e))?;
         Ok(SamplePublisher {
             publisher,
             notifier,
@@ -283,9 +338,9 @@ impl<T: Message> SampleSubscriber<T> {
     /// same settings as the publisher, and creates the subscriber and listener ports. If the
     /// service already holds a sample, the first [`receive`](Self::receive) returns it.
     pub fn create(service: &str) -> Result<Self, PublishError> {
-        let (node, _) = create_node("omnitrack-subscriber", service)?;
-        let pubsub = open_pubsub::<T>(&node, service)?;
-        let events = open_event(&node, service)?;
+        let (node, _, domain) = create_node("omnitrack-subscriber", service)?;
+        let pubsub = open_pubsub::<T>(&node, service, &domain)?;
+        let events = open_event(&node, service, &domain)?;
         let subscriber = pubsub
             .subscriber_builder()
             .buffer_size(SUBSCRIBER_BUFFER)
@@ -295,6 +350,12 @@ impl<T: Message> SampleSubscriber<T> {
             .listener_builder()
             .create()
             .map_err(|e| PublishError::new("create listener", service, e))?;
+        domain.share_with_group().map_err(|e| PublishError::files(service, e))?;
+        // A tracker of another user that met the listener in the instant before it was shared
+        // could not connect (its notifier, unlike its publisher, does not wait for a file's
+        // rights) and would not try again until the listeners change: a listener made and
+        // dropped here changes them, so it connects to this one too.
+        drop(events.listener_builder().create());
         Ok(SampleSubscriber {
             subscriber,
             listener,
