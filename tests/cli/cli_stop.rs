@@ -192,9 +192,10 @@ fn sigterm_cuts_a_whole_model_search_short_and_writes_no_pose_from_it() {
         trajectory.to_str().unwrap(),
     ]);
     run.wait_for("source ended");
-    // The frame's edges (a second in a debug build), its search sent to the worker: the run
-    // waits for it.
-    std::thread::sleep(Duration::from_secs(3));
+    // The frame's edges (a second in a debug build, three on a loaded machine), then its search
+    // sent to the worker, which the run waits for: signalled once the search is under way.
+    run.wait_for("search started");
+    std::thread::sleep(Duration::from_millis(300));
     let (code, took, stderr) = run.terminate();
     eprintln!("SIGTERM honoured in {took:?} during the whole model's search");
     assert_eq!(code, Some(0), "{stderr}");

@@ -121,6 +121,8 @@ struct Processor<'a, 'o, 'm> {
     last_good: Option<LastGood>,
     motion: MotionConfig,
     last_state: TrackerState,
+    /// The search under way after the last frame, to say when one starts.
+    searching: Option<SearchKind>,
     first_frame: Option<Instant>,
     last_frame: Option<Instant>,
     poses_published: u64,
@@ -234,6 +236,13 @@ impl Processor<'_, '_, '_> {
             (record, slot.arrived)
         };
         self.pool.release(h);
+        // A search is seconds of silence (the whole model's, 10 s of work): the log says when
+        // one starts, and which.
+        let searching = self.tracker.search_under_way();
+        if let (Some(kind), None) = (searching, self.searching) {
+            tracing::info!(frame = record.sequence, "search started: {kind:?}");
+        }
+        self.searching = searching;
         self.last_ts = record.timestamp_ns;
         self.processed += 1;
         self.last_sequence = record.sequence;
@@ -435,6 +444,7 @@ pub(super) fn run_process(
         last_good: None,
         motion: cfg.motion.clone(),
         last_state: TrackerState::Initialising,
+        searching: None,
         first_frame: None,
         last_frame: None,
         poses_published: 0,
