@@ -85,8 +85,37 @@ fn can_switch_users(test: &str) -> bool {
             "{test}: skipped: running processes as other users needs root, and this runs as uid {}",
             unsafe { libc::geteuid() }
         );
+        return false;
     }
-    root
+    // A checkout in a private folder (a home of mode 0700) keeps the binaries from other users:
+    // then no test here can run, which is the machine's doing, not the tracker's.
+    for program in [
+        std::env::current_exe().unwrap(),
+        PathBuf::from(env!("CARGO_BIN_EXE_omnitrack")),
+    ] {
+        let mut probe = Command::new(&program);
+        probe.arg("--help").stdout(Stdio::null()).stderr(Stdio::null());
+        // SAFETY: between fork and exec the closure makes only async-signal-safe system calls.
+        unsafe {
+            probe.pre_exec(|| {
+                if libc::setgroups(0, std::ptr::null()) != 0
+                    || libc::setgid(OUTSIDER.gid) != 0
+                    || libc::setuid(OUTSIDER.uid) != 0
+                {
+                    return Err(std::io::Error::last_os_error());
+                }
+                Ok(())
+            });
+        }
+        if let Err(e) = probe.status() {
+            eprintln!(
+                "{test}: skipped: other users cannot run {} ({e}): the checkout is in a folder they cannot enter",
+                program.display()
+            );
+            return false;
+        }
+    }
+    true
 }
 
 /// An iceoryx2 domain of one test: a working directory whose `config/iceoryx2.toml` names a root
