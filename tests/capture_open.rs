@@ -472,3 +472,48 @@ fn rig_usb_keys_parse_validate_and_round_trip() {
     );
     assert!(err("", &|_| "usb_serial = \"\"".into()).starts_with("rig.toml: sensor 0, key 'usb_serial': must be"));
 }
+
+/// The front door built as it is (with or without the capture features): `omnitrack record
+/// --source v4l|usb` on a machine without the rig's cameras ends in one line naming the problem
+/// and a non-zero exit, never a panic. CI runs this file again with every feature on, so the
+/// binary that reaches the live drivers is checked too.
+#[test]
+fn the_binary_refuses_a_missing_camera_in_one_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let rig = dir.path().join("rig.toml");
+    let text = rig_toml(&[(8, 6)], "[usb]\nvendor_id = 0x1e10\nproduct_id = 0x4000", &|_| {
+        "device = \"/dev/video_missing_xyz\"".to_string()
+    });
+    std::fs::write(&rig, text).unwrap();
+    for source in ["v4l", "usb"] {
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_omnitrack"))
+            .args([
+                "record",
+                "--rig",
+                rig.to_str().unwrap(),
+                "--source",
+                source,
+                "--frames",
+                "1",
+            ])
+            .arg("--out")
+            .arg(dir.path().join(format!("out-{source}")))
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        let lines: Vec<&str> = stderr.lines().filter(|l| !l.trim().is_empty()).collect();
+        eprintln!("{source}: {stderr}");
+        assert!(
+            !out.status.success() && out.status.code() != Some(101),
+            "{source}: {stderr}"
+        );
+        assert_eq!(lines.len(), 1, "{source}: one line: {stderr}");
+        let expected = match (source, cfg!(feature = "v4l"), cfg!(feature = "usb")) {
+            ("v4l", true, _) => "/dev/video_missing_xyz: sensor 0: no such device",
+            ("v4l", false, _) => "--features v4l",
+            (_, _, true) => "usb",
+            _ => "--features usb",
+        };
+        assert!(lines[0].contains(expected), "{source}: {stderr}");
+    }
+}
