@@ -141,6 +141,11 @@ pub struct SolverOptions {
     pub degenerate_subset_det: f64,
     /// σ (rad) of an observed edge plane's normal, for the covariance of §5.
     pub edge_sigma_rad: f64,
+    /// The angle one pixel subtends at the centre of the sensors (rad: 1 / f for a pinhole; the
+    /// largest of a rig's sensors), or 0 when unknown. Med_R_and_T's inlier decision takes σ̂
+    /// no smaller than this: real line errors have heavier tails than a Gaussian of the bulk's
+    /// σ̂, and a σ̂ of a fraction of a pixel would cut good lines a pixel or two off.
+    pub pixel_rad: f64,
 }
 
 impl Default for SolverOptions {
@@ -155,6 +160,7 @@ impl Default for SolverOptions {
             lms_outlier_threshold: 2.5,
             degenerate_subset_det: 0.05,
             edge_sigma_rad: 0.5f64.to_radians(),
+            pixel_rad: 0.0,
         }
     }
 }
