@@ -463,7 +463,8 @@ def paired_table(trials, cells, ours, pl, before=None):
     e_before = trial_errors(trials, before) if before is not None else None
     head = "| σ px | n | out % | rot ours/PL: ratio / p worse | t ours/PL: ratio / p worse |"
     if e_before is not None:
-        head += " rot ours/before: ratio / p worse | t ours/before: ratio / p worse | fail% before |"
+        head += (" rot ours/before: ratio / p worse | t ours/before: ratio / p worse | fail% before "
+                 "| before/PL, rot: ratio / p worse; t: ratio / p worse |")
     lines = [
         "Paired: each trial is a pair on identical data. Ratio = median over the trials of ours / the other "
         "(below 1: ours more accurate); p worse = one-sided Wilcoxon signed-rank p-value (exact) on "
@@ -484,6 +485,11 @@ def paired_table(trials, cells, ours, pl, before=None):
                 out.append(f"{med:.2f} / {pw:.3f}")
             sub = [trials[i] for i in idx]
             out.append(f"{cell_stats(sub, [before[i] for i in idx])['fail']:.1f}")
+            vs = []
+            for k in (0, 1):
+                _, med, pw, _ = paired([e_before[i][k] for i in idx], [e_pl[i][k] for i in idx])
+                vs.append(f"{med:.2f} / {pw:.3f}")
+            out.append("; ".join(vs))
         return " | ".join(out)
 
     for (noise, n, of), a, b in cells:
