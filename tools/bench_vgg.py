@@ -280,7 +280,9 @@ def main() -> None:
 
     out = []
     out.append(f"Shipped Med_R_and_T settings: `{' '.join(shipped)}` (the error as in each column). "
-               "\"no pixel floor\" is the solver without the camera's pixel size, as it was before issue 52.")
+               "\"no pixel floor\": the solver not given the camera's pixel (its inlier gate on the lines' own σ̂)."
+               + (f" \"{args.baseline_label}\": the build at `{args.baseline_runner}`, shipped settings."
+                  if args.baseline_runner else ""))
     out.append("")
     out.extend(f"- {n}" for n in notes)
     out.append("")
@@ -384,7 +386,8 @@ def main() -> None:
     print(text)
     if not args.no_results:
         cmd = "python3 tools/bench_vgg.py DATA_DIR" + ("" if args.draws == 10 else f" --draws {args.draws}") + (
-            "" if args.variants == "e2,e3,e2-nofloor" else f" --variants {args.variants}")
+            "" if args.variants == "e2,e3,e2-nofloor" else f" --variants {args.variants}") + (
+            " --baseline-runner BEFORE" if args.baseline_runner else "")
         path = bench_pnl.write_results("vgg", "Line pose on the Oxford VGG lines: omnitrack against PoseLib, paired",
                                        cmd, text)
         print(f"\n[vgg] wrote {path.relative_to(bench_pnl.REPO)}")
