@@ -346,6 +346,22 @@ def main() -> None:
             out.append(f"| {label} | {outliers * 100:.0f} % | {cells[0]} | {cells[1]} | [{dr[1]:.2f} / {dr[2]:.3f}; "
                        f"{dc[1]:.2f} / {dc[2]:.3f}] | {only_ours} / {only_pl} |")
             verdicts.append((label, outliers, worst, only_ours))
+    if args.baseline_runner:
+        out.append("")
+        out.append(f"Each of ours against \"{args.baseline_label}\", paired the same way (ratio / p worse / p better):")
+        out.append("")
+        out.append("| ours | outliers | rotation | centre |")
+        out.append("| --- | --- | --- | --- |")
+        for label, variant in methods[1:]:
+            if variant == "baseline":
+                continue
+            for outliers in (0.0, 0.3):
+                cells = []
+                for k in (0, 1):
+                    _, med, pw, pb = bench_pnl.paired(per_view(label, outliers, k),
+                                                      per_view(args.baseline_label, outliers, k))
+                    cells.append(f"{med:.2f} / {pw:.3f} / {pb:.3f}")
+                out.append(f"| {label} | {outliers * 100:.0f} % | {cells[0]} | {cells[1]} |")
     out.append("")
     for label, _ in methods[1:]:
         rows = [v for v in verdicts if v[0] == label]
@@ -376,7 +392,8 @@ def main() -> None:
                     cells.append("- / -")
                     continue
                 cells.append(f"{math.sqrt(np.median(d2) / CHI2_3_MEDIAN):.2f} / {100 * np.mean(d2 <= CHI2_3_95):.0f} %")
-            out.append(f"| {label} | {outliers * 100:.0f} % | {100 * np.median(kept):.0f} % | {cells[0]} | {cells[1]} |")
+            share = f"{100 * np.median(kept):.0f} %" if kept else "-"
+            out.append(f"| {label} | {outliers * 100:.0f} % | {share} | {cells[0]} | {cells[1]} |")
     out.append("")
     base = [m for m, _ in methods[1:]]
     out.append("Time of the whole run per method (solver calls with I/O, same run, this machine): "
