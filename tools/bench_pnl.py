@@ -477,8 +477,9 @@ def paired_table(trials, cells, ours, pl, before=None):
                  "| before/PL, rot: ratio / p worse; t: ratio / p worse |")
     lines = [
         "Paired: each trial is a pair on identical data. Ratio = median over the trials of ours / the other "
-        "(below 1: ours more accurate); p worse = one-sided Wilcoxon signed-rank p-value (exact) on "
-        "log(ours / other) that ours is worse. Pooled rows take every trial of that outlier level.",
+        "(below 1: ours more accurate); p worse = one-sided Wilcoxon signed-rank p-value on "
+        "log(ours / other) that ours is worse (exact up to 600 pairs, the tie-corrected normal approximation "
+        "beyond). Pooled rows take every trial of that outlier level.",
         "",
         head,
         "|" + "---|" * (head.count("|") - 1),
