@@ -605,7 +605,8 @@ def main() -> None:
     method_name = {
         "lms": "Med_R_and_T (least k-th squares over 3-line subsets solved in closed form, sized for ε = 0.5 "
         "outliers at 99.999 % success, the best poses concentrated (FAST-LTS), lines re-judged by an F-test "
-        "against each fit's own σ̂, the most likely fit kept; line error E2, the runner's defaults)",
+        "against each fit's own σ̂ (never below the camera's pixel), the most likely fit kept and its lines "
+        "fitted last under Cauchy's loss; tracker.toml's settings unless --runner-settings)",
         "r_and_t": "R_and_T (no guess, line error E2)",
     }
     md = [
