@@ -19,7 +19,11 @@ What it does, in order:
  4. Builds and runs our Rust runner (tools/src/bin/pnl_bench.rs, omnitrack::solver::med_r_and_t
     or r_and_t) on the identical data, passed as JSON lines; the runner times each solver call
     with std::time::Instant around the call only.
- 5. Prints, per cell, both methods side by side, and writes tools/bench_pnl_results.md.
+ 5. Prints, per cell, both methods side by side, and the paired test: every trial is a pair
+    (ours, PoseLib) on identical data; per cell and pooled per outlier level, the median ratio
+    of the errors and a one-sided Wilcoxon signed-rank p-value (exact) that ours is worse. With
+    --baseline-runner, the same of ours against an earlier build of ours, run on the same data.
+    Writes it all to benches/results/DATE-MACHINE/pnl.md (date, commit, machine at its head).
 
 Error definitions (both methods compared in T_camera_world = (R, t), x_cam = R X_world + t; the
 world origin is the centroid of the scene's end points, so |t_true| is the camera-to-scene
@@ -51,7 +55,6 @@ from pathlib import Path
 TOOLS = Path(__file__).resolve().parent
 REPO = TOOLS.parent
 VENV = TOOLS / ".venv-bench"
-RESULTS_MD = TOOLS / "bench_pnl_results.md"
 PACKAGES = ["numpy", "poselib"]
 
 FOCAL, WIDTH, HEIGHT = 800.0, 640, 480
@@ -286,13 +289,26 @@ def run_ours(trials, method: str, runner: Path, max_seconds: float, extra=()):
         R_cw = R_wc.T
         t_cw = -R_cw @ c
         ok = bool(np.all(np.isfinite(R_cw)) and np.all(np.isfinite(t_cw)))
-        out.append({"ok": ok, "us": rec["us"], "R": R_cw, "t": t_cw})
+        cov = np.array(rec["covariance"]).reshape(6, 6) if "covariance" in rec else None
+        out.append({"ok": ok, "us": rec["us"], "R": R_cw, "t": t_cw, "cov": cov,
+                    "inliers": rec.get("inliers"), "lines": rec.get("lines")})
     return out
 
 
 # --------------------------------------------------------------------------------------------
 # 5. Statistics and the table
 # --------------------------------------------------------------------------------------------
+
+
+def trial_errors(trials, results):
+    """Per trial: (rotation error deg, translation error %), inf for no result."""
+    out = []
+    for tr, res in zip(trials, results):
+        if not res["ok"]:
+            out.append((math.inf, math.inf))
+        else:
+            out.append((rot_err_deg(res["R"], tr["R_cw"]), trans_err_pct(res["t"], tr["t_cw"])))
+    return out
 
 
 def cell_stats(trials, results):
@@ -318,6 +334,107 @@ def cell_stats(trials, results):
         "fail": 100.0 * fail / len(trials),
         "us": float(np.nanmedian(us)),
     }
+
+
+EXACT_SIGNED_RANK_MAX = 600
+
+
+def signed_rank_p(d) -> float:
+    """Exact one-sided Wilcoxon signed-rank p-value for "the d are centred above 0": P(W+ >= w)
+    under H0 (each |d| equally likely to carry either sign), where W+ is the sum of the ranks of
+    the positive d among |d|. Zeros (and NaN, e.g. both methods failed) are dropped, as Wilcoxon
+    does; tied |d| share their mean rank, and the null distribution is computed for those very
+    (half-integer) ranks, so the p-value is exact with ties too. +-inf ranks above every finite d.
+    Beyond EXACT_SIGNED_RANK_MAX pairs, the normal approximation (tie-corrected)."""
+    import numpy as np
+
+    d = np.asarray([x for x in d if x == x and x != 0.0], dtype=float)
+    n = len(d)
+    if n == 0:
+        return 1.0
+    a = np.abs(d)
+    order = np.argsort(a, kind="stable")
+    ranks2 = np.empty(n, dtype=np.int64)  # twice the mid-ranks, integers
+    i = 0
+    while i < n:
+        j = i
+        while j + 1 < n and a[order[j + 1]] == a[order[i]]:
+            j += 1
+        for k in range(i, j + 1):
+            ranks2[order[k]] = i + j + 2  # 2 * mean of the 1-based ranks i+1..j+1
+        i = j + 1
+    w = int(ranks2[d > 0].sum())
+    if n > EXACT_SIGNED_RANK_MAX:
+        # The exact distribution costs n³ here: past this size the normal approximation with the
+        # tie correction is exact to three decimals (continuity-corrected, in doubled ranks).
+        mean = ranks2.sum() / 2.0
+        sd = math.sqrt(float((ranks2.astype(float) ** 2).sum()) / 4.0)
+        return float(0.5 * math.erfc((w - 1.0 - mean) / sd / math.sqrt(2.0))) if sd > 0 else 1.0
+    dist = np.zeros(int(ranks2.sum()) + 1)
+    dist[0] = 1.0
+    for r in ranks2:
+        shifted = np.zeros_like(dist)
+        shifted[r:] = dist[:-r] if r > 0 else dist
+        dist = 0.5 * (dist + shifted)
+    return float(min(1.0, dist[w:].sum()))
+
+
+def paired(ours, theirs):
+    """A paired comparison of errors on identical data: (pairs, median of ours / theirs,
+    p that ours is worse, p that ours is better), both one-sided Wilcoxon signed-rank on
+    log(ours / theirs). A failure counts as an infinite error, so it ranks above any finite
+    difference; two failures are a tie and drop out."""
+    import numpy as np
+
+    o, t = np.asarray(ours, dtype=float), np.asarray(theirs, dtype=float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        d = np.log(o) - np.log(t)
+        r = o / t
+    r = r[~np.isnan(r)]
+    med = float(np.median(r)) if len(r) else math.nan
+    return len(o), med, signed_rank_p(d), signed_rank_p(-d)
+
+
+def results_dir() -> Path:
+    """benches/results/DATE-ARCH-Nc, as omnitrack::desk::results names it."""
+    date = datetime.datetime.now().strftime("%Y-%m-%d")
+    return REPO / "benches" / "results" / f"{date}-{platform.machine()}-{os.cpu_count()}c"
+
+
+def machine() -> str:
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return f"{cpu}, {os.cpu_count()} cores"
+
+
+def commit() -> str:
+    def git(*a):
+        r = subprocess.run(["git", *a], cwd=REPO, capture_output=True, text=True)
+        return r.stdout.strip() if r.returncode == 0 else ""
+
+    h = git("rev-parse", "--short", "HEAD")
+    if not h:
+        return "unknown"
+    return h + ("-dirty" if git("status", "--porcelain", "--untracked-files=no") else "")
+
+
+def write_results(name: str, title: str, command: str, body: str) -> Path:
+    """Writes benches/results/DATE-MACHINE/NAME.md headed as omnitrack::desk::results does."""
+    d = results_dir()
+    d.mkdir(parents=True, exist_ok=True)
+    now = datetime.datetime.now(datetime.timezone.utc)
+    path = d / f"{name}.md"
+    path.write_text(
+        f"# {title}\n\n- date: {now.strftime('%Y-%m-%d %H:%M')} UTC\n- commit: {commit()}\n"
+        f"- machine: {machine()}\n- command: `{command}`\n\n{body}\n"
+    )
+    return path
 
 
 def ratio(a: float, b: float) -> str:
@@ -348,6 +465,52 @@ def table_rows(rows):
     return lines
 
 
+def paired_table(trials, cells, ours, pl, before=None):
+    """Every trial is a pair (ours, PoseLib) on identical data: per cell and pooled per outlier
+    level, the median of the ratios ours / PoseLib and the one-sided Wilcoxon signed-rank p that
+    ours is worse; with a baseline build, the same of ours against it (p that ours got worse)."""
+    e_ours, e_pl = trial_errors(trials, ours), trial_errors(trials, pl)
+    e_before = trial_errors(trials, before) if before is not None else None
+    head = "| σ px | n | out % | rot ours/PL: ratio / p worse | t ours/PL: ratio / p worse |"
+    if e_before is not None:
+        head += (" rot ours/before: ratio / p worse | t ours/before: ratio / p worse | fail% before "
+                 "| before/PL, rot: ratio / p worse; t: ratio / p worse |")
+    lines = [
+        "Paired: each trial is a pair on identical data. Ratio = median over the trials of ours / the other "
+        "(below 1: ours more accurate); p worse = one-sided Wilcoxon signed-rank p-value on "
+        "log(ours / other) that ours is worse (exact up to 600 pairs, the tie-corrected normal approximation "
+        "beyond). Pooled rows take every trial of that outlier level.",
+        "",
+        head,
+        "|" + "---|" * (head.count("|") - 1),
+    ]
+
+    def cells_of(idx):
+        out = []
+        for k in (0, 1):
+            _, med, pw, _ = paired([e_ours[i][k] for i in idx], [e_pl[i][k] for i in idx])
+            out.append(f"{med:.2f} / {pw:.3f}")
+        if e_before is not None:
+            for k in (0, 1):
+                _, med, pw, _ = paired([e_ours[i][k] for i in idx], [e_before[i][k] for i in idx])
+                out.append(f"{med:.2f} / {pw:.3f}")
+            sub = [trials[i] for i in idx]
+            out.append(f"{cell_stats(sub, [before[i] for i in idx])['fail']:.1f}")
+            vs = []
+            for k in (0, 1):
+                _, med, pw, _ = paired([e_before[i][k] for i in idx], [e_pl[i][k] for i in idx])
+                vs.append(f"{med:.2f} / {pw:.3f}")
+            out.append("; ".join(vs))
+        return " | ".join(out)
+
+    for (noise, n, of), a, b in cells:
+        lines.append(f"| {noise:g} | {n} | {of * 100:.0f} | {cells_of(range(a, b))} |")
+    for of in OUTLIERS:
+        idx = [i for (key, a, b) in cells if key[2] == of for i in range(a, b)]
+        lines.append(f"| all | all | {of * 100:.0f} | {cells_of(idx)} |")
+    return lines
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--trials", type=int, default=500, help="trials per cell (default 500)")
@@ -355,10 +518,13 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=20260101, help="data seed")
     ap.add_argument("--method", choices=["lms", "r_and_t"], default="lms", help="our solver")
     ap.add_argument("--runner", type=Path, default=None, help="use this pnl_bench binary, skip the build")
+    ap.add_argument("--baseline-runner", type=Path, default=None,
+                    help="also run this pnl_bench binary (an earlier build) with the same settings, and test ours "
+                         "against it cell by cell")
     ap.add_argument(
         "--max-seconds", type=float, default=420.0, help="give up on a method that takes longer than this (default 420)"
     )
-    ap.add_argument("--no-md", action="store_true", help="do not write tools/bench_pnl_results.md")
+    ap.add_argument("--no-md", action="store_true", help="do not write the results file")
     ap.add_argument(
         "--runner-settings",
         action="store_true",
@@ -397,6 +563,10 @@ def main() -> None:
     print(f"[bench] our settings: {' '.join(extra) if extra else 'the runner defaults'}", flush=True)
     ours = run_ours(trials, args.method, runner, args.max_seconds, extra=extra)
     t_ours = time.time() - t0
+    before = None
+    if args.baseline_runner:
+        print(f"[bench] ours before ({args.baseline_runner}) ...", flush=True)
+        before = run_ours(trials, args.method, args.baseline_runner, args.max_seconds, extra=extra)
     t0 = time.time()
     print(f"[bench] PoseLib {poselib.__version__ if hasattr(poselib, '__version__') else ''} ...", flush=True)
     pl = run_poselib(trials, args.max_seconds)
@@ -413,6 +583,9 @@ def main() -> None:
     table = table_rows(rows)
     print()
     print("\n".join(table))
+    paired_lines = paired_table(trials, cells, ours, pl, before)
+    print()
+    print("\n".join(paired_lines))
 
     try:
         from importlib.metadata import version
@@ -432,7 +605,8 @@ def main() -> None:
     method_name = {
         "lms": "Med_R_and_T (least k-th squares over 3-line subsets solved in closed form, sized for ε = 0.5 "
         "outliers at 99.999 % success, the best poses concentrated (FAST-LTS), lines re-judged by an F-test "
-        "against each fit's own σ̂, the most likely fit kept; line error E2, the runner's defaults)",
+        "against each fit's own σ̂ (never below the camera's pixel), the most likely fit kept and its lines "
+        "fitted last under Cauchy's loss; tracker.toml's settings unless --runner-settings)",
         "r_and_t": "R_and_T (no guess, line error E2)",
     }
     md = [
@@ -462,10 +636,16 @@ def main() -> None:
         "",
         *table,
         "",
+        *paired_lines,
+        "",
     ]
     if not args.no_md:
-        RESULTS_MD.write_text("\n".join(md))
-        print(f"\n[bench] wrote {RESULTS_MD.relative_to(REPO)}")
+        cmd = (f"python3 tools/bench_pnl.py{' --quick' if args.quick else ''}"
+               f"{'' if args.quick or args.trials == 500 else f' --trials {args.trials}'}"
+               f"{'' if args.method == 'lms' else ' --method ' + args.method}"
+               f"{' --baseline-runner BEFORE' if before is not None else ''}")
+        path = write_results("pnl", "PnL benchmark: omnitrack vs PoseLib", cmd, "\n".join(md[2:]))
+        print(f"\n[bench] wrote {path.relative_to(REPO)}")
 
 
 if __name__ == "__main__":

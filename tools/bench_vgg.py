@@ -149,13 +149,66 @@ def check_truth(views):
     return float(np.median(errs))
 
 
+VARIANTS = {
+    # name: (line error, runner flags beyond the shipped settings, column label)
+    "e2": ("e2", [], "ours lms e2"),
+    "e3": ("e3", [], "ours lms e3"),
+    "e2-nofloor": ("e2", ["--no-pixel-floor"], "ours lms e2, no pixel floor"),
+    "e3-nofloor": ("e3", ["--no-pixel-floor"], "ours lms e3, no pixel floor"),
+}
+CHI2_3_MEDIAN, CHI2_3_95 = 2.365974, 7.814728
+
+
+def rotation_vector(m):
+    """The axis-angle vector of rotation matrix m (rad)."""
+    import numpy as np
+
+    c = max(-1.0, min(1.0, (np.trace(m) - 1.0) / 2.0))
+    angle = math.acos(c)
+    w = np.array([m[2, 1] - m[1, 2], m[0, 2] - m[2, 0], m[1, 0] - m[0, 1]])
+    if angle < 1e-12:
+        return w / 2.0
+    return w * angle / (2.0 * math.sin(angle))
+
+
+def errors(trial, r):
+    """(rotation error deg, centre error, failed, d2 rotation, d2 centre): the errors of one
+    result against the truth, and each as a squared Mahalanobis distance under the result's own
+    covariance (None without one). The covariance is T_world_camera's: camera centre in the world,
+    then the small rotation δθ of R_wc = exp(δθ) R_wc_true, world frame."""
+    import numpy as np
+
+    if not r["ok"]:
+        return math.inf, math.inf, True, None, None
+    re = bench_pnl.rot_err_deg(r["R"], trial["R_cw"])
+    c = -r["R"].T @ r["t"]
+    dc = c - trial["centre"]
+    ce = float(np.linalg.norm(dc))
+    failed = re > ROT_FAIL_DEG or ce > CENTRE_FAIL_FRAC * trial["scale"]
+    d2r = d2c = None
+    cov = r.get("cov")
+    if cov is not None and np.all(np.isfinite(cov)):
+        dth = rotation_vector(r["R"].T @ trial["R_cw"])
+        try:
+            d2c = float(dc @ np.linalg.solve(cov[:3, :3], dc))
+            d2r = float(dth @ np.linalg.solve(cov[3:, 3:], dth))
+        except np.linalg.LinAlgError:
+            pass
+    return re, ce, failed, d2r, d2c
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("data", type=Path, help="the oxford_data directory")
     ap.add_argument("--draws", type=int, default=10, help="outlier draws per view at 30 %% (default 10)")
-    ap.add_argument("--errors", default="e2,e3", help="our line errors to run (default e2,e3)")
+    ap.add_argument("--variants", default="e2,e3,e2-nofloor",
+                    help=f"our variants to run, of {','.join(VARIANTS)} (default e2,e3,e2-nofloor)")
     ap.add_argument("--seed", type=int, default=20261127)
     ap.add_argument("--runner", type=Path, default=None, help="use this pnl_bench binary, skip the build")
+    ap.add_argument("--baseline-runner", type=Path, default=None,
+                    help="also run this pnl_bench binary (an earlier build) with the shipped settings, as a column")
+    ap.add_argument("--baseline-label", default="ours lms e2, before", help="that column's name")
+    ap.add_argument("--no-results", action="store_true", help="do not write the results file")
     args = ap.parse_args()
     if not bench_pnl.in_bench_venv():
         bench_pnl.ensure_venv_and_reexec()
@@ -168,12 +221,14 @@ def main() -> None:
     runner = args.runner or bench_pnl.RUNNER
     shipped = bench_pnl.shipped_solver_args()
     rng = np.random.default_rng(args.seed)
-    trials, groups = [], []
+    trials, groups, notes = [], [], []
     for name in SEQUENCES:
         views, mirror = load_sequence(args.data, name)
-        print(f"[vgg] {name}: {len(views)} views, {np.mean([len(v['lines']) for v in views]):.0f} lines per view, "
-              f"{'mirrored (left-handed), ' if mirror else ''}median end-point line distance at the truth "
-              f"{check_truth(views):.2f} px", flush=True)
+        note = (f"{name}: {len(views)} views, {np.mean([len(v['lines']) for v in views]):.0f} lines per view, "
+                f"{'mirrored (left-handed), ' if mirror else ''}median end-point line distance at the truth "
+                f"{check_truth(views):.2f} px")
+        notes.append(note)
+        print(f"[vgg] {note}", flush=True)
         for outliers in (0.0, 0.3):
             start = len(trials)
             for v in views:
@@ -192,55 +247,167 @@ def main() -> None:
                     trials.append({
                         "id": len(trials), "seed": int(rng.integers(0, 2**63 - 1)), "K": v["K"],
                         "uv1": lines[:, 0:2], "uv2": lines[:, 2:4], "X1": lines[:, 4:7], "X2": lines[:, 7:10],
-                        "R_cw": v["R_cw"], "t_cw": v["t_cw"], "centre": centre,
+                        "R_cw": v["R_cw"], "t_cw": v["t_cw"], "centre": centre, "view": (name, v["view"]),
+                        "outliers": outliers,
                         "scale": float(np.median(np.linalg.norm(mids - centre, axis=1))),
                         "cam": {"model": "PINHOLE", "width": int(math.ceil(v["extent"][0])),
                                 "height": int(math.ceil(v["extent"][1])), "params": v["K"]},
                     })
             groups.append((name, outliers, start, len(trials)))
-    methods = [("PoseLib", None)] + [(f"ours lms {e}", e) for e in args.errors.split(",") if e]
-    results = {}
-    for label, error in methods:
+    variants = [v for v in args.variants.split(",") if v]
+    for v in variants:
+        if v not in VARIANTS:
+            sys.exit(f"--variants: unknown {v!r} (known: {', '.join(VARIANTS)})")
+    methods = [("PoseLib", None)] + [(VARIANTS[v][2], v) for v in variants]
+    if args.baseline_runner:
+        methods.append((args.baseline_label, "baseline"))
+    results, seconds = {}, {}
+    for label, variant in methods:
         t0 = time.time()
-        if error is None:
+        if variant is None:
             results[label] = bench_pnl.run_poselib(trials, 600.0)
+        elif variant == "baseline":
+            results[label] = bench_pnl.run_ours(trials, "lms", args.baseline_runner, 600.0, extra=shipped)
         else:
             # The shipped settings, with the line error of this column instead of the shipped one.
+            error, flags, _ = VARIANTS[variant]
             i = shipped.index("--error")
-            extra = shipped[:i] + shipped[i + 2 :] + ["--error", error]
+            extra = shipped[:i] + shipped[i + 2 :] + ["--error", error, *flags]
             results[label] = bench_pnl.run_ours(trials, "lms", runner, 600.0, extra=extra)
-        print(f"[vgg] {label}: {time.time() - t0:.1f} s", flush=True)
+        seconds[label] = time.time() - t0
+        print(f"[vgg] {label}: {seconds[label]:.1f} s", flush=True)
+    errs = {label: [errors(t, r) for t, r in zip(trials, results[label])] for label, _ in methods}
 
-    def stats(res, lo, hi):
-        rot, cen, fail = [], [], 0
-        for tr, r in zip(trials[lo:hi], res[lo:hi]):
-            if not r["ok"]:
-                rot.append(math.inf)
-                cen.append(math.inf)
-                fail += 1
-                continue
-            re = bench_pnl.rot_err_deg(r["R"], tr["R_cw"])
-            c = -r["R"].T @ r["t"]
-            ce = float(np.linalg.norm(c - tr["centre"]))
-            rot.append(re)
-            cen.append(ce)
-            if re > ROT_FAIL_DEG or ce > CENTRE_FAIL_FRAC * tr["scale"]:
-                fail += 1
-        scale = float(np.median([t["scale"] for t in trials[lo:hi]]))
-        return float(np.median(rot)), float(np.median(cen)), 100.0 * float(np.median(cen)) / scale, fail
-
-    print()
-    print(f"Shipped Med_R_and_T settings: {' '.join(shipped)} (the error as in each column).")
-    print()
-    head = "| sequence | outliers | trials |" + "".join(f" {m} rot° / centre (%) / fails |" for m, _ in methods)
-    print(head)
-    print("|" + " --- |" * (3 + len(methods)))
+    out = []
+    out.append(f"Shipped Med_R_and_T settings: `{' '.join(shipped)}` (the error as in each column). "
+               "\"no pixel floor\": the solver not given the camera's pixel (its inlier gate on the lines' own σ̂)."
+               + (f" \"{args.baseline_label}\": the build at `{args.baseline_runner}`, shipped settings."
+                  if args.baseline_runner else ""))
+    out.append("")
+    out.extend(f"- {n}" for n in notes)
+    out.append("")
+    out.append("Median rotation error (°) / camera-centre error (reconstruction units, and % of the median "
+               f"distance to the lines) / failures (no pose, rotation error > {ROT_FAIL_DEG:g}° or centre error "
+               f"> {CENTRE_FAIL_FRAC * 100:g} % of that distance):")
+    out.append("")
+    out.append("| sequence | outliers | trials |" + "".join(f" {m} |" for m, _ in methods))
+    out.append("|" + " --- |" * (3 + len(methods)))
     for name, outliers, lo, hi in groups:
+        scale = float(np.median([t["scale"] for t in trials[lo:hi]]))
         cells = []
         for label, _ in methods:
-            r, c, pct, fail = stats(results[label], lo, hi)
-            cells.append(f" {r:.3f} / {c:.4f} ({pct:.2f} %) / {fail} |")
-        print(f"| {name} | {outliers * 100:.0f} % | {hi - lo} |" + "".join(cells))
+            e = errs[label][lo:hi]
+            r = float(np.median([x[0] for x in e]))
+            c = float(np.median([x[1] for x in e]))
+            fails = sum(x[2] for x in e)
+            cells.append(f" {r:.3f} / {c:.4f} ({100 * c / scale:.2f} %) / {fails} |")
+        out.append(f"| {name} | {outliers * 100:.0f} % | {hi - lo} |" + "".join(cells))
+
+    # The paired test: each view is a pair (ours, PoseLib) on identical lines. At 30 % outliers
+    # a view's error is the median over its draws (the draws of one view share its lines, so the
+    # view, not the draw, is the independent unit); the per-draw pairs are given beside it.
+    view_keys = list(dict.fromkeys(t["view"] for t in trials))
+
+    def per_view(label, outliers, k):
+        vals = []
+        for key in view_keys:
+            xs = [e[k] for t, e in zip(trials, errs[label]) if t["view"] == key and t["outliers"] == outliers]
+            vals.append(float(np.median(xs)))
+        return vals
+
+    def per_draw(label, outliers, k):
+        return [e[k] for t, e in zip(trials, errs[label]) if t["outliers"] == outliers]
+
+    out.append("")
+    out.append(f"Paired test against PoseLib, pooled over all {len(view_keys)} views: median of the per-view "
+               "ratios ours / PoseLib, and one-sided Wilcoxon signed-rank p-values (exact) on log(ours / PoseLib) "
+               "for \"ours worse\" and \"ours better\". At 30 % outliers a view's error is the median over its "
+               f"{args.draws} draws; the per-draw pairs ({args.draws} × {len(view_keys)}) follow in brackets. "
+               "Fails: trials where only that method failed.")
+    out.append("")
+    out.append("| ours | outliers | rotation: ratio / p worse / p better | centre: ratio / p worse / p better "
+               "| [per draw: rotation ratio / p worse; centre ratio / p worse] | fails ours only / PoseLib only |")
+    out.append("| --- | --- | --- | --- | --- | --- |")
+    verdicts = []
+    for label, variant in methods[1:]:
+        for outliers in (0.0, 0.3):
+            cells = []
+            worst = 0.0
+            for k in (0, 1):
+                n, med, pw, pb = bench_pnl.paired(per_view(label, outliers, k), per_view("PoseLib", outliers, k))
+                cells.append(f"{med:.2f} / {pw:.3f} / {pb:.3f}")
+                worst = min(worst or 1.0, pw)
+            dr = bench_pnl.paired(per_draw(label, outliers, 0), per_draw("PoseLib", outliers, 0))
+            dc = bench_pnl.paired(per_draw(label, outliers, 1), per_draw("PoseLib", outliers, 1))
+            ours_f = [e[2] for t, e in zip(trials, errs[label]) if t["outliers"] == outliers]
+            pl_f = [e[2] for t, e in zip(trials, errs["PoseLib"]) if t["outliers"] == outliers]
+            only_ours = sum(a and not b for a, b in zip(ours_f, pl_f))
+            only_pl = sum(b and not a for a, b in zip(ours_f, pl_f))
+            out.append(f"| {label} | {outliers * 100:.0f} % | {cells[0]} | {cells[1]} | [{dr[1]:.2f} / {dr[2]:.3f}; "
+                       f"{dc[1]:.2f} / {dc[2]:.3f}] | {only_ours} / {only_pl} |")
+            verdicts.append((label, outliers, worst, only_ours))
+    if args.baseline_runner:
+        out.append("")
+        out.append(f"Each of ours against \"{args.baseline_label}\", paired the same way (ratio / p worse / p better):")
+        out.append("")
+        out.append("| ours | outliers | rotation | centre |")
+        out.append("| --- | --- | --- | --- |")
+        for label, variant in methods[1:]:
+            if variant == "baseline":
+                continue
+            for outliers in (0.0, 0.3):
+                cells = []
+                for k in (0, 1):
+                    _, med, pw, pb = bench_pnl.paired(per_view(label, outliers, k),
+                                                      per_view(args.baseline_label, outliers, k))
+                    cells.append(f"{med:.2f} / {pw:.3f} / {pb:.3f}")
+                out.append(f"| {label} | {outliers * 100:.0f} % | {cells[0]} | {cells[1]} |")
+    out.append("")
+    for label, _ in methods[1:]:
+        rows = [v for v in verdicts if v[0] == label]
+        met = all(p >= 0.05 and f == 0 for _, _, p, f in rows)
+        out.append(f"- {label}: not worse than PoseLib at p < 0.05 (rotation and centre, 0 % and 30 %) and no "
+                   f"view failing only for us: {'met' if met else 'not met'} "
+                   f"(smallest p worse {min(p for _, _, p, _ in rows):.3f}, ours-only failures "
+                   f"{sum(f for *_, f in rows)}).")
+
+    # The lines kept and the covariance's honesty.
+    out.append("")
+    out.append("Lines kept (median share of a view's lines in the final fit) and the §5 covariance against the "
+               "observed errors: d² is an error's squared Mahalanobis distance under the solution's own "
+               "covariance, rotation and centre each χ²₃ when the covariance is honest (median "
+               f"{CHI2_3_MEDIAN:.2f}, 95 % below {CHI2_3_95:.2f}). \"Spread\" = √(median d² / {CHI2_3_MEDIAN:.2f}): "
+               "the observed spread over the predicted one (1: honest; above 1: the covariance is too small).")
+    out.append("")
+    out.append("| ours | outliers | kept | rotation: spread / within 95 % | centre: spread / within 95 % |")
+    out.append("| --- | --- | --- | --- | --- |")
+    for label, _ in methods[1:]:
+        for outliers in (0.0, 0.3):
+            sel = [(t, r, e) for t, r, e in zip(trials, results[label], errs[label]) if t["outliers"] == outliers]
+            kept = [r["inliers"] / r["lines"] for _, r, _ in sel if r["ok"] and r.get("lines")]
+            cells = []
+            for k in (3, 4):
+                d2 = np.array([e[k] for *_, e in sel if e[k] is not None])
+                if len(d2) == 0:
+                    cells.append("- / -")
+                    continue
+                cells.append(f"{math.sqrt(np.median(d2) / CHI2_3_MEDIAN):.2f} / {100 * np.mean(d2 <= CHI2_3_95):.0f} %")
+            share = f"{100 * np.median(kept):.0f} %" if kept else "-"
+            out.append(f"| {label} | {outliers * 100:.0f} % | {share} | {cells[0]} | {cells[1]} |")
+    out.append("")
+    base = [m for m, _ in methods[1:]]
+    out.append("Time of the whole run per method (solver calls with I/O, same run, this machine): "
+               + ", ".join(f"{m} {seconds[m]:.1f} s" for m in ["PoseLib", *base]) + ".")
+    text = "\n".join(out)
+    print()
+    print(text)
+    if not args.no_results:
+        cmd = "python3 tools/bench_vgg.py DATA_DIR" + ("" if args.draws == 10 else f" --draws {args.draws}") + (
+            "" if args.variants == "e2,e3,e2-nofloor" else f" --variants {args.variants}") + (
+            " --baseline-runner BEFORE" if args.baseline_runner else "")
+        path = bench_pnl.write_results("vgg", "Line pose on the Oxford VGG lines: omnitrack against PoseLib, paired",
+                                       cmd, text)
+        print(f"\n[vgg] wrote {path.relative_to(bench_pnl.REPO)}")
 
 
 if __name__ == "__main__":

@@ -45,9 +45,17 @@ pub fn run(
 ) -> CommandResult {
     let guess = guess.as_deref().map(parse_guess).transpose()?;
     let rig = Rig::load(&rig)?;
-    let options = match config {
-        Some(path) => TrackerConfig::load(&path)?.solver_options(),
-        None => TrackerConfig::default().solver_options(),
+    let options = omnitrack::solver::SolverOptions {
+        // The rig's pixel: Med_R_and_T judges no line an outlier on a scale finer than this.
+        pixel_rad: rig
+            .sensors
+            .iter()
+            .map(|s| 1.0 / s.lens.fx().min(s.lens.fy()))
+            .fold(0.0, f64::max),
+        ..match config {
+            Some(path) => TrackerConfig::load(&path)?.solver_options(),
+            None => TrackerConfig::default().solver_options(),
+        }
     };
     let name = lines.display().to_string();
     let text = omnitrack::text_file::read_text(&lines, omnitrack::text_file::LARGE_FILE_LIMIT)

@@ -355,6 +355,8 @@ impl TrackerConfig {
             lms_outlier_threshold: s.lms_outlier_threshold,
             degenerate_subset_det: s.degenerate_subset_det,
             edge_sigma_rad: self.noise.edge_normal_sigma_deg.to_radians(),
+            // A tracker.toml knows no camera: whoever holds the rig sets its pixel.
+            pixel_rad: 0.0,
         }
     }
 

@@ -139,8 +139,14 @@ pub struct SolverOptions {
     pub lms_outlier_threshold: f64,
     /// Med_R_and_T: subsets whose 3D line directions have |det| below this are degenerate.
     pub degenerate_subset_det: f64,
-    /// σ (rad) of an observed edge plane's normal, for the covariance of §5.
+    /// σ (rad) of an observed edge plane's normal, for the covariance of §5 (but Med_R_and_T's,
+    /// which is at the noise its own lines show).
     pub edge_sigma_rad: f64,
+    /// The angle one pixel subtends at the centre of the sensors (rad: 1 / f for a pinhole; the
+    /// largest of a rig's sensors), or 0 when unknown. Med_R_and_T's inlier decision takes σ̂
+    /// no smaller than this: real line errors have heavier tails than a Gaussian of the bulk's
+    /// σ̂, and a σ̂ of a fraction of a pixel would cut good lines a pixel or two off.
+    pub pixel_rad: f64,
 }
 
 impl Default for SolverOptions {
@@ -155,6 +161,7 @@ impl Default for SolverOptions {
             lms_outlier_threshold: 2.5,
             degenerate_subset_det: 0.05,
             edge_sigma_rad: 0.5f64.to_radians(),
+            pixel_rad: 0.0,
         }
     }
 }
@@ -166,6 +173,7 @@ pub struct Solution {
     pub pose: Pose,
     /// 6×6 covariance, row-major over (tx, ty, tz, rx, ry, rz): the rig position in the world and
     /// the rotation as a small-angle vector in the world frame (docs/interfaces.md, "Pose service").
+    /// §5's, at `edge_sigma_rad`, or for Med_R_and_T at the noise of the lines it kept.
     pub covariance: Matrix6<f64>,
     /// Indices (into the input) of the correspondences the final fit used.
     pub inliers: Vec<usize>,

@@ -71,6 +71,9 @@ struct Cli {
     /// Med_R_and_T's inlier gate, σ per end point (tracker.toml's `lms_outlier_threshold`).
     #[arg(long, default_value_t = 2.5)]
     threshold: f64,
+    /// Leave the solver without the camera's pixel size (σ̂ of the inlier gate unfloored).
+    #[arg(long)]
+    no_pixel_floor: bool,
 }
 
 fn f(v: &Value) -> Result<f64, String> {
@@ -79,11 +82,12 @@ fn f(v: &Value) -> Result<f64, String> {
 
 /// The correspondences of one trial. A 2D segment whose end rays are parallel gives no plane and
 /// is left out (it cannot happen for the benchmark's segments of ≥ 1 px).
-fn correspondences(trial: &Value) -> Result<Vec<Correspondence>, String> {
+fn correspondences(trial: &Value) -> Result<(Vec<Correspondence>, f64), String> {
     let k = trial["K"].as_array().ok_or("trial without K")?;
     if k.len() != 4 {
         return Err("K must be [fx, fy, cx, cy]".into());
     }
+    let pixel_rad = 1.0 / f(&k[0])?.min(f(&k[1])?);
     let lens = Lens::Pinhole(Pinhole::new(f(&k[0])?, f(&k[1])?, f(&k[2])?, f(&k[3])?).map_err(|e| e.to_string())?);
     let lines = trial["lines"].as_array().ok_or("trial without lines")?;
     let mut out = Vec::with_capacity(lines.len());
@@ -106,7 +110,7 @@ fn correspondences(trial: &Value) -> Result<Vec<Correspondence>, String> {
             });
         }
     }
-    Ok(out)
+    Ok((out, pixel_rad))
 }
 
 fn run(cli: &Cli) -> Result<(), String> {
@@ -133,7 +137,11 @@ fn run(cli: &Cli) -> Result<(), String> {
         let trial: Value = serde_json::from_str(&line).map_err(|e| format!("line {}: {e}", n + 1))?;
         let id = trial["id"].as_u64().ok_or_else(|| format!("line {}: no id", n + 1))?;
         let seed = trial["seed"].as_u64().unwrap_or(id);
-        let c = correspondences(&trial).map_err(|e| format!("line {}: {e}", n + 1))?;
+        let (c, pixel_rad) = correspondences(&trial).map_err(|e| format!("line {}: {e}", n + 1))?;
+        let options = SolverOptions {
+            pixel_rad: if cli.no_pixel_floor { 0.0 } else { pixel_rad },
+            ..options.clone()
+        };
 
         let start = Instant::now();
         let result = match cli.method {
@@ -147,8 +155,10 @@ fn run(cli: &Cli) -> Result<(), String> {
                 let r = s.pose.rotation.to_rotation_matrix();
                 let m = r.matrix();
                 let t = s.pose.translation.vector;
+                let cov: Vec<f64> = s.covariance.iter().copied().collect();
                 json!({
-                    "id": id, "ok": true, "us": us, "inliers": s.inliers.len(),
+                    "id": id, "ok": true, "us": us, "inliers": s.inliers.len(), "lines": c.len(),
+                    "covariance": cov,
                     "t_world_camera": {
                         "t": [t.x, t.y, t.z],
                         "R": [m[(0, 0)], m[(0, 1)], m[(0, 2)],

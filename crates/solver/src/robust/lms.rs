@@ -17,7 +17,9 @@
 //! the centre cannot tell a scene from its mirror image behind the camera. (3)–(4), the outlier
 //! threshold and R_and_T on the rest, are where we go past the paper (see `Search::finish`): the
 //! few best poses are concentrated (FAST-LTS), their lines re-judged with an F-test from the
-//! fit's own σ̂, refitted until stable, and the most likely candidate wins.
+//! fit's own σ̂ (never below the sensor's pixel, `SolverOptions::pixel_rad`), refitted until
+//! stable, the most likely candidate wins, and its lines are fitted last under Cauchy's loss at
+//! their own robust scale; the covariance is §5's at the noise those lines show.
 //!
 //! Scratch (per-line errors, the candidates' line sets) is allocated per call, never per subset:
 //! the subset loop itself allocates nothing. This solver is for `omnitrack pose` and whole-frame
