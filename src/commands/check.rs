@@ -77,14 +77,17 @@ pub fn run(Args { rig, model, config }: Args) -> CommandResult {
             .map_err(|e| format!("{}: {e}", path.display()))?;
         // A table is often built on a desk machine and copied to the rig's: a build this machine
         // could not hold is said, not refused (`run` without --visibility, or `visibility build`
-        // here, refuses it before allocating).
-        let opts = omnitrack::visibility::build::BuildOptions::from_config(v);
-        let available = omnitrack::visibility::build::available_memory();
-        if let Err(e) = omnitrack::visibility::build::check_memory(&m, &opts, available) {
-            eprintln!(
-                "{}: warning: {e}; a table built elsewhere (--visibility) needs none of it",
-                path.display()
-            );
+        // here, refuses it before allocating). The device build cannot build tables at all.
+        #[cfg(feature = "desk")]
+        {
+            let opts = omnitrack::visibility::build::BuildOptions::from_config(v);
+            let available = omnitrack::visibility::build::available_memory();
+            if let Err(e) = omnitrack::visibility::build::check_memory(&m, &opts, available) {
+                eprintln!(
+                    "{}: warning: {e}; a table built elsewhere (--visibility) needs none of it",
+                    path.display()
+                );
+            }
         }
         eprintln!(
             "{}: {} vertices, {} faces, {} segments ({} free); skipped {} degenerate faces, \

@@ -28,11 +28,14 @@
 use std::fs::{self, File, Metadata, OpenOptions};
 use std::io::ErrorKind;
 use std::os::unix::ffi::OsStrExt;
-use std::os::unix::fs::{DirBuilderExt, FileExt, FileTypeExt, MetadataExt, OpenOptionsExt, PermissionsExt};
+use std::os::unix::fs::{DirBuilderExt, FileExt, MetadataExt, OpenOptionsExt, PermissionsExt};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use iceoryx2::prelude::{Config, FileName, SemanticString};
+
+mod identity;
+use identity::{group, kind, user, who, Identity};
 
 /// Where POSIX shared memory lives on Linux (iceoryx2's `shm_open` files).
 pub const SHM_DIR: &str = "/dev/shm";
@@ -57,92 +60,6 @@ const HALF_MADE_WAIT: Duration = Duration::from_secs(1);
 
 /// What to do about a domain folder or file another user made first.
 const REMEDY: &str = "tools/deploy/omnitrack.tmpfiles makes them at boot, before other users can";
-
-/// The user and groups this process acts as.
-#[derive(Debug, Clone)]
-struct Identity {
-    uid: u32,
-    gid: u32,
-    groups: Vec<u32>,
-}
-
-impl Identity {
-    fn of_this_process() -> Result<Self, String> {
-        let status = fs::read_to_string("/proc/self/status")
-            .map_err(|e| format!("cannot read /proc/self/status for this process's user: {e}"))?;
-        let field = |key: &str| -> Vec<u32> {
-            status
-                .lines()
-                .find_map(|l| l.strip_prefix(key))
-                .map(|rest| rest.split_whitespace().filter_map(|n| n.parse().ok()).collect())
-                .unwrap_or_default()
-        };
-        // Real, effective, saved, filesystem: files are made and checked as the effective ones.
-        let (uid, gid) = match (field("Uid:").get(1), field("Gid:").get(1)) {
-            (Some(&u), Some(&g)) => (u, g),
-            _ => return Err("cannot read this process's user from /proc/self/status".into()),
-        };
-        Ok(Identity {
-            uid,
-            gid,
-            groups: field("Groups:"),
-        })
-    }
-
-    fn is_root(&self) -> bool {
-        self.uid == 0
-    }
-
-    fn member_of(&self, gid: u32) -> bool {
-        self.gid == gid || self.groups.contains(&gid)
-    }
-}
-
-/// `name (uid N)` from /etc/passwd, or `uid N`.
-fn user(uid: u32) -> String {
-    match name_in("/etc/passwd", uid) {
-        Some(name) => format!("{name} (uid {uid})"),
-        None => format!("uid {uid}"),
-    }
-}
-
-/// The group's name from /etc/group, or its number.
-fn group(gid: u32) -> String {
-    name_in("/etc/group", gid).unwrap_or_else(|| gid.to_string())
-}
-
-fn name_in(file: &str, id: u32) -> Option<String> {
-    let text = fs::read_to_string(file).ok()?;
-    text.lines().find_map(|l| {
-        let mut f = l.split(':');
-        let name = f.next()?;
-        (f.nth(1)?.parse::<u32>().ok()? == id).then(|| name.to_string())
-    })
-}
-
-fn kind(m: &Metadata) -> &'static str {
-    let t = m.file_type();
-    if t.is_dir() {
-        "a folder"
-    } else if t.is_symlink() {
-        "a symbolic link"
-    } else if t.is_socket() {
-        "a socket"
-    } else if t.is_file() {
-        "a file"
-    } else {
-        "a device or FIFO"
-    }
-}
-
-fn who(m: &Metadata) -> String {
-    format!(
-        "{}, group {}, mode {:04o}",
-        user(m.uid()),
-        group(m.gid()),
-        m.mode() & 0o7777
-    )
-}
 
 /// The iceoryx2 domain this process's nodes use, checked, with the group its files are shared
 /// with.
