@@ -3,7 +3,7 @@
 
 use image::{Rgb, RgbImage};
 use omnitrack::capture::device::CaptureDevice;
-use omnitrack::capture::live::{FailureDetail, LiveCamera, ReadFailure};
+use omnitrack::capture::live::{FailureDetail, LiveCamera, ReadFailure, READ_SLICE, STOPPED};
 use omnitrack::capture::open::{USB_DISABLED, V4L_DISABLED};
 use omnitrack::capture::{
     open_source, open_source_with, FrameSource, LiveSource, Pacing, SourceError, SourceOptions, SourceSpec,
@@ -516,4 +516,90 @@ fn the_binary_refuses_a_missing_camera_in_one_line() {
         };
         assert!(lines[0].contains(expected), "{source}: {stderr}");
     }
+}
+
+/// A camera that never delivers: each read waits the whole frame timeout, as a driver does, in
+/// slices of [`READ_SLICE`] with the stop looked at between them (as the V4L2 and USB drivers
+/// wait).
+struct SilentCamera {
+    timeout: Duration,
+}
+
+impl LiveCamera for SilentCamera {
+    type Env = ();
+
+    fn open(_: &mut (), device: &CaptureDevice, options: &SourceOptions) -> Result<SilentCamera, SourceError> {
+        let _ = device;
+        Ok(SilentCamera {
+            timeout: options.frame_timeout,
+        })
+    }
+
+    fn name(&self) -> &str {
+        "silent"
+    }
+
+    fn frame_size(&self) -> (u32, u32) {
+        (4, 3)
+    }
+
+    fn read(&mut self, img: &mut SensorImage) -> Result<u64, ReadFailure> {
+        self.read_or_stop(img, &|| false)
+    }
+
+    fn read_or_stop(&mut self, _: &mut SensorImage, stop: &dyn Fn() -> bool) -> Result<u64, ReadFailure> {
+        let deadline = std::time::Instant::now() + self.timeout;
+        while std::time::Instant::now() < deadline {
+            if stop() {
+                return Err(STOPPED);
+            }
+            std::thread::sleep(READ_SLICE);
+        }
+        Err(ReadFailure {
+            fault: ImageFault::Dropped,
+            lost: false,
+            detail: FailureDetail::TimedOut,
+        })
+    }
+}
+
+/// A stop while a live camera waits for its frame ends the wait within a slice, not a frame
+/// timeout later (issue 50, item 8): no frame is delivered, and nothing is counted against the
+/// camera. Unstopped, the same read times out and counts a dropped frame.
+#[test]
+fn a_stop_ends_a_live_read_waiting_for_its_frame() {
+    let one = rig(&[(4, 3)], "", &|_| String::new());
+    let options = SourceOptions {
+        frame_timeout: Duration::from_secs(2),
+        ..SourceOptions::default()
+    };
+    let mut source = LiveSource::<SilentCamera>::open_with_env(one.clone(), (), options).unwrap();
+    let mut frame = FrameSet::for_rig(source.rig());
+    let started = std::time::Instant::now();
+    let stop_at = started + Duration::from_millis(100);
+    let delivered = source
+        .next_frame_or_stop(&mut frame, &|| std::time::Instant::now() >= stop_at)
+        .unwrap();
+    let took = started.elapsed();
+    assert!(!delivered, "a frame after the stop");
+    assert!(took < Duration::from_secs(1), "the stop waited {took:?} for the read");
+    assert_eq!(source.stats().frames_delivered, 0);
+    assert_eq!(
+        source.stats().sensors[0].total_faults(),
+        0,
+        "a stop is no fault of the camera"
+    );
+
+    let mut source = LiveSource::<SilentCamera>::open_with_env(
+        one,
+        (),
+        SourceOptions {
+            frame_timeout: Duration::from_millis(60),
+            ..SourceOptions::default()
+        },
+    )
+    .unwrap();
+    assert!(source.next_frame(&mut frame).unwrap());
+    assert_eq!(frame.sensor(0).fault, Some(ImageFault::Dropped));
+    assert_eq!(source.stats().sensors[0].dropped, 1);
 }

@@ -30,7 +30,7 @@ use omnitrack_core::frame::{FrameSet, ImageFault, SensorImage};
 use omnitrack_core::rig::Rig;
 use std::fmt;
 use std::sync::OnceLock;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 /// Timeouts in a row after which a live sensor counts as lost and is reopened.
 pub const LOST_AFTER_TIMEOUTS: u32 = 3;
@@ -57,6 +57,9 @@ pub enum FailureDetail {
     U3v(super::u3v::RejectReason),
     /// Anything else, in a few words.
     Text(&'static str),
+    /// The read was given up because the run is stopping ([`LiveCamera::read_or_stop`]): not a
+    /// fault of the camera, never counted.
+    Stopped,
 }
 
 impl fmt::Display for FailureDetail {
@@ -67,6 +70,7 @@ impl fmt::Display for FailureDetail {
             FailureDetail::Convert(e) => write!(f, "{e}"),
             FailureDetail::U3v(r) => write!(f, "USB3 Vision block rejected: {r}"),
             FailureDetail::Text(t) => f.write_str(t),
+            FailureDetail::Stopped => f.write_str("stopped"),
         }
     }
 }
@@ -101,7 +105,27 @@ pub trait LiveCamera: Sized + Send {
     /// Reads the next frame into `img`'s pixels (an image of [`LiveCamera::frame_size`], not
     /// marked); returns its timestamp (ns).
     fn read(&mut self, img: &mut SensorImage) -> Result<u64, ReadFailure>;
+
+    /// [`read`](Self::read), given up as soon as `stop` says so: a driver that waits for its
+    /// device waits in slices of at most [`READ_SLICE`] and returns [`FailureDetail::Stopped`]
+    /// when `stop` is true between them, so that a stop is honoured within a tenth of a second
+    /// rather than a frame timeout (a second) later. The default reads without looking at `stop`
+    /// (a camera whose reads do not wait).
+    fn read_or_stop(&mut self, img: &mut SensorImage, stop: &dyn Fn() -> bool) -> Result<u64, ReadFailure> {
+        let _ = stop;
+        self.read(img)
+    }
 }
+
+/// The longest a live read waits before it looks at the run's stop flag again.
+pub const READ_SLICE: Duration = Duration::from_millis(20);
+
+/// The failure of a read given up for a stop.
+pub const STOPPED: ReadFailure = ReadFailure {
+    fault: ImageFault::Dropped,
+    lost: false,
+    detail: FailureDetail::Stopped,
+};
 
 /// Opens `device`'s camera and checks that its frames hold every window; sizes `scratch` (the
 /// frame buffer of a device split into windows) to the negotiated frame.
@@ -218,7 +242,9 @@ impl<C: LiveCamera> LiveSource<C> {
         }
     }
 
-    fn capture(&mut self, d: usize, out: &mut FrameSet) {
+    /// Reads device `d` into `out`; false when the read was given up for `stop` (nothing
+    /// counted).
+    fn capture(&mut self, d: usize, out: &mut FrameSet, stop: &dyn Fn() -> bool) -> bool {
         let now = Instant::now();
         let slot = &mut self.slots[d];
         if slot.camera.is_none() && now >= slot.retry_at {
@@ -246,13 +272,14 @@ impl<C: LiveCamera> LiveSource<C> {
         }
         let Some(camera) = slot.camera.as_mut() else {
             self.fail_device(d, ImageFault::Missing, out);
-            return;
+            return true;
         };
         let read = match slot.scratch.as_mut() {
-            None => camera.read(out.sensor_mut(slot.device.windows[0].sensor)),
-            Some(frame) => camera.read(frame),
+            None => camera.read_or_stop(out.sensor_mut(slot.device.windows[0].sensor), stop),
+            Some(frame) => camera.read_or_stop(frame, stop),
         };
         match read {
+            Err(failure) if failure.detail == FailureDetail::Stopped => return false,
             Ok(ts) => {
                 for w in &slot.device.windows {
                     let img = out.sensor_mut(w.sensor);
@@ -288,6 +315,7 @@ impl<C: LiveCamera> LiveSource<C> {
                 self.fail_device(d, failure.fault, out);
             }
         }
+        true
     }
 }
 
@@ -318,7 +346,10 @@ impl<C: LiveCamera> FrameSource for LiveSource<C> {
             }
         }
         for d in 0..self.slots.len() {
-            self.capture(d, out);
+            // A read given up for the stop: the frame is not delivered, half read.
+            if !self.capture(d, out, stop) {
+                return Ok(false);
+            }
         }
         out.sequence = self.sequence;
         self.sequence += 1;

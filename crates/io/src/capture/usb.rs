@@ -35,7 +35,7 @@
 //! transfer structure with C `malloc` on each call, outside Rust's allocator.
 
 use super::device::CaptureDevice;
-use super::live::{host_time_ns, FailureDetail, LiveCamera, LiveSource, ReadFailure};
+use super::live::{host_time_ns, FailureDetail, LiveCamera, LiveSource, ReadFailure, READ_SLICE, STOPPED};
 use super::spec::SourceOptions;
 use super::u3v::{U3vEvent, U3vStream};
 use super::SourceError;
@@ -270,9 +270,18 @@ impl LiveCamera for UsbCamera {
     }
 
     fn read(&mut self, img: &mut SensorImage) -> Result<u64, ReadFailure> {
+        self.read_or_stop(img, &|| false)
+    }
+
+    fn read_or_stop(&mut self, img: &mut SensorImage, stop: &dyn Fn() -> bool) -> Result<u64, ReadFailure> {
         let deadline = Instant::now() + self.timeout;
         loop {
-            let left = deadline.saturating_duration_since(Instant::now());
+            // Transfers of at most READ_SLICE, the stop looked at between them: a block cut by
+            // a slice's end goes on in the next transfer (the parser keeps its state).
+            if stop() {
+                return Err(STOPPED);
+            }
+            let left = deadline.saturating_duration_since(Instant::now()).min(READ_SLICE);
             if left.is_zero() {
                 return Err(ReadFailure {
                     fault: ImageFault::Dropped,

@@ -14,7 +14,9 @@
 //! `BA81` (BGGR). A device whose offered formats all fail at that size is an error listing what it
 //! offers. Then [`BUFFERS`] driver buffers are memory-mapped and streaming starts on the first read.
 //!
-//! Reading: each read waits (up to the frame timeout) for the next filled buffer, converts its
+//! Reading: each read waits (up to the frame timeout; after the first, which starts the stream,
+//! in polls of [`READ_SLICE`] with the run's stop looked at between them) for the next filled
+//! buffer, converts its
 //! bytes (`bytesused`, the driver's row stride) with [`convert`] into the sensor's
 //! image and takes the driver's timestamp (`CLOCK_MONOTONIC` for almost every driver; when a
 //! driver gives none, [`host_time_ns`]). A buffer flagged as erroneous or too short is a corrupt
@@ -37,7 +39,7 @@
 
 use super::convert::{self, BayerPattern, ConvertError, YuvOrder, YuvRange};
 use super::device::CaptureDevice;
-use super::live::{host_time_ns, FailureDetail, LiveCamera, LiveSource, ReadFailure};
+use super::live::{host_time_ns, FailureDetail, LiveCamera, LiveSource, ReadFailure, READ_SLICE, STOPPED};
 use super::spec::SourceOptions;
 use super::SourceError;
 use omnitrack_core::frame::{ImageFault, SensorImage};
@@ -49,6 +51,9 @@ use v4l::io::mmap::Stream;
 use v4l::io::traits::{CaptureStream, Stream as _};
 use v4l::video::Capture;
 use v4l::{Device, Format, FourCC};
+
+/// poll(2)'s "data to read" event (the same on every Linux architecture).
+const POLLIN: i16 = 0x001;
 
 /// Driver buffers memory-mapped per device.
 pub const BUFFERS: u32 = 4;
@@ -164,6 +169,12 @@ pub struct V4l2Camera {
     height: u32,
     format: V4l2Format,
     stride: usize,
+    /// How long a read waits for a frame.
+    frame_timeout: std::time::Duration,
+    /// The device's handle, polled for a filled buffer a slice at a time.
+    handle: std::sync::Arc<v4l::device::Handle>,
+    /// Whether the stream has been started (by the first read).
+    streaming: bool,
     /// `Some` until dropped; taken by [`Drop`] to stop it without panicking.
     stream: Option<Stream<'static>>,
     /// Kept open for the stream's lifetime.
@@ -293,6 +304,9 @@ impl LiveCamera for V4l2Camera {
             height: h,
             format,
             stride,
+            frame_timeout: options.frame_timeout,
+            handle: device.handle(),
+            streaming: false,
             stream: Some(stream),
             _device: device,
         })
@@ -307,6 +321,10 @@ impl LiveCamera for V4l2Camera {
     }
 
     fn read(&mut self, img: &mut SensorImage) -> Result<u64, ReadFailure> {
+        self.read_or_stop(img, &|| false)
+    }
+
+    fn read_or_stop(&mut self, img: &mut SensorImage, stop: &dyn Fn() -> bool) -> Result<u64, ReadFailure> {
         let Some(stream) = self.stream.as_mut() else {
             return Err(ReadFailure {
                 fault: ImageFault::Missing,
@@ -314,7 +332,47 @@ impl LiveCamera for V4l2Camera {
                 detail: FailureDetail::Text("stream closed"),
             });
         };
-        let (buf, meta) = match CaptureStream::next(stream) {
+        let timed_out = ReadFailure {
+            fault: ImageFault::Dropped,
+            lost: false,
+            detail: FailureDetail::TimedOut,
+        };
+        // Once streaming, a filled buffer is waited for here, a slice at a time with the stop
+        // looked at between slices; the stream's own wait (the whole frame timeout) then finds
+        // it ready. Not through the stream: after its wait times out it queues its last buffer
+        // again on the next call, which the driver refuses. The first read starts the stream
+        // and waits in it.
+        if self.streaming {
+            let deadline = std::time::Instant::now() + self.frame_timeout;
+            loop {
+                if stop() {
+                    return Err(STOPPED);
+                }
+                let left = deadline.saturating_duration_since(std::time::Instant::now());
+                if left.is_zero() {
+                    return Err(timed_out);
+                }
+                let ms = left.min(READ_SLICE).as_millis().clamp(1, 1000) as i32;
+                match self.handle.poll(POLLIN, ms) {
+                    Ok(0) => continue,
+                    Ok(_) => break,
+                    Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
+                    Err(e) => {
+                        return Err(ReadFailure {
+                            fault: ImageFault::Missing,
+                            lost: true,
+                            detail: match e.raw_os_error() {
+                                Some(code) => FailureDetail::Os(code),
+                                None => FailureDetail::Text("poll failed"),
+                            },
+                        })
+                    }
+                }
+            }
+        }
+        self.streaming = true;
+        let next = CaptureStream::next(stream);
+        let (buf, meta) = match next {
             Ok(x) => x,
             Err(e) if e.kind() == io::ErrorKind::TimedOut => {
                 return Err(ReadFailure {

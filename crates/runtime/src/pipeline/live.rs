@@ -120,10 +120,12 @@ impl<C: LiveCamera> SensorCapture for LiveDevice<C> {
             return Ok(true);
         };
         let read = match self.scratch.as_mut() {
-            None => camera.read(imgs[0]),
-            Some(frame) => camera.read(frame),
+            None => camera.read_or_stop(imgs[0], stop),
+            Some(frame) => camera.read_or_stop(frame, stop),
         };
         match read {
+            // Given up for the stop: nothing captured, nothing counted.
+            Err(failure) if failure.detail == FailureDetail::Stopped => return Ok(false),
             Ok(ts) => {
                 for (img, w) in imgs.iter_mut().zip(&self.device.windows) {
                     if let Some(frame) = self.scratch.as_ref() {
