@@ -39,8 +39,8 @@ pub struct BuildEstimate {
 }
 
 /// Estimates a build of `model` with `opts`: the grid from the bounds, the node share and the
-/// set sizes from samples (see the module doc). Costs the node rule on [`SAMPLE_CELLS`] cells and
-/// up to [`SAMPLE_NODES`] renders (five times as many when merging with the cell corners).
+/// set sizes from samples (see the module doc). Costs the node rule on 2,048 cells and up to 16
+/// renders (five times as many when merging with the cell corners).
 pub fn estimate(model: &Model, opts: &BuildOptions) -> BuildEstimate {
     let (origin, [nx, ny, nz]) = grid(model, opts);
     let (nx, ny, nz) = (u64::from(nx), u64::from(ny), u64::from(nz));
