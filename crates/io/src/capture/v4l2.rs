@@ -55,6 +55,25 @@ use v4l::{Device, Format, FourCC};
 /// poll(2)'s "data to read" event (the same on every Linux architecture).
 const POLLIN: i16 = 0x001;
 
+/// A read that found no frame within the frame timeout: a dropped image.
+const TIMED_OUT: ReadFailure = ReadFailure {
+    fault: ImageFault::Dropped,
+    lost: false,
+    detail: FailureDetail::TimedOut,
+};
+
+/// A device error while reading: the device is lost (unplugged, I/O error) and reopened later.
+fn device_lost(e: &io::Error, what: &'static str) -> ReadFailure {
+    ReadFailure {
+        fault: ImageFault::Missing,
+        lost: true,
+        detail: match e.raw_os_error() {
+            Some(code) => FailureDetail::Os(code),
+            None => FailureDetail::Text(what),
+        },
+    }
+}
+
 /// Driver buffers memory-mapped per device.
 pub const BUFFERS: u32 = 4;
 
@@ -332,11 +351,6 @@ impl LiveCamera for V4l2Camera {
                 detail: FailureDetail::Text("stream closed"),
             });
         };
-        let timed_out = ReadFailure {
-            fault: ImageFault::Dropped,
-            lost: false,
-            detail: FailureDetail::TimedOut,
-        };
         // Once streaming, a filled buffer is waited for here, a slice at a time with the stop
         // looked at between slices; the stream's own wait (the whole frame timeout) then finds
         // it ready. Not through the stream: after its wait times out it queues its last buffer
@@ -350,23 +364,14 @@ impl LiveCamera for V4l2Camera {
                 }
                 let left = deadline.saturating_duration_since(std::time::Instant::now());
                 if left.is_zero() {
-                    return Err(timed_out);
+                    return Err(TIMED_OUT);
                 }
                 let ms = left.min(READ_SLICE).as_millis().clamp(1, 1000) as i32;
                 match self.handle.poll(POLLIN, ms) {
                     Ok(0) => continue,
                     Ok(_) => break,
                     Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
-                    Err(e) => {
-                        return Err(ReadFailure {
-                            fault: ImageFault::Missing,
-                            lost: true,
-                            detail: match e.raw_os_error() {
-                                Some(code) => FailureDetail::Os(code),
-                                None => FailureDetail::Text("poll failed"),
-                            },
-                        })
-                    }
+                    Err(e) => return Err(device_lost(&e, "poll failed")),
                 }
             }
         }
@@ -374,23 +379,8 @@ impl LiveCamera for V4l2Camera {
         let next = CaptureStream::next(stream);
         let (buf, meta) = match next {
             Ok(x) => x,
-            Err(e) if e.kind() == io::ErrorKind::TimedOut => {
-                return Err(ReadFailure {
-                    fault: ImageFault::Dropped,
-                    lost: false,
-                    detail: FailureDetail::TimedOut,
-                })
-            }
-            Err(e) => {
-                return Err(ReadFailure {
-                    fault: ImageFault::Missing,
-                    lost: true,
-                    detail: match e.raw_os_error() {
-                        Some(code) => FailureDetail::Os(code),
-                        None => FailureDetail::Text("read failed"),
-                    },
-                })
-            }
+            Err(e) if e.kind() == io::ErrorKind::TimedOut => return Err(TIMED_OUT),
+            Err(e) => return Err(device_lost(&e, "read failed")),
         };
         if meta.flags.contains(Flags::ERROR) {
             return Err(ReadFailure {

@@ -81,9 +81,39 @@ enum Bad {
     NotText,
     FieldCount(usize),
     NotANumber,
-    UnknownSensor(usize),
+    /// The sensor, and the rig's sensor count.
+    UnknownSensor(usize, usize),
     EmptyPath,
     Outside(String),
+}
+
+impl Bad {
+    /// Counts it in its kind's counter.
+    fn count(&self, rows: &mut crate::capture::BadRowStats) {
+        let counter = match self {
+            Bad::TooLong | Bad::NotText => &mut rows.unreadable,
+            Bad::FieldCount(_) => &mut rows.field_count,
+            Bad::NotANumber => &mut rows.not_a_number,
+            Bad::UnknownSensor(..) => &mut rows.unknown_sensor,
+            Bad::EmptyPath => &mut rows.empty_path,
+            Bad::Outside(_) => &mut rows.outside,
+        };
+        *counter += 1;
+    }
+}
+
+impl fmt::Display for Bad {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Bad::TooLong => write!(f, "longer than {MAX_LINE} bytes, not a row of {FRAMES_HEADER}"),
+            Bad::NotText => f.write_str("not UTF-8 text"),
+            Bad::FieldCount(n) => write!(f, "expected 4 fields ({FRAMES_HEADER}), found {n}"),
+            Bad::NotANumber => f.write_str("frame, sensor and timestamp_ns must be non-negative integers"),
+            Bad::UnknownSensor(sensor, of) => write!(f, "sensor {sensor} is not in the rig ({of} sensors)"),
+            Bad::EmptyPath => f.write_str("empty path"),
+            Bad::Outside(p) => write!(f, "path {p:?} leaves the recording (absolute or with ..)"),
+        }
+    }
 }
 
 /// A row's fields, checked.
@@ -114,7 +144,7 @@ fn check_row<'a>(line: &'a [u8], sensors: usize) -> Result<Fields<'a>, Bad> {
         return Err(Bad::NotANumber);
     };
     if sensor >= sensors {
-        return Err(Bad::UnknownSensor(sensor));
+        return Err(Bad::UnknownSensor(sensor, sensors));
     }
     if path.is_empty() {
         return Err(Bad::EmptyPath);
@@ -239,56 +269,8 @@ impl FrameIndex {
             let row = match checked {
                 Ok(row) => row,
                 Err(problem) => {
-                    match problem {
-                        Bad::TooLong => {
-                            stats.bad_rows.unreadable += 1;
-                            bad(
-                                stats,
-                                warnings,
-                                format_args!("longer than {MAX_LINE} bytes, not a row of {FRAMES_HEADER}"),
-                            );
-                        }
-                        Bad::NotText => {
-                            stats.bad_rows.unreadable += 1;
-                            bad(stats, warnings, format_args!("not UTF-8 text"));
-                        }
-                        Bad::FieldCount(n) => {
-                            stats.bad_rows.field_count += 1;
-                            bad(
-                                stats,
-                                warnings,
-                                format_args!("expected 4 fields ({FRAMES_HEADER}), found {n}"),
-                            );
-                        }
-                        Bad::NotANumber => {
-                            stats.bad_rows.not_a_number += 1;
-                            bad(
-                                stats,
-                                warnings,
-                                format_args!("frame, sensor and timestamp_ns must be non-negative integers"),
-                            );
-                        }
-                        Bad::UnknownSensor(sensor) => {
-                            stats.bad_rows.unknown_sensor += 1;
-                            bad(
-                                stats,
-                                warnings,
-                                format_args!("sensor {sensor} is not in the rig ({sensors} sensors)"),
-                            );
-                        }
-                        Bad::EmptyPath => {
-                            stats.bad_rows.empty_path += 1;
-                            bad(stats, warnings, format_args!("empty path"));
-                        }
-                        Bad::Outside(p) => {
-                            stats.bad_rows.outside += 1;
-                            bad(
-                                stats,
-                                warnings,
-                                format_args!("path {p:?} leaves the recording (absolute or with ..)"),
-                            );
-                        }
-                    }
+                    problem.count(&mut stats.bad_rows);
+                    bad(stats, warnings, format_args!("{problem}"));
                     continue;
                 }
             };
