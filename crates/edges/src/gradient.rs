@@ -8,7 +8,7 @@
 //! pass is compiled for AVX2 and AVX-512BW as well as the baseline and picks the best the CPU has
 //! at run time (`multiversion`), since a rig's computer may have either.
 
-use super::Smoothing;
+use super::params::Smoothing;
 use multiversion::multiversion;
 
 /// Ring buffers of one image width, sized at start-up.

@@ -19,9 +19,10 @@ mod plane;
 mod select;
 
 use super::contrario::Contrario;
+use super::edge::{Edge, MAX_GAPS};
 use super::gradient::{gradients_and_edgels, Rows};
 use super::hue::{HueAcc, HueTable};
-use super::{Edge, EdgeParams, MAX_GAPS};
+use super::params::EdgeParams;
 use chain::{LN_MAG, MAX_CHAIN};
 use nalgebra::{Point2, Point3, UnitQuaternion, Vector3};
 use omnitrack_core::frame::SensorImage;

@@ -10,8 +10,8 @@
 
 use super::plane::{edgel_weight, plane_normal, plane_residual, two_lines_apart, weighted_outer, Moments};
 use super::{Candidate, Workspace};
+use crate::edge::MAX_GAPS;
 use crate::hue::HueAcc;
-use crate::MAX_GAPS;
 use nalgebra::Vector3;
 
 impl Workspace {

@@ -7,7 +7,7 @@
 
 use super::plane::{angle_in_plane, plane_normal, plane_residual, two_lines_apart, Moments};
 use super::{Candidate, Workspace};
-use crate::MAX_GAPS;
+use crate::edge::MAX_GAPS;
 use nalgebra::{Point2, Vector2, Vector3};
 
 /// A gradient counts as across a line when its component along the line is at most this share

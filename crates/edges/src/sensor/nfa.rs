@@ -240,8 +240,8 @@ pub(super) enum Stretch {
 mod tests {
     use super::*;
     use crate::hue::HueTable;
+    use crate::params::EdgeParams;
     use crate::sensor::ray_table;
-    use crate::EdgeParams;
     use nalgebra::Point2;
     use omnitrack_core::frame::SensorImage;
     use rand::rngs::SmallRng;

@@ -8,7 +8,8 @@
 use super::nfa::Stretch;
 use super::plane::{angle_in_plane, plane_residual};
 use super::Workspace;
-use crate::{Edge, HueSignature, MAX_GAPS};
+use crate::edge::{Edge, MAX_GAPS};
+use crate::hue::HueSignature;
 use nalgebra::{Point2, Unit, Vector3};
 use omnitrack_core::geometry::EdgePlane;
 
