@@ -21,133 +21,27 @@
 //!
 //! No alignment is the default here (evo's default too): the tracker estimates poses in the
 //! model's frame, so any rigid offset is an error to report, not a gauge freedom to remove.
+//!
+//! Files, each importing only those before it: `eval/options.rs` ([`EvalOptions`], [`EvalError`]),
+//! `eval/stats.rs` (the error series and their [`Stats`]), `eval/associate.rs` ([`associate`]),
+//! `eval/align.rs` ([`align_rigid`]); this one compares ([`evaluate`]) and prints the result
+//! ([`Evaluation::table`]).
 
-use nalgebra::{Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
+mod align;
+mod associate;
+mod options;
+mod stats;
+
+pub use align::{align_rigid, transformed};
+pub use associate::associate;
+pub use options::{EvalError, EvalOptions};
+pub use stats::{ErrorSeries, PoseError, Stats};
+
+use nalgebra::{Point3, UnitQuaternion};
 use omnitrack_core::geometry::Pose;
 use omnitrack_core::trajectory::{load_tum_whole_lines, Stamped, TumError};
 use std::fmt::Write as _;
 use std::path::Path;
-
-/// How to compare two trajectories.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct EvalOptions {
-    /// Largest timestamp difference (seconds) for two poses to be associated (evo `--t_max_diff`).
-    pub max_diff_s: f64,
-    /// Rigidly align the estimate onto the ground truth first (evo `--align`).
-    pub align: bool,
-    /// RPE frame distance, in associated poses (evo `--delta N --delta_unit f`).
-    pub rpe_delta: usize,
-}
-
-impl Default for EvalOptions {
-    fn default() -> Self {
-        Self {
-            max_diff_s: 0.01,
-            align: false,
-            rpe_delta: 1,
-        }
-    }
-}
-
-/// Why two trajectories could not be compared.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum EvalError {
-    #[error(transparent)]
-    Trajectory(#[from] TumError),
-    #[error("{gt} vs {est}: {source}")]
-    Files {
-        gt: String,
-        est: String,
-        #[source]
-        source: Box<EvalError>,
-    },
-    #[error("bad option: {0}")]
-    Option(String),
-    #[error("no timestamps match within {max_diff_s} s ({gt_poses} ground-truth poses, {est_poses} estimated poses)")]
-    NoMatches {
-        max_diff_s: f64,
-        gt_poses: usize,
-        est_poses: usize,
-    },
-    #[error("cannot align: {0}")]
-    Alignment(String),
-}
-
-/// Summary statistics of one error series, in the series' unit.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Stats {
-    pub rmse: f64,
-    pub mean: f64,
-    pub median: f64,
-    /// Population standard deviation (numpy's `std`, as evo reports).
-    pub std: f64,
-    pub min: f64,
-    pub max: f64,
-    pub count: usize,
-}
-
-impl Stats {
-    /// Statistics of a series; `None` when it is empty.
-    pub fn of(values: &[f64]) -> Option<Stats> {
-        if values.is_empty() {
-            return None;
-        }
-        let n = values.len() as f64;
-        let mean = values.iter().sum::<f64>() / n;
-        let rmse = (values.iter().map(|v| v * v).sum::<f64>() / n).sqrt();
-        let std = (values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n).sqrt();
-        let mut sorted = values.to_vec();
-        sorted.sort_by(f64::total_cmp);
-        let mid = sorted.len() / 2;
-        let median = if sorted.len() % 2 == 0 {
-            (sorted[mid - 1] + sorted[mid]) / 2.0
-        } else {
-            sorted[mid]
-        };
-        Some(Stats {
-            rmse,
-            mean,
-            median,
-            std,
-            min: sorted[0],
-            max: sorted[sorted.len() - 1],
-            count: values.len(),
-        })
-    }
-}
-
-/// The error of one associated pose (ATE) or one pose pair (RPE).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct PoseError {
-    /// Timestamp of the estimated pose (for RPE: of the pair's later pose).
-    pub timestamp_ns: u64,
-    /// Index in the ground-truth trajectory as given (for RPE: of the pair's later pose).
-    pub gt_index: usize,
-    /// Index in the estimated trajectory as given (for RPE: of the pair's later pose).
-    pub est_index: usize,
-    pub translation_m: f64,
-    pub rotation_deg: f64,
-}
-
-/// One metric (ATE or RPE): per-pose errors and their statistics.
-#[derive(Debug, Clone, PartialEq)]
-pub struct ErrorSeries {
-    pub per_pose: Vec<PoseError>,
-    pub translation_m: Stats,
-    pub rotation_deg: Stats,
-}
-
-impl ErrorSeries {
-    fn from_errors(per_pose: Vec<PoseError>) -> Option<ErrorSeries> {
-        let t: Vec<f64> = per_pose.iter().map(|e| e.translation_m).collect();
-        let r: Vec<f64> = per_pose.iter().map(|e| e.rotation_deg).collect();
-        Some(ErrorSeries {
-            translation_m: Stats::of(&t)?,
-            rotation_deg: Stats::of(&r)?,
-            per_pose,
-        })
-    }
-}
 
 /// The comparison of an estimate with the ground truth.
 #[derive(Debug, Clone, PartialEq)]
@@ -164,98 +58,6 @@ pub struct Evaluation {
     pub rpe: Option<ErrorSeries>,
     /// Lines left out of the files read: a last line cut off by its writer (a full disk).
     pub cut_lines: Vec<TumError>,
-}
-
-/// Pairs `(gt index, est index)` of poses whose timestamps match within `max_diff_s`, as evo
-/// associates them (see the module doc). Both trajectories must be in time order.
-pub fn associate(gt: &[Stamped], est: &[Stamped], max_diff_s: f64) -> Vec<(usize, usize)> {
-    // evo starts from the shorter trajectory so that none of its poses is lost; on a tie the
-    // second argument (the estimate) is the short one.
-    let est_is_short = est.len() <= gt.len();
-    let (short, long) = if est_is_short { (est, gt) } else { (gt, est) };
-    let max_diff_ns = (max_diff_s * 1e9).round() as i128;
-    let mut pairs = Vec::new();
-    for (i_short, s) in short.iter().enumerate() {
-        let t = i128::from(s.timestamp_ns);
-        // First pose of the long trajectory strictly after t (evo's searchsorted side="right").
-        let upper = long.partition_point(|p| i128::from(p.timestamp_ns) <= t);
-        let diff_after = long.get(upper).map(|p| i128::from(p.timestamp_ns) - t);
-        let diff_before = upper.checked_sub(1).map(|k| t - i128::from(long[k].timestamp_ns));
-        let best = match (diff_before, diff_after) {
-            (Some(b), Some(a)) if a < b => Some((upper, a)),
-            (Some(b), _) => Some((upper - 1, b)),
-            (None, Some(a)) => Some((upper, a)),
-            (None, None) => None,
-        };
-        if let Some((i_long, _)) = best.filter(|&(_, d)| d <= max_diff_ns) {
-            pairs.push(if est_is_short {
-                (i_long, i_short)
-            } else {
-                (i_short, i_long)
-            });
-        }
-    }
-    pairs
-}
-
-/// The rigid motion `T` (no scale) minimising `Σ ‖T·from_i − to_i‖²` (Umeyama 1991, as evo's
-/// `umeyama_alignment` with `with_scale=False`). Fails for fewer than three points or points
-/// on one line, where the rotation is not determined.
-pub fn align_rigid(from: &[Point3<f64>], to: &[Point3<f64>]) -> Result<Pose, EvalError> {
-    if from.len() != to.len() {
-        return Err(EvalError::Alignment(format!(
-            "{} points to align onto {}",
-            from.len(),
-            to.len()
-        )));
-    }
-    if from.len() < 3 {
-        return Err(EvalError::Alignment(format!(
-            "{} associated poses, at least 3 needed",
-            from.len()
-        )));
-    }
-    let n = from.len() as f64;
-    let mean_from = from.iter().fold(Vector3::zeros(), |s, p| s + p.coords) / n;
-    let mean_to = to.iter().fold(Vector3::zeros(), |s, p| s + p.coords) / n;
-    let mut cov = Matrix3::zeros();
-    for (a, b) in from.iter().zip(to) {
-        cov += (b.coords - mean_to) * (a.coords - mean_from).transpose();
-    }
-    cov /= n;
-    let svd = cov.svd(true, true);
-    let (Some(u), Some(v_t)) = (svd.u, svd.v_t) else {
-        return Err(EvalError::Alignment("SVD did not converge".into()));
-    };
-    if svd.singular_values.iter().filter(|&&d| d > f64::EPSILON).count() < 2 {
-        return Err(EvalError::Alignment(
-            "the positions lie on a line or a point (degenerate covariance)".into(),
-        ));
-    }
-    let mut s = Matrix3::identity();
-    if u.determinant() * v_t.determinant() < 0.0 {
-        // The reflection goes on the smallest singular value (numpy sorts them, nalgebra may not).
-        let smallest = svd.singular_values.imin();
-        s[(smallest, smallest)] = -1.0;
-    }
-    let r = Rotation3::from_matrix_unchecked(u * s * v_t);
-    let t = mean_to - r * mean_from;
-    Ok(Pose::from_parts(
-        Translation3::from(t),
-        UnitQuaternion::from_rotation_matrix(&r),
-    ))
-}
-
-/// The trajectory with every pose moved by `T` (`T · pose`), e.g. an estimate aligned by
-/// [`Evaluation::alignment`] for drawing.
-pub fn transformed(trajectory: &[Stamped], t: &Pose) -> Vec<Stamped> {
-    trajectory
-        .iter()
-        .map(|s| Stamped {
-            timestamp_ns: s.timestamp_ns,
-            pose: t * s.pose,
-        })
-        .collect()
 }
 
 fn angle_deg(r: &UnitQuaternion<f64>) -> f64 {
@@ -432,7 +234,7 @@ impl Evaluation {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use nalgebra::Isometry3;
+    use nalgebra::{Isometry3, Translation3, Vector3};
 
     fn wiggly(n: usize) -> Vec<Stamped> {
         (0..n)
