@@ -4,7 +4,6 @@
 mod common;
 
 mod calibration;
-mod convert;
 mod demo;
 mod eval;
 mod floorplan;

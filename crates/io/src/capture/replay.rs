@@ -39,7 +39,7 @@
 //! Allocation: this module allocates nothing per frame of its own. The `image` crate's PNG decoder
 //! (`png` underneath) does allocate internally each time a decoder is created — its inflate state
 //! and row buffers — and offers no way to reuse them across images; the count is a small constant
-//! per image (`tests/replay.rs` measures it). Removing it needs a reusable decoder (a later issue).
+//! per image (`tests/io/replay.rs` measures it). Removing it needs a reusable decoder (a later issue).
 
 mod index;
 

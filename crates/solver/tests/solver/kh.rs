@@ -2,15 +2,13 @@
 //! on synthetic correspondences, for a single pinhole camera and for the six-sensor rig.
 
 use nalgebra::{Isometry3, Matrix6, Point3, Translation3, Unit, UnitQuaternion, Vector3, Vector6};
-use omnitrack::geometry::{Correspondence, EdgePlane, Pose};
-use omnitrack::solver::{
+use omnitrack_core::geometry::{Correspondence, EdgePlane, Pose};
+use omnitrack_solver::{
     covariance, line_residuals, med_r_and_t, med_r_and_t_landmarks, point_residuals, r_and_t, r_and_t_mixed, r_then_t,
     LineError, PointObservation, SolveError, SolverOptions,
 };
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
-
-mod common;
 
 // ---------------------------------------------------------------------------------------------
 // Synthetic data
@@ -22,7 +20,7 @@ fn pinhole() -> Vec<Pose> {
 
 /// … or the six sensors of the Ladybug2-like rig (centres a few cm apart).
 fn rig() -> Vec<Pose> {
-    let rig = common::shipped_rig();
+    let rig = omnitrack_testkit::shipped_rig();
     assert_eq!(rig.sensors.len(), 6);
     rig.sensors.iter().map(|s| s.t_rig_sensor).collect()
 }
@@ -219,7 +217,7 @@ fn options(error: LineError) -> SolverOptions {
 // ---------------------------------------------------------------------------------------------
 // Exact recovery
 
-fn assert_exact(name: &str, result: Result<omnitrack::solver::Solution, SolveError>, truth: &Pose) {
+fn assert_exact(name: &str, result: Result<omnitrack_solver::Solution, SolveError>, truth: &Pose) {
     let sol = result.unwrap_or_else(|e| panic!("{name}: {e}"));
     let (r, t) = errors(&sol.pose, truth);
     assert!(
@@ -621,8 +619,8 @@ fn bad_input_is_refused_without_panics() {
 }
 
 // ---------------------------------------------------------------------------------------------
-// Timing (not a test of speed: run by hand with `cargo test --release --test solver_kh -- --ignored
-// --nocapture`)
+// Timing (not a test of speed: run by hand with
+// `cargo test --release -p omnitrack-solver --test solver -- --ignored --nocapture kh::timing`)
 
 #[test]
 #[ignore]

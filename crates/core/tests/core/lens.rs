@@ -1,7 +1,7 @@
 //! Lens geometry: round trips at random pixels and rays, Jacobians against finite differences.
 
 use nalgebra::{Point2, Vector3};
-use omnitrack::geometry::{Equirectangular, Kb4, Lens, Pinhole, Radtan};
+use omnitrack_core::geometry::{Equirectangular, Kb4, Lens, Pinhole, Radtan};
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 

@@ -2,11 +2,11 @@
 
 use image::codecs::jpeg::JpegEncoder;
 use image::ExtendedColorType;
-use omnitrack::capture::convert::{
+use omnitrack_core::frame::ImageFault;
+use omnitrack_io::capture::convert::{
     bayer_to_rgb, bgr_to_rgb, grey_to_rgb, jpeg_to_rgb, rgb_to_rgb, yuv422_to_rgb, BayerPattern, ConvertError,
     YuvOrder, YuvRange,
 };
-use omnitrack::frame::ImageFault;
 
 fn out(w: u32, h: u32) -> Vec<u8> {
     vec![0u8; (w * h * 3) as usize]

@@ -3,22 +3,15 @@
 //! anytime consensus sampler (accuracy under outliers, stop reasons, zero allocations, capacity).
 
 use nalgebra::{Isometry3, Point3, Translation3, Unit, UnitQuaternion, Vector3};
-use omnitrack::geometry::{Correspondence, EdgePlane, Pose};
-use omnitrack::solver::{
+use omnitrack_core::geometry::{Correspondence, EdgePlane, Pose};
+use omnitrack_core::Rig;
+use omnitrack_solver::{
     minimise_xi, minimise_xi_upright, sample_count, xi_solve, ConsensusError, ConsensusSampler, SampleScore,
     SamplingBudget, SimplexOptions, SolveError, SolverOptions, StopReason,
 };
-use omnitrack::Rig;
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 use std::time::Duration;
-
-// ---------------------------------------------------------------- allocation counting
-
-mod common;
-
-#[global_allocator]
-static ALLOCATOR: common::Counting = common::Counting;
 
 // ---------------------------------------------------------------- synthetic observations
 
@@ -30,7 +23,7 @@ fn truth() -> Pose {
 }
 
 fn rig() -> Rig {
-    common::shipped_rig()
+    omnitrack_testkit::shipped_rig()
 }
 
 /// A point 3–10 m in front of a camera looking along +z of its own frame, within ±0.6 rad-ish.
@@ -426,13 +419,14 @@ fn consensus_run_allocates_nothing_after_construction() {
     let mut fit = simplex_fit();
     let b = budget(30, Duration::from_secs(600));
     for _ in 0..2 {
-        let (out, allocations) = common::allocations_in(|| sampler.run(&c, &truth(), &b, &mut rng, &mut fit));
+        let (out, allocations) =
+            omnitrack_testkit::allocations_in(|| sampler.run(&c, &truth(), &b, &mut rng, &mut fit));
         let out = out.unwrap();
         assert_eq!(out.samples, 30);
         assert_eq!(allocations, 0, "run allocated {allocations} times");
     }
     // The counter does count (the test could fail): a Vec allocates.
-    let (v, allocations) = common::allocations_in(|| vec![1u8; 16]);
+    let (v, allocations) = omnitrack_testkit::allocations_in(|| vec![1u8; 16]);
     assert_eq!(v.len(), 16);
     assert_eq!(allocations, 1);
 }

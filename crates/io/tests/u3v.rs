@@ -2,14 +2,12 @@
 //! trailer layouts of the standard: good streams in chunks of every size, and truncated, corrupt,
 //! mismatched and garbage-ridden ones.
 
-use omnitrack::capture::u3v::{PixelFormat, RejectReason, U3vEvent, U3vStream, LEADER_MAGIC, TRAILER_MAGIC};
+use omnitrack_io::capture::u3v::{PixelFormat, RejectReason, U3vEvent, U3vStream, LEADER_MAGIC, TRAILER_MAGIC};
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 
-mod common;
-
 #[global_allocator]
-static ALLOCATOR: common::Counting = common::Counting;
+static ALLOCATOR: omnitrack_testkit::Counting = omnitrack_testkit::Counting;
 
 const W: u32 = 8;
 const H: u32 = 6;
@@ -470,9 +468,9 @@ fn parsing_and_converting_allocate_nothing() {
     garbage.extend_from_slice(&bytes);
     let mut parser = U3vStream::new(W, H);
     let mut rgb = vec![0u8; (W * H * 3) as usize];
-    common::assert_counter_works();
+    omnitrack_testkit::assert_counter_works();
     let mut frames = 0;
-    let ((), allocated) = common::allocations_in(|| {
+    let ((), allocated) = omnitrack_testkit::allocations_in(|| {
         for round in 0..50 {
             // Chunks of a few sizes, without a random generator (nothing else runs while counting).
             let size = [1usize, 13, 512, 4096][round % 4];

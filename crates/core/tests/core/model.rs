@@ -1,7 +1,7 @@
 //! Model loading and segment extraction on small scenes with known answers, and bad input.
 
 use nalgebra::Point3;
-use omnitrack::model::{Model, Segment};
+use omnitrack_core::model::{Model, Segment};
 
 fn load(obj: &str) -> Model {
     Model::from_obj_str(obj, "test.obj").unwrap_or_else(|e| panic!("{e}"))

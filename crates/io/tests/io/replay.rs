@@ -4,18 +4,13 @@
 //! real-time pacing keeps the recorded spacing; and the steady state's allocations are counted.
 
 use image::{GrayAlphaImage, GrayImage, ImageBuffer, Rgb, RgbImage, RgbaImage};
-use omnitrack::capture::{FrameSource, Pacing, ReplaySource, SourceError};
-use omnitrack::frame::{FrameSet, ImageFault};
-use omnitrack::rig::Rig;
+use omnitrack_core::frame::{FrameSet, ImageFault};
+use omnitrack_core::rig::Rig;
+use omnitrack_io::capture::{FrameSource, Pacing, ReplaySource, SourceError};
 use std::fmt::Write as _;
 use std::path::Path;
 use std::time::{Duration, Instant};
 use tempfile::TempDir;
-
-mod common;
-
-#[global_allocator]
-static ALLOCATOR: common::Counting = common::Counting;
 
 // ---------------------------------------------------------------------------------------------
 // Recordings.
@@ -188,8 +183,8 @@ fn delivers_every_frame_in_order_with_timestamps_and_pixels() {
 
 #[test]
 fn six_sensor_ladybug_rig_replays_through_a_trait_object() {
-    let rig_text = std::fs::read_to_string(common::SHIPPED_RIG).unwrap();
-    let rig = common::shipped_rig();
+    let rig_text = std::fs::read_to_string(omnitrack_testkit::SHIPPED_RIG).unwrap();
+    let rig = omnitrack_testkit::shipped_rig();
     let sizes: Vec<(u32, u32)> = rig.sensors.iter().map(|s| (s.width, s.height)).collect();
     let dir = recording_with_rig(&rig_text, &sizes, 2);
 
@@ -338,7 +333,7 @@ fn real_time_pacing_keeps_the_recorded_spacing() {
 /// nothing overflows, and the frame is not taken (the next call delivers it).
 #[test]
 fn a_stop_ends_the_wait_for_a_distant_frame() {
-    use omnitrack::capture::STOP_SLICE;
+    use omnitrack_io::capture::STOP_SLICE;
     let dir = recording(&SMALL, 2);
     for far_ns in [T0_NS + 40_000_000_000, u64::MAX] {
         let rows: Vec<String> = (0..2u64)
@@ -644,7 +639,8 @@ fn a_long_index_is_held_per_frame_not_per_row() {
     write_index_bytes(dir.path(), &rows);
     drop(rows);
 
-    let (source, peak, kept) = common::heap_in(|| ReplaySource::open(dir.path(), Pacing::AsFastAsPossible).unwrap());
+    let (source, peak, kept) =
+        omnitrack_testkit::heap_in(|| ReplaySource::open(dir.path(), Pacing::AsFastAsPossible).unwrap());
     let mut source = source;
     eprintln!("opening a {}-row index: peak heap {peak} B, kept {kept} B", FRAMES * 6);
     assert_eq!(source.frame_count(), FRAMES as usize);
@@ -733,8 +729,8 @@ fn missing_or_malformed_files_are_one_line_errors_naming_the_file() {
 /// of sensors, so that a regression (a per-frame `Vec`, a path built per frame) shows up here.
 #[test]
 fn steady_state_allocations_per_frame_are_constant_and_only_the_decoders() {
-    let rig_text = std::fs::read_to_string(common::SHIPPED_RIG).unwrap();
-    let rig = common::shipped_rig();
+    let rig_text = std::fs::read_to_string(omnitrack_testkit::SHIPPED_RIG).unwrap();
+    let rig = omnitrack_testkit::shipped_rig();
     let sizes: Vec<(u32, u32)> = rig.sensors.iter().map(|s| (s.width, s.height)).collect();
     let dir = recording_with_rig(&rig_text, &sizes, 6);
 
@@ -744,7 +740,7 @@ fn steady_state_allocations_per_frame_are_constant_and_only_the_decoders() {
 
     let mut counts = Vec::new();
     loop {
-        let (more, allocations) = common::allocations_in(|| source.next_frame(&mut frame).unwrap());
+        let (more, allocations) = omnitrack_testkit::allocations_in(|| source.next_frame(&mut frame).unwrap());
         if !more {
             assert_eq!(allocations, 0, "end of stream allocates nothing");
             break;

@@ -5,15 +5,13 @@
 //! heap allocations per frame after warm-up (counting allocator).
 
 use nalgebra::{Point2, Vector3};
-use omnitrack::config::EdgeConfig;
-use omnitrack::edges::{edges_csv, Edge, EdgeDetector, EdgeParams, EDGES_CSV_HEADER};
-use omnitrack::frame::{FrameSet, SensorImage};
-use omnitrack::Rig;
+use omnitrack_config::EdgeConfig;
+use omnitrack_core::frame::{FrameSet, SensorImage};
+use omnitrack_core::Rig;
+use omnitrack_edges::{edges_csv, Edge, EdgeDetector, EdgeParams, EDGES_CSV_HEADER};
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::{Mutex, MutexGuard};
-
-mod common;
 
 /// Counts allocations while `COUNTING` is on, on every thread but the test harness's.
 struct Counting;
@@ -28,7 +26,7 @@ thread_local! {
 
 unsafe impl GlobalAlloc for Counting {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        if COUNTING.load(Ordering::Relaxed) && !common::on_harness_thread() {
+        if COUNTING.load(Ordering::Relaxed) && !omnitrack_testkit::on_harness_thread() {
             ALLOCS.fetch_add(1, Ordering::Relaxed);
             LAST_SIZE.store(layout.size(), Ordering::Relaxed);
             if !COUNTER_THREAD.with(|c| c.get()) {
@@ -41,7 +39,7 @@ unsafe impl GlobalAlloc for Counting {
         unsafe { System.dealloc(ptr, layout) }
     }
     unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        if COUNTING.load(Ordering::Relaxed) && !common::on_harness_thread() {
+        if COUNTING.load(Ordering::Relaxed) && !omnitrack_testkit::on_harness_thread() {
             ALLOCS.fetch_add(1, Ordering::Relaxed);
         }
         unsafe { System.realloc(ptr, layout, new_size) }
@@ -59,7 +57,7 @@ fn serial() -> MutexGuard<'static, ()> {
 }
 
 fn rig() -> Rig {
-    common::shipped_rig()
+    omnitrack_testkit::shipped_rig()
 }
 
 /// Renders sensor `k` of the rig: `colour(ray)` for the sensor-frame unit ray of each pixel,
@@ -572,7 +570,7 @@ fn zero_allocations_per_frame_after_warm_up() {
     // One sensor missing from a frame: still no allocation.
     frames[1]
         .sensor_mut(3)
-        .set_invalid(omnitrack::frame::ImageFault::Dropped, 0);
+        .set_invalid(omnitrack_core::frame::ImageFault::Dropped, 0);
     // The two-line test's cuts and refused merges take the same pre-sized buffers.
     for (threads, two_line_excess) in [(2, 0.0), (1, 0.0), (2, 0.3)] {
         let params = EdgeParams {

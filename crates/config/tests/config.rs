@@ -1,14 +1,14 @@
 //! tracker.toml: the shipped file carries exactly the papers' defaults, and mistakes are refused
 //! with the key named.
 
-use omnitrack::config::{SolverMethod, TrackerConfig};
+use omnitrack_config::{SolverMethod, TrackerConfig};
 use std::path::Path;
 
 #[test]
 fn shipped_tracker_toml_is_the_defaults_and_holds_the_papers_values() {
     let shipped = TrackerConfig::load(Path::new(concat!(
         env!("CARGO_MANIFEST_DIR"),
-        "/firmware_config/tracker.toml"
+        "/../../firmware_config/tracker.toml"
     )))
     .unwrap();
     let defaults = TrackerConfig::default();
@@ -30,7 +30,11 @@ fn shipped_tracker_toml_is_the_defaults_and_holds_the_papers_values() {
 
 #[test]
 fn every_key_in_the_shipped_file_cites_its_source() {
-    let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/firmware_config/tracker.toml")).unwrap();
+    let text = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../firmware_config/tracker.toml"
+    ))
+    .unwrap();
     for line in text
         .lines()
         .filter(|l| l.contains('=') && !l.trim_start().starts_with('#'))
@@ -130,12 +134,12 @@ fn solver_options_of_the_shipped_config_are_the_solver_defaults_but_for_the_meas
     // The solvers default to Kumar–Hanson's E1 (eq. 10); the tracker ships E2 (eq. 11), which
     // the tracker benchmark measured best.
     let shipped = TrackerConfig::default().solver_options();
-    assert_eq!(shipped.error, omnitrack::solver::LineError::E2);
+    assert_eq!(shipped.error, omnitrack_solver::LineError::E2);
     assert_eq!(
-        omnitrack::solver::SolverOptions {
-            error: omnitrack::solver::LineError::E1,
+        omnitrack_solver::SolverOptions {
+            error: omnitrack_solver::LineError::E1,
             ..shipped
         },
-        omnitrack::solver::SolverOptions::default()
+        omnitrack_solver::SolverOptions::default()
     );
 }
