@@ -37,6 +37,10 @@
 //! case, "every 10th frame replayed alone"), so the trial measures the search and not the
 //! maintenance of a moving narrow view.
 //!
+//! `--hold N` measures maintenance alone instead (issue 47, item 4; module `hold`): N stretches
+//! of 90 frames spread over each recording, each started at the true pose, every frame judged:
+//! the share within 10 cm and 1° of the truth, more than 30 cm or 3° off, and without a pose.
+//!
 //! `--buildings A-B` tracks walks through random buildings nobody here drew instead
 //! (`desk::scenario::random`, seeds A to B: L, U, courtyard and rectangular outlines, single-face
 //! or thick walls, random winding, triangulated faces, two storeys with a stair hall; furniture
@@ -61,12 +65,14 @@
 mod buildings;
 mod detailed;
 mod figure15;
+mod hold;
 mod init_trials;
 mod run;
 
 use buildings::buildings;
 use detailed::detailed;
 use figure15::figure15;
+use hold::{hold, HoldSummary};
 use init_trials::{init_trials, WINDOW_AND_AFTER};
 use run::{hint_at_start, run_once};
 
@@ -103,6 +109,7 @@ struct Args {
     rig: Option<PathBuf>,
     figure15: bool,
     init_trials: usize,
+    hold: usize,
     tracker_seeds: Vec<u64>,
     appearance: Option<String>,
     from_truth: bool,
@@ -128,6 +135,7 @@ fn args() -> Args {
         rig: None,
         figure15: true,
         init_trials: 0,
+        hold: 0,
         tracker_seeds: vec![1],
         appearance: None,
         from_truth: false,
@@ -186,6 +194,7 @@ fn args() -> Args {
             "--pin" => a.pins = Some(it.next().expect("--pin L,thin,cart")),
             "--seconds" => a.seconds = it.next().and_then(|s| s.parse().ok()).expect("--seconds S"),
             "--starts" => a.starts = it.next().and_then(|s| s.parse().ok()).expect("--starts N"),
+            "--hold" => a.hold = it.next().and_then(|s| s.parse().ok()).expect("--hold N"),
             "--init-trials" => a.init_trials = it.next().and_then(|s| s.parse().ok()).expect("--init-trials N"),
             _ => {}
         }
@@ -245,6 +254,7 @@ fn main() {
     if a.figure15 {
         figure15(&rig);
     }
+    let mut held = HoldSummary::default();
     for name in &a.scenarios {
         let scenario = Scenario::get(*name);
         let frames = a.frames.unwrap_or(if a.full { scenario.paper_frames } else { 300 });
@@ -291,6 +301,25 @@ fn main() {
         eprintln!("{name}: {origin}");
         let mut source = ReplaySource::open(&dir, Pacing::AsFastAsPossible).unwrap();
         let truth: Vec<Stamped> = source.ground_truth().unwrap().to_vec();
+        if a.hold > 0 {
+            let h = hold(
+                name.as_str(),
+                &rig,
+                &model,
+                &table,
+                &cfg,
+                &mut source,
+                &truth,
+                a.hold,
+                a.verbose,
+            );
+            held.frames += h.frames;
+            held.right += h.right;
+            held.wrong += h.wrong;
+            held.none += h.none;
+            held.losses += h.losses;
+            continue;
+        }
         if a.init_trials > 0 {
             init_trials(
                 name.as_str(),
@@ -347,5 +376,16 @@ fn main() {
                 a.tracker_seeds.len()
             );
         }
+    }
+    if a.hold > 0 {
+        let pct = |n: usize| 100.0 * n as f64 / held.frames.max(1) as f64;
+        println!(
+            "all: {:.1} % of {} frames within 10 cm / 1°, {:.1} % more than 30 cm or 3° off, {:.1} % without a pose, {} losses of lock",
+            pct(held.right),
+            held.frames,
+            pct(held.wrong),
+            pct(held.none),
+            held.losses
+        );
     }
 }

@@ -160,6 +160,15 @@ pub struct MotionConfig {
     /// refuse poses outside it, below every floor or outside the building. Ignored for a model
     /// without floors and when `upright`.
     pub height_above_floor_m: [f64; 2],
+    /// Maintenance predicts, fuses and publishes through the motion filter
+    /// (`omnitrack_tracker::motion_filter`): a frame whose few lines fix the pose only in some
+    /// directions is fused where it is informative instead of refused whole.
+    pub filter: bool,
+    /// The filter's linear acceleration noise: σ of the change of velocity over one second,
+    /// per axis (m/s² per √s).
+    pub accel_noise_m_s2: f64,
+    /// The same for turning (deg/s² per √s).
+    pub angular_accel_noise_deg_s2: f64,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -313,6 +322,9 @@ impl Default for MotionConfig {
             max_speed_m_s: 2.0,
             max_tilt_deg: 60.0,               // ours: a worn rig leans less than a look at the floor
             height_above_floor_m: [1.0, 2.0], // ours: worn 1.2–1.9 m, hand-held or on a cart 1.0–1.6 m
+            filter: true,
+            accel_noise_m_s2: 2.0,             // ours: a walk starting or stopping within a second
+            angular_accel_noise_deg_s2: 180.0, // ours: a head turning to 180°/s within a second
         } // Koch–Teller §5.4
     }
 }

@@ -247,6 +247,11 @@ impl TrackerConfig {
         positive("motion.upright_height_m", self.motion.upright_height_m)?;
         positive("motion.max_turn_rate_deg_s", self.motion.max_turn_rate_deg_s)?;
         positive("motion.max_speed_m_s", self.motion.max_speed_m_s)?;
+        positive("motion.accel_noise_m_s2", self.motion.accel_noise_m_s2)?;
+        positive(
+            "motion.angular_accel_noise_deg_s2",
+            self.motion.angular_accel_noise_deg_s2,
+        )?;
         let tilt = self.motion.max_tilt_deg;
         if !(tilt > 0.0 && tilt <= 180.0) {
             return Err(format!("key 'motion.max_tilt_deg': must be in (0, 180], found {tilt}"));

@@ -72,6 +72,7 @@ pub mod edge_index;
 mod floor;
 pub mod init;
 pub mod matching;
+pub mod motion_filter;
 mod report;
 mod tracker;
 mod vanishing;

@@ -85,6 +85,9 @@ pub struct TrackerStats {
     /// Frames whose solve, far from the prediction, a second opinion replaced (the polished
     /// prediction, or the solve's rotation polished at the predicted position).
     pub second_opinions: u64,
+    /// Frames with fewer accepted inliers than `maintenance.min_inliers` whose pose the motion
+    /// filter fused where their lines fix it (module `motion_filter`), instead of refusing.
+    pub filtered_few_lines: u64,
     /// Searches the wall clock stopped before their work budget did ([`InitReport::backstop`]):
     /// their answers depend on the machine's load.
     pub search_backstops: u64,

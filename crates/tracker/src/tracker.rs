@@ -14,6 +14,7 @@ use crate::background::{Backlog, SearchJob, SearchLink};
 use crate::correspondence::{CorrespondenceState, CorrespondenceTable, HeldEdge, Track};
 use crate::init::{Candidate, InitOptions, Initialiser, SearchVolume};
 use crate::matching::{best_edge, Gate, Predicted};
+use crate::motion_filter::{MotionFilter, MotionNoise};
 use crate::report::{FrameResult, StateCounts, TrackerState, TrackerStats};
 use crate::visibility::VisibilityTable;
 use nalgebra::{Point3, UnitQuaternion};
@@ -117,6 +118,9 @@ pub struct Tracker<'m> {
     pose: Pose,
     /// Previous tracked pose and its time, for the constant-velocity prior.
     previous: Option<(Pose, u64)>,
+    /// The motion filter (`motion.filter`): the prediction maintenance starts from and the
+    /// pose it publishes.
+    filter: MotionFilter,
     last_time: u64,
     last_good: Option<Pose>,
     /// When `last_good` was seen (ns).
@@ -215,6 +219,12 @@ impl<'m> Tracker<'m> {
             hint,
             pose: Pose::identity(),
             previous: None,
+            filter: MotionFilter::new(MotionNoise {
+                accel_m_s2: cfg.motion.accel_noise_m_s2,
+                angular_accel_rad_s2: cfg.motion.angular_accel_noise_deg_s2.to_radians(),
+                start_speed_m_s: cfg.motion.max_speed_m_s,
+                start_turn_rad_s: cfg.motion.max_turn_rate_deg_s.to_radians(),
+            }),
             last_time: 0,
             last_good: None,
             last_good_time: 0,
@@ -517,13 +527,22 @@ impl<'m> Tracker<'m> {
         self.collect_accepted_set(edges, pose, true);
         result.inliers = self.set.len() as u32;
         self.last_inliers = result.inliers;
-        result.covariance = omnitrack_solver::covariance(&self.set, pose, &self.solver);
+        result.covariance = self.measured_covariance(pose);
         result.xi_rad2 = omnitrack_core::geometry::xi(&self.set, pose);
         result.explained = explained as f32;
         result.pose = Some(*pose);
         result.states = self.state_counts();
         self.previous = Some((*pose, timestamp_ns));
+        self.filter.start(pose, &result.covariance, timestamp_ns);
         result
+    }
+
+    /// Kumar–Hanson §5's covariance of `pose` fitted to `set`, at the noise the lines show
+    /// where that exceeds the configured σ (a model drawn a few centimetres off, blur): the
+    /// filter weighs a frame by it, and a covariance at the configured σ alone would make a
+    /// frame of a few poorly placed lines as certain as the motion so far.
+    pub(super) fn measured_covariance(&self, pose: &Pose) -> nalgebra::Matrix6<f64> {
+        covariance_at_seen_noise(&self.set, pose, &self.solver)
     }
 
     fn state_counts(&self) -> StateCounts {
@@ -556,6 +575,19 @@ impl<'m> Tracker<'m> {
                 self.set_track.push(i);
             }
         }
+    }
+}
+
+/// Kumar–Hanson §5's covariance of `pose` fitted to `set`, at the noise the lines show where
+/// that exceeds the configured σ (see [`Tracker::measured_covariance`]).
+fn covariance_at_seen_noise(set: &[Correspondence], pose: &Pose, solver: &SolverOptions) -> nalgebra::Matrix6<f64> {
+    let cov = omnitrack_solver::covariance(set, pose, solver);
+    let sigma2 = solver.edge_sigma_rad * solver.edge_sigma_rad;
+    let seen = omnitrack_core::geometry::xi(set, pose);
+    if sigma2 > 0.0 && seen > sigma2 {
+        cov * (seen / sigma2)
+    } else {
+        cov
     }
 }
 

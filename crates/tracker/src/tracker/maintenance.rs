@@ -40,14 +40,13 @@ use super::Tracker;
 use crate::correspondence::{CorrespondenceState, HeldEdge};
 use crate::init::Candidate;
 use crate::matching::{best_edge, Gate, Predicted};
+use crate::motion_filter::{Fused, GATE_CHI2_6};
 use crate::report::{FrameResult, TrackerEvent, TrackerState};
-use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion};
+use nalgebra::{Isometry3, Matrix6, Point3, Translation3, UnitQuaternion};
 use omnitrack_config::SolverMethod;
 use omnitrack_core::geometry::{xi, Correspondence, Pose};
 use omnitrack_edges::Edge;
-use omnitrack_solver::{
-    covariance, minimise_xi, r_and_t_refine, refine_upright, sample_count, SamplingBudget, SimplexOptions,
-};
+use omnitrack_solver::{minimise_xi, r_and_t_refine, refine_upright, sample_count, SamplingBudget, SimplexOptions};
 use std::time::{Duration, Instant};
 
 /// A relocalised pose replaces a suspect maintenance pose only when it explains this many times
@@ -61,6 +60,15 @@ const SMALLEST_SAMPLE: usize = 4;
 /// beyond what smooth motion leaves between them, is checked against the polished prediction.
 const SECOND_OPINION_M: f64 = 0.05;
 const SECOND_OPINION_RAD: f64 = 0.035;
+
+/// The largest standard deviation of a pose covariance's position block (m).
+fn largest_position_sigma(cov: &Matrix6<f64>) -> f64 {
+    cov.fixed_view::<3, 3>(0, 0)
+        .symmetric_eigenvalues()
+        .max()
+        .max(0.0)
+        .sqrt()
+}
 
 /// The pose and S_t the next frame will be predicted from.
 fn constant_velocity(previous: &Pose, previous_t: u64, current: &Pose, current_t: u64, next_t: u64) -> Pose {
@@ -242,7 +250,9 @@ impl Tracker<'_> {
         let min_len = self.cfg.edges.min_edge_length_deg.to_radians();
 
         // 1. Prediction.
+        let filtering = self.cfg.motion.filter && self.filter.started();
         let predicted = match (self.cfg.maintenance.constant_velocity_prior, self.previous) {
+            _ if filtering => self.filter.predict(timestamp_ns).0,
             (true, Some((prev, prev_t))) if prev_t < self.last_time => {
                 constant_velocity(&prev, prev_t, &self.pose, self.last_time, timestamp_ns)
             }
@@ -382,14 +392,31 @@ impl Tracker<'_> {
             }
         }
         let max_jump_rad = mcfg.max_jump_deg.to_radians();
-        let mut good = match &pose {
-            Some(p) => {
-                self.set.len() >= mcfg.min_inliers as usize
-                    && (p.translation.vector - prior.translation.vector).norm() <= mcfg.max_jump_m
-                    && p.rotation.angle_to(&prior.rotation) <= max_jump_rad
-            }
-            None => false,
+        let within_jump = |p: &Pose| {
+            (p.translation.vector - prior.translation.vector).norm() <= mcfg.max_jump_m
+                && p.rotation.angle_to(&prior.rotation) <= max_jump_rad
         };
+        let mut good = pose.is_some_and(|p| self.set.len() >= mcfg.min_inliers as usize && within_jump(&p));
+        // Fewer lines than `min_inliers` fix the pose in some directions and hardly in others;
+        // with the motion filter such a frame is fused where its lines are informative
+        // (their covariance says where), provided it continues the motion (inside the filter's
+        // gate) and the prediction is still sharp enough to tell a slide from the motion: its
+        // position σ within a third of the jump limit.
+        if !good && filtering {
+            if let Some(p) = pose.filter(|p| self.set.len() >= SMALLEST_SAMPLE && within_jump(p)) {
+                let (_, prior_cov) = self.filter.predict(timestamp_ns);
+                let sharp = largest_position_sigma(&prior_cov) <= mcfg.max_jump_m / 3.0;
+                let cov = self.measured_covariance(&p);
+                let continues = self
+                    .filter
+                    .distance2(timestamp_ns, &p, &cov)
+                    .is_some_and(|d2| d2 <= GATE_CHI2_6);
+                if sharp && continues {
+                    good = true;
+                    self.stats.filtered_few_lines += 1;
+                }
+            }
+        }
         // A pose that explains far less of VIS(T) than the frames before it may have slid off
         // the building (a doorway turn that took most correspondences out of view) while moving
         // less than the jump limits, or the view may just be poorer (people, clutter): a local
@@ -449,14 +476,21 @@ impl Tracker<'_> {
         let lost_after_frames = self.cfg.maintenance.lost_after_frames;
         result.states = self.state_counts();
         if good {
-            let p = pose.expect("a good frame has a pose");
+            let measured = pose.expect("a good frame has a pose");
             self.bad_frames = 0;
             self.note_explained(result.explained as f64);
-            result.pose = Some(p);
             result.inliers = self.set.len() as u32;
             self.last_inliers = result.inliers;
-            result.covariance = covariance(&self.set, &p, &self.solver);
-            result.xi_rad2 = xi(&self.set, &p);
+            result.covariance = self.measured_covariance(&measured);
+            result.xi_rad2 = xi(&self.set, &measured);
+            let p = if self.cfg.motion.filter {
+                let (p, cov) = self.fuse(&measured, &result.covariance, timestamp_ns);
+                result.covariance = cov;
+                p
+            } else {
+                measured
+            };
+            result.pose = Some(p);
             self.previous = Some((self.pose, self.last_time));
             self.pose = p;
             self.last_good = Some(p);
@@ -470,6 +504,7 @@ impl Tracker<'_> {
             // Coast on the prediction so that the gate follows the motion.
             self.previous = Some((self.pose, self.last_time));
             self.pose = predicted;
+            self.filter.coast(timestamp_ns);
             if self.bad_frames >= lost_after_frames {
                 self.state = TrackerState::Lost;
                 self.stats.losses += 1;
@@ -481,5 +516,24 @@ impl Tracker<'_> {
             }
         }
         result
+    }
+
+    /// A good frame's `measured` pose (covariance `cov`) through the motion filter: the fused
+    /// pose and its covariance. A frame outside the filter's gate that maintenance
+    /// nevertheless trusts (enough lines, within the jump limits: a stop or a turn the motion
+    /// model did not expect) restarts the filter there, moving as it moved since the last frame.
+    fn fuse(&mut self, measured: &Pose, cov: &Matrix6<f64>, timestamp_ns: u64) -> (Pose, Matrix6<f64>) {
+        if !self.filter.started() {
+            self.filter.start(measured, cov, timestamp_ns);
+            return (*measured, *cov);
+        }
+        match self.filter.update(timestamp_ns, measured, cov) {
+            Fused::Yes(_) => (*self.filter.pose(), self.filter.pose_covariance()),
+            Fused::Outside(_) | Fused::NoInformation => {
+                self.filter.start(measured, cov, timestamp_ns);
+                self.filter.continue_from(&self.pose, self.last_time);
+                (*measured, *cov)
+            }
+        }
     }
 }

@@ -229,8 +229,9 @@ impl Tracker<'_> {
             .filter(|(_, t)| *t < timestamp_ns);
         let mut r = self.commit(&best.pose, job.edges(), timestamp_ns);
         self.job = Some(job);
-        if since.is_some() {
+        if let Some((p, t)) = since {
             self.previous = since;
+            self.filter.continue_from(&p, t);
         }
         r.event = Some(TrackerEvent::Relocalised);
         r.match_time += reloc.tail.result.match_time;

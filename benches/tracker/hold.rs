@@ -1,0 +1,149 @@
+//! The `--hold N` mode (the bench's doc): maintenance alone over stretches of a recording, each
+//! started at the true pose. In: a recording, its ground truth, the tracker's config. Out: one
+//! line per scenario, the share of frames whose pose (on time or late) is within 10 cm and 1° of
+//! the truth, those more than 30 cm or 3° off, those without a pose, and the losses of lock.
+//!
+//! Issue 47's measure of a narrow or moving view: "≥ 90 % of frames after the first pose within
+//! 10 cm / 1°". Started at the truth, the search is out of it: what is left is how maintenance
+//! holds a view that turns past its lines (and what a loss's searches then make of it).
+
+use omnitrack::capture::{FrameSource, ReplaySource};
+use omnitrack::config::TrackerConfig;
+use omnitrack::edges::EdgeDetector;
+use omnitrack::frame::FrameSet;
+use omnitrack::tracker::{FrameResult, Tracker, TrackerEvent};
+use omnitrack::trajectory::Stamped;
+use omnitrack::{Model, Rig};
+
+/// Frames per stretch: 3 s at the scenarios' 30 Hz.
+pub(crate) const HOLD_FRAMES: usize = 90;
+
+/// What `hold` counted over every stretch of one recording.
+#[derive(Default, Clone, Copy)]
+pub(crate) struct HoldSummary {
+    pub(crate) frames: usize,
+    pub(crate) right: usize,
+    pub(crate) wrong: usize,
+    pub(crate) none: usize,
+    pub(crate) losses: usize,
+}
+
+/// The `--hold N` mode (module doc): `stretches` starts spread over the recording.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn hold(
+    name: &str,
+    rig: &Rig,
+    model: &Model,
+    table: &omnitrack::visibility::VisibilityTable,
+    cfg: &TrackerConfig,
+    source: &mut ReplaySource,
+    truth: &[Stamped],
+    stretches: usize,
+    verbose: bool,
+) -> HoldSummary {
+    let frames = source.frame_count();
+    let spacing = (frames.saturating_sub(HOLD_FRAMES) / stretches.max(1)).max(1);
+    let starts: Vec<usize> = (0..stretches)
+        .map(|k| k * spacing)
+        .filter(|&s| s + HOLD_FRAMES <= frames)
+        .collect();
+    let mut frame = FrameSet::for_rig(rig);
+    let mut detector = EdgeDetector::new(rig, &cfg.edges);
+    let mut sum = HoldSummary::default();
+    let truth_at = |ts: u64| {
+        truth
+            .iter()
+            .find(|s| s.timestamp_ns.abs_diff(ts) < 1_000_000)
+            .map(|s| s.pose)
+    };
+    for (k, &start) in starts.iter().enumerate() {
+        source.seek(start);
+        let mut tracker = Tracker::new(rig, model, table, cfg, None, 1 + k as u64);
+        // Each frame's pose by its time; late answers fill in the frames they belong to.
+        let mut poses: Vec<(u64, Option<omnitrack::geometry::Pose>)> = Vec::with_capacity(HOLD_FRAMES);
+        let mut losses = 0;
+        for i in 0..HOLD_FRAMES {
+            if !source.next_frame(&mut frame).unwrap() {
+                break;
+            }
+            let ts = frame.timestamp_ns().unwrap_or(0);
+            let edges = detector.detect(&frame);
+            let r: FrameResult = if i == 0 {
+                tracker.start_at(&truth[start].pose, edges, ts)
+            } else {
+                tracker.process(edges, ts)
+            };
+            losses += usize::from(matches!(r.event, Some(TrackerEvent::LostLock)));
+            poses.push((ts, r.pose));
+            for (lt, late) in tracker.late() {
+                if let Some(slot) = poses.iter_mut().find(|(t, _)| t == lt) {
+                    slot.1 = slot.1.or(late.pose);
+                }
+            }
+            if verbose {
+                let err = r.pose.zip(truth_at(ts)).map(|(p, g)| {
+                    format!(
+                        "{:6.1} cm {:5.2}°",
+                        (p.translation.vector - g.translation.vector).norm() * 100.0,
+                        p.rotation.angle_to(&g.rotation).to_degrees()
+                    )
+                });
+                eprintln!(
+                    "    {name} stretch {k} frame {}: {:?} {} inliers {} explains {:.2} u/p/a {:?}{}",
+                    start + i,
+                    r.state,
+                    err.unwrap_or_else(|| "     --          ".into()),
+                    r.inliers,
+                    r.explained,
+                    r.states,
+                    match r.event {
+                        Some(TrackerEvent::LostLock) => " LOST",
+                        Some(TrackerEvent::Relocalised) => " relocalised",
+                        Some(TrackerEvent::Committed { .. }) => " committed",
+                        _ => "",
+                    }
+                );
+            }
+        }
+        tracker.finish();
+        for (lt, late) in tracker.late() {
+            if let Some(slot) = poses.iter_mut().find(|(t, _)| t == lt) {
+                slot.1 = slot.1.or(late.pose);
+            }
+        }
+        let (mut right, mut wrong, mut none) = (0, 0, 0);
+        for (ts, pose) in &poses {
+            match pose.zip(truth_at(*ts)) {
+                Some((p, g)) => {
+                    let dp = (p.translation.vector - g.translation.vector).norm();
+                    let dr = p.rotation.angle_to(&g.rotation).to_degrees();
+                    right += usize::from(dp <= 0.10 && dr <= 1.0);
+                    wrong += usize::from(dp > 0.30 || dr > 3.0);
+                }
+                None => none += 1,
+            }
+        }
+        if verbose {
+            eprintln!(
+                "  {name} stretch {k} from frame {start}: {right} of {} within 10 cm / 1°, {wrong} wrong, {none} without a pose, {losses} losses",
+                poses.len()
+            );
+        }
+        sum.frames += poses.len();
+        sum.right += right;
+        sum.wrong += wrong;
+        sum.none += none;
+        sum.losses += losses;
+    }
+    let pct = |n: usize| 100.0 * n as f64 / sum.frames.max(1) as f64;
+    println!(
+        "{name}: held from the truth over {} stretches of {HOLD_FRAMES} frames: {:.1} % of {} frames within 10 cm / 1°, {:.1} % more than 30 cm or 3° off, {:.1} % without a pose, {} losses of lock",
+        starts.len(),
+        pct(sum.right),
+        sum.frames,
+        pct(sum.wrong),
+        pct(sum.none),
+        sum.losses
+    );
+    sum
+}
