@@ -837,6 +837,82 @@ fn a_search_volume_without_a_valid_node_says_so_on_the_status() {
     assert_eq!(SearchState::try_from(statuses[0].search), Ok(SearchState::None));
 }
 
+/// A lossless run with `max_frames` reads exactly that many frames: every frame read is
+/// processed, none dropped or left (it read two ahead, counting one "dropped": "10 processed of
+/// 12 captured, 1 dropped", issue 49). A stop leaves what was read unprocessed as `left`, not
+/// dropped, and the counts still add up.
+#[test]
+fn a_lossless_run_reads_exactly_the_frames_it_processes() {
+    let _serial = serial();
+    let f = fixture();
+    let mut opts = options(f, "exact");
+    opts.pose_service = None;
+    opts.status_service = None;
+    opts.run.max_frames = Some(10);
+    let mut sink = Recorder {
+        records: Vec::new(),
+        tum: None,
+        stop_after: None,
+    };
+    let summary = run_pipeline(
+        replay(&f.rec),
+        &f.model,
+        &f.table,
+        &TrackerConfig::default(),
+        &opts,
+        &mut sink,
+    )
+    .unwrap();
+    eprintln!("{summary}");
+    assert_eq!(summary.reason, RunEnd::MaxFrames);
+    assert_eq!(
+        (
+            summary.frames_captured,
+            summary.frames_processed,
+            summary.frames_dropped,
+            summary.frames_left
+        ),
+        (10, 10, 0, 0)
+    );
+    for (k, s) in summary.sensors.iter().enumerate() {
+        assert_eq!((s.delivered, s.lost()), (10, 0), "sensor {k}: {s:?}");
+    }
+    let text = summary.to_string();
+    assert!(
+        text.starts_with("10 frames processed of 10 captured") && text.contains(", 0 dropped;"),
+        "{text}"
+    );
+
+    // Stopped after 5 records: whatever capture had read beyond them is left, never dropped.
+    let opts = options(f, "exact-stop");
+    let mut sink = Recorder {
+        records: Vec::new(),
+        tum: None,
+        stop_after: Some((5, Arc::clone(&opts.stop))),
+    };
+    let summary = run_pipeline(
+        replay(&f.rec),
+        &f.model,
+        &f.table,
+        &TrackerConfig::default(),
+        &opts,
+        &mut sink,
+    )
+    .unwrap();
+    eprintln!("{summary}");
+    assert_eq!(summary.reason, RunEnd::Stopped);
+    assert_eq!(summary.frames_dropped, 0);
+    assert_eq!(
+        summary.frames_captured,
+        summary.frames_processed + summary.frames_left,
+        "{summary}"
+    );
+    for (k, s) in summary.sensors.iter().enumerate() {
+        assert_eq!(s.overwritten, 0, "sensor {k}: {s:?}");
+        assert_eq!(s.delivered + s.left, summary.frames_captured, "sensor {k}: {s:?}");
+    }
+}
+
 /// A pose service that cannot be opened (here: the name is taken by a service of another
 /// message type) stops the run before its first frame, and the summary says why; with
 /// `require_services` off the run goes on without it.

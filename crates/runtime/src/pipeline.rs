@@ -33,11 +33,14 @@
 //! Latest frame wins: the hand-over to the tracker holds one frame; a newer frame replaces a
 //! pending one, which goes back to the pool and is counted as dropped (whole frame, and per
 //! sensor for each valid image in it). With [`PipelineOptions::lossless`] capture waits instead
-//! (offline replays and evaluations).
+//! (offline replays and evaluations): nothing is dropped, and a whole-rig source reads no more
+//! than `max_frames`.
 //!
-//! Every image a source produces is counted exactly once per sensor ([`SensorSummary`]):
-//! delivered to the tracker, overwritten (latest frame wins), a fault of the source, or missed
-//! its sync window. The status sample's per-sensor `frames_dropped` is everything but delivered
+//! Every frame handed into the pool is counted once ([`PipelineSummary`]): processed, dropped
+//! (replaced by a newer one) or left (the run ended while it waited). Every image a source
+//! produces is counted exactly once per sensor ([`SensorSummary`]): delivered to the tracker,
+//! overwritten (latest frame wins), a fault of the source, missed its sync window, or left. The
+//! status sample's per-sensor `frames_dropped` is everything but delivered
 //! ([`SensorSummary::lost`]); its `frame_rate_hz` is the rate of delivered images over the last
 //! status interval (0 for a dead sensor); its stage p50/p99 are over the whole run so far.
 //!
@@ -171,6 +174,9 @@ pub fn run_pipeline(
         PipelineSource::Rig(_) => Vec::new(),
     };
     let (ready_tx, ready_rx) = bounded::<usize>(1);
+    // What is still in the hand-over once every thread has ended: a capture thread may post a
+    // frame after the process thread's last look (it had room again), and that frame was read.
+    let leftover = ready_rx.clone();
     let (records_tx, records_rx) = bounded::<FrameRecord>(SINK_BUFFER);
     pool::warm_channel(&ready_tx, &ready_rx, || 0);
     let no_record = || FrameRecord::late(0, 0, FrameResult::empty(TrackerState::Initialising));
@@ -218,6 +224,9 @@ pub fn run_pipeline(
                 Ok(s) => source_stats = source_stats.or(s),
                 Err(panic) => std::panic::resume_unwind(panic),
             }
+        }
+        while let Ok(h) = leftover.try_recv() {
+            shared.leave(pool, h);
         }
         (outcome, source_stats, sink_error)
     });

@@ -110,7 +110,8 @@ pub(super) struct Handover {
 
 impl Handover {
     /// Hands frame `h` to the tracker: the latest frame wins (or, lossless, waits). False once
-    /// the pipeline stops.
+    /// the pipeline stops (the frame is then counted as left, `Shared::leave`). Every frame
+    /// posted is counted as captured, and ends processed, dropped or left.
     pub(super) fn post(&self, shared: &Shared, pool: &Pool, h: usize) -> bool {
         shared.frames_captured.fetch_add(1, Ordering::Relaxed);
         let mut h = h;
@@ -120,13 +121,13 @@ impl Handover {
                     Ok(()) => return true,
                     Err(SendTimeoutError::Timeout(x)) => {
                         if shared.stopping() {
-                            pool.release(x);
+                            shared.leave(pool, x);
                             return false;
                         }
                         h = x;
                     }
                     Err(SendTimeoutError::Disconnected(x)) => {
-                        pool.release(x);
+                        shared.leave(pool, x);
                         return false;
                     }
                 }
@@ -142,7 +143,7 @@ impl Handover {
                     }
                 }
                 Err(TrySendError::Disconnected(x)) => {
-                    pool.release(x);
+                    shared.leave(pool, x);
                     return false;
                 }
             }

@@ -22,9 +22,15 @@ pub(super) struct Shared<'o> {
     pub(super) sensors: Box<[SensorCounters]>,
     pub(super) frames_captured: AtomicU64,
     pub(super) frames_dropped: AtomicU64,
+    /// Frames read but never processed: the run ended while they waited (`summary`'s
+    /// `frames_left`).
+    pub(super) frames_left: AtomicU64,
     pub(super) capture: Mutex<StageClock>,
     pub(super) source_error: Mutex<Option<SourceError>>,
     pub(super) lossless: bool,
+    /// A lossless run reads no more frames than it will process (`max_frames`): a whole-rig
+    /// source stops there instead of reading ahead frames the run would then leave.
+    pub(super) capture_limit: Option<u64>,
     pub(super) hook: Option<fn(PipelineThread)>,
     /// `[budgets] realtime_priority` (0: off).
     realtime_priority: u8,
@@ -40,9 +46,11 @@ impl<'o> Shared<'o> {
             sensors: (0..sensors).map(|_| SensorCounters::default()).collect(),
             frames_captured: AtomicU64::new(0),
             frames_dropped: AtomicU64::new(0),
+            frames_left: AtomicU64::new(0),
             capture: Mutex::new(StageClock::new(stage_budget(Stage::Capture, budgets))),
             source_error: Mutex::new(None),
             lossless: opts.lossless,
+            capture_limit: opts.run.max_frames.filter(|_| opts.lossless),
             hook: opts.on_thread_start,
             realtime_priority: if opts.lossless { 0 } else { budgets.realtime_priority },
             realtime: Mutex::new(if budgets.realtime_priority == 0 {
@@ -82,6 +90,21 @@ impl Shared<'_> {
         if let Some(hook) = self.hook {
             hook(t);
         }
+    }
+
+    /// A frame read but left unprocessed as the run ends: counted (whole, and per sensor for
+    /// each valid image in it) and its slot back to the pool.
+    pub(super) fn leave(&self, pool: &super::pool::Pool, h: usize) {
+        {
+            let slot = pool.slot(h);
+            for (img, c) in slot.frame.sensors().iter().zip(self.sensors.iter()) {
+                if img.valid {
+                    SensorCounters::add(&c.left, 1);
+                }
+            }
+        }
+        self.frames_left.fetch_add(1, Ordering::Relaxed);
+        pool.release(h);
     }
 
     pub(super) fn record_capture(&self, d: Duration) {
