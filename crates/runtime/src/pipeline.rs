@@ -24,6 +24,9 @@
 //!   The frame goes back to the pool before publishing.
 //! - the **caller's thread** runs the sink, fed by a bounded channel of [`SINK_BUFFER`] records;
 //!   when it is full the tracker waits (the trajectory is never short of a processed frame).
+//!   Between records it looks at the tracker's search every tick, and tells the sink how far a
+//!   search of more than a second has got, about once a second
+//!   ([`FrameSink::search_progress`]): the frame path never does.
 //!
 //! Scheduling (`priority`): where frames come in real time, process and the edge workers run at
 //! `SCHED_FIFO` `[budgets] realtime_priority`, capture and assembly one below, the search thread
@@ -94,13 +97,14 @@ mod summary;
 pub use live::{live_sensors, open_pipeline_source, LiveDevice};
 pub use logging::init_logging;
 pub use omnitrack_io::publish::Stage;
+pub use omnitrack_tracker::SearchSnapshot;
 pub use options::{PipelineOptions, PipelineSource, PipelineThread, SensorCapture};
 #[cfg(unix)]
 pub use priority::current_thread_policy;
 pub use priority::{upstream_priority, Realtime, ThreadPolicy};
 pub use publishing::inside_publish;
 pub use signals::{stop_on_signals, SignalGuard};
-pub use sink::{FrameSink, TrajectoryFileError, TumSink};
+pub use sink::{FrameSink, TrajectoryFileError, TumSink, PROGRESS_AFTER, PROGRESS_EVERY};
 pub use stats::{stage_budget, Histogram, SensorSummary, StageClock, StageSummary};
 pub use summary::{PipelineSummary, RunEnd};
 

@@ -423,6 +423,7 @@ pub(super) fn run_process(
             // ends at its next check and is discarded (no pose from half a search).
             tracker.stop_searches_on(std::sync::Arc::clone(shared.stop));
             tracker.stop_searches_on(std::sync::Arc::clone(&shared.halt));
+            let _ = shared.search.set(std::sync::Arc::clone(tracker.search_progress()));
             tracker
         },
         poses,

@@ -9,8 +9,9 @@ use super::stats::SensorCounters;
 use super::{stage_budget, PipelineOptions, PipelineThread, Stage, StageClock};
 use omnitrack_config::BudgetConfig;
 use omnitrack_io::capture::SourceError;
+use omnitrack_tracker::SearchProgress;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::{Arc, Mutex, MutexGuard};
+use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
 use std::time::Duration;
 
 /// State shared by all pipeline threads: flags and counters (atomics), the capture clock.
@@ -36,6 +37,9 @@ pub(super) struct Shared<'o> {
     realtime_priority: u8,
     /// What the frame-path threads got so far (`priority`).
     pub(super) realtime: Mutex<Realtime>,
+    /// The tracker's search progress, set by the process thread once the tracker is made; the
+    /// sink's thread watches it (`sink::drain`).
+    pub(super) search: OnceLock<Arc<SearchProgress>>,
 }
 
 impl<'o> Shared<'o> {
@@ -60,6 +64,7 @@ impl<'o> Shared<'o> {
             } else {
                 Realtime::Granted(budgets.realtime_priority)
             }),
+            search: OnceLock::new(),
         }
     }
 }
