@@ -6,7 +6,6 @@
 //! or, lossless, where capture waits.
 
 use super::shared::{lock, Shared};
-use super::stats::SensorCounters;
 use super::TICK;
 use crossbeam::channel::{bounded, Receiver, RecvTimeoutError, Select, SendTimeoutError, Sender, TrySendError};
 use omnitrack_core::frame::FrameSet;
@@ -152,15 +151,6 @@ impl Handover {
 
     /// A frame replaced before the tracker took it: counted, back to the pool.
     fn drop_frame(&self, shared: &Shared, pool: &Pool, h: usize) {
-        {
-            let slot = pool.slot(h);
-            for (img, c) in slot.frame.sensors().iter().zip(shared.sensors.iter()) {
-                if img.valid {
-                    SensorCounters::add(&c.overwritten, 1);
-                }
-            }
-        }
-        shared.frames_dropped.fetch_add(1, Ordering::Relaxed);
-        pool.release(h);
+        shared.give_back(pool, h, &shared.frames_dropped, |c| &c.overwritten);
     }
 }

@@ -4,6 +4,7 @@
 //! In: the [`PipelineOptions`] and the budgets. Out: what every thread reads and counts into;
 //! [`run_pipeline`](super::run_pipeline) turns it into the summary at the end.
 
+use super::pool::Pool;
 use super::priority::{self, Realtime};
 use super::stats::SensorCounters;
 use super::{stage_budget, PipelineOptions, PipelineThread, Stage, StageClock};
@@ -99,16 +100,28 @@ impl Shared<'_> {
 
     /// A frame read but left unprocessed as the run ends: counted (whole, and per sensor for
     /// each valid image in it) and its slot back to the pool.
-    pub(super) fn leave(&self, pool: &super::pool::Pool, h: usize) {
+    pub(super) fn leave(&self, pool: &Pool, h: usize) {
+        self.give_back(pool, h, &self.frames_left, |c| &c.left);
+    }
+
+    /// A frame that will not be processed: `frames` counts it, each sensor's `counter` each of
+    /// its valid images, and its slot goes back to the pool.
+    pub(super) fn give_back(
+        &self,
+        pool: &Pool,
+        h: usize,
+        frames: &AtomicU64,
+        counter: impl Fn(&SensorCounters) -> &AtomicU64,
+    ) {
         {
             let slot = pool.slot(h);
             for (img, c) in slot.frame.sensors().iter().zip(self.sensors.iter()) {
                 if img.valid {
-                    SensorCounters::add(&c.left, 1);
+                    SensorCounters::add(counter(c), 1);
                 }
             }
         }
-        self.frames_left.fetch_add(1, Ordering::Relaxed);
+        frames.fetch_add(1, Ordering::Relaxed);
         pool.release(h);
     }
 
