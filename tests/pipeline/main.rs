@@ -837,6 +837,32 @@ fn a_search_volume_without_a_valid_node_says_so_on_the_status() {
     assert_eq!(SearchState::try_from(statuses[0].search), Ok(SearchState::None));
 }
 
+/// Runs the fixture's recording through the pipeline with the default config into a
+/// [`Recorder`] (stopping after `stop_after` records, if given); prints the summary and
+/// returns it.
+fn run_recorded(
+    f: &Fixture,
+    opts: &PipelineOptions,
+    stop_after: Option<usize>,
+) -> omnitrack::runtime::pipeline::PipelineSummary {
+    let mut sink = Recorder {
+        records: Vec::new(),
+        tum: None,
+        stop_after: stop_after.map(|n| (n, Arc::clone(&opts.stop))),
+    };
+    let summary = run_pipeline(
+        replay(&f.rec),
+        &f.model,
+        &f.table,
+        &TrackerConfig::default(),
+        opts,
+        &mut sink,
+    )
+    .unwrap();
+    eprintln!("{summary}");
+    summary
+}
+
 /// A lossless run with `max_frames` reads exactly that many frames: every frame read is
 /// processed, none dropped or left (it read two ahead, counting one "dropped": "10 processed of
 /// 12 captured, 1 dropped", issue 49). A stop leaves what was read unprocessed as `left`, not
@@ -849,21 +875,7 @@ fn a_lossless_run_reads_exactly_the_frames_it_processes() {
     opts.pose_service = None;
     opts.status_service = None;
     opts.run.max_frames = Some(10);
-    let mut sink = Recorder {
-        records: Vec::new(),
-        tum: None,
-        stop_after: None,
-    };
-    let summary = run_pipeline(
-        replay(&f.rec),
-        &f.model,
-        &f.table,
-        &TrackerConfig::default(),
-        &opts,
-        &mut sink,
-    )
-    .unwrap();
-    eprintln!("{summary}");
+    let summary = run_recorded(f, &opts, None);
     assert_eq!(summary.reason, RunEnd::MaxFrames);
     assert_eq!(
         (
@@ -885,21 +897,7 @@ fn a_lossless_run_reads_exactly_the_frames_it_processes() {
 
     // Stopped after 5 records: whatever capture had read beyond them is left, never dropped.
     let opts = options(f, "exact-stop");
-    let mut sink = Recorder {
-        records: Vec::new(),
-        tum: None,
-        stop_after: Some((5, Arc::clone(&opts.stop))),
-    };
-    let summary = run_pipeline(
-        replay(&f.rec),
-        &f.model,
-        &f.table,
-        &TrackerConfig::default(),
-        &opts,
-        &mut sink,
-    )
-    .unwrap();
-    eprintln!("{summary}");
+    let summary = run_recorded(f, &opts, Some(5));
     assert_eq!(summary.reason, RunEnd::Stopped);
     assert_eq!(summary.frames_dropped, 0);
     assert_eq!(
