@@ -3,7 +3,8 @@
 //! (docs/interfaces.md, "JSON output").
 //!
 //! Each file given is checked, also after another failed: a script (or a person) hears of every
-//! file that is wrong at once. The model is checked against the config as `run` would use it
+//! file that is wrong at once (without `--json`, one line each, after the summaries of the valid
+//! ones). The model is checked against the config as `run` would use it
 //! (the config given, or the shipped values when none is given or it is not valid).
 
 use super::CommandResult;
@@ -134,10 +135,14 @@ pub fn run(a: Args) -> CommandResult {
     }
     findings.extend(config_finding);
     let failed = findings.iter().filter(|f| !f.ok).count();
-    for f in &findings {
-        if a.json {
+    if a.json {
+        for f in &findings {
             super::print_json(f)?;
-        } else {
+        }
+    } else {
+        // What is wrong last, one line per file: the last line of the output says it.
+        let (bad, good): (Vec<&Finding>, Vec<&Finding>) = findings.iter().partition(|f| !f.ok);
+        for f in good.into_iter().chain(bad) {
             say(f);
         }
     }

@@ -112,8 +112,10 @@ struct StatusJson<'a> {
     stage_p99_us: Stages<'a>,
 }
 
+/// (A write error keeps its kind through serde_json: a reader gone away stays a closed pipe, which
+/// ends `listen` quietly.)
 fn pose_json(s: &PoseSample, out: &mut dyn Write) -> std::io::Result<()> {
-    serde_json::to_writer(out, &PoseJson::from(s)).map_err(std::io::Error::other)
+    serde_json::to_writer(out, &PoseJson::from(s)).map_err(std::io::Error::from)
 }
 
 fn status_json(s: &StatusSample, out: &mut dyn Write) -> std::io::Result<()> {
@@ -140,7 +142,7 @@ fn status_json(s: &StatusSample, out: &mut dyn Write) -> std::io::Result<()> {
         stage_p50_us: Stages(&s.stage_p50_us),
         stage_p99_us: Stages(&s.stage_p99_us),
     };
-    serde_json::to_writer(out, &json).map_err(std::io::Error::other)
+    serde_json::to_writer(out, &json).map_err(std::io::Error::from)
 }
 
 #[cfg(test)]

@@ -133,6 +133,15 @@ fn run_and_listen_json_have_every_documented_field() {
     // Subscribed before the tracker publishes: every pose sample reaches them.
     let poses_listener = listen(&["--count", "6"]);
     let status_listener = listen(&["--status", "--count", "2"]);
+    // And one whose reader has gone away (`listen --json | head -c0`): it ends quietly, 0.
+    let (reader, writer) = std::io::pipe().unwrap();
+    drop(reader);
+    let closed_listener = Command::new(env!("CARGO_BIN_EXE_omnitrack"))
+        .args(["listen", "--json", "--services", &prefix])
+        .stdout(writer)
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
     std::thread::sleep(Duration::from_secs(1));
     let (code, stdout, stderr) = lab.run(&[
         "--init",
@@ -320,7 +329,12 @@ fn run_and_listen_json_have_every_documented_field() {
             std::thread::sleep(Duration::from_millis(20));
         }
         let out = child.wait_with_output().unwrap();
-        assert!(out.status.success(), "{what}: {}", String::from_utf8_lossy(&out.stderr));
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            out.status.success() && stderr.is_empty(),
+            "{what}: {:?} {stderr}",
+            out.status
+        );
         String::from_utf8(out.stdout).unwrap()
     };
     let pose_lines = finish(poses_listener, "listen --json");
@@ -374,6 +388,8 @@ fn run_and_listen_json_have_every_documented_field() {
     }
     assert_eq!(tracked, u(&p["on_time"]), "tracking samples are the on-time poses");
 
+    let closed = finish(closed_listener, "listen --json into a closed pipe");
+    assert!(closed.is_empty());
     let status_lines = finish(status_listener, "listen --status --json");
     assert_eq!(status_lines.lines().count(), 2, "{status_lines}");
     for l in status_lines.lines() {
@@ -617,6 +633,28 @@ fn check_json_reports_every_file_with_every_field() {
     assert!(stderr.contains("rig 'dual_fisheye"), "{stderr}");
     assert!(stderr.contains(" segments (1 free)"), "{stderr}");
     assert_eq!(stderr.trim_end().lines().last().unwrap(), format!("omnitrack: {error}"));
+    // A broken rig before a valid model: the model's summary first, the rig's error last.
+    let broken = dir.path().join("broken.toml");
+    std::fs::write(&broken, "name = \"broken\"\n").unwrap();
+    let broken = broken.to_str().unwrap();
+    let (code, _, stderr) = omnitrack(&["check", "--rig", broken, "--model", model]);
+    assert_eq!(code, 2, "{stderr}");
+    let lines: Vec<&str> = stderr.trim_end().lines().collect();
+    assert!(lines[0].contains(" segments (1 free)"), "{stderr}");
+    assert!(
+        lines.len() == 2 && lines[1].starts_with("omnitrack: ") && lines[1].contains("broken.toml"),
+        "{stderr}"
+    );
+    let (code, stdout, _) = omnitrack(&["check", "--rig", broken, "--model", model, "--json"]);
+    assert_eq!(code, 2);
+    let found: Vec<Value> = stdout.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    assert_eq!(found[0]["kind"], "rig");
+    assert_eq!(found[0]["ok"], false);
+    assert_eq!(format!("omnitrack: {}", found[0]["error"].as_str().unwrap()), lines[1]);
+    assert_eq!(
+        (&found[1]["kind"], &found[1]["ok"]),
+        (&Value::from("model"), &Value::Bool(true))
+    );
 }
 
 /// The exit codes are where a user looks for them: `omnitrack --help`, `run --help`,
