@@ -13,7 +13,8 @@ use std::process::ExitCode;
 #[command(
     name = "omnitrack",
     version,
-    about = "6-DOF tracking of an omnidirectional rig in a known building model"
+    about = "6-DOF tracking of an omnidirectional rig in a known building model",
+    after_help = commands::EXIT_STATUS_HELP
 )]
 struct Cli {
     #[command(subcommand)]
@@ -26,11 +27,13 @@ enum Command {
     Demo,
     /// Tracks: frames from the source, poses on the iceoryx2 pose service and, if asked, a TUM
     /// trajectory. Without --init the whole model is searched.
+    #[command(after_help = commands::EXIT_STATUS_HELP)]
     Run(commands::run::Args),
     /// Records what a source delivers (v4l, usb or a replay) in the recording layout `run`
     /// replays: PNG per sensor image, frames.csv with the capture timestamps.
     Record(commands::record::Args),
     /// Validates a rig, and optionally a model and a tracker config, and summarises them.
+    #[command(after_help = commands::EXIT_STATUS_HELP)]
     Check(commands::check::Args),
     /// Solves one pose T_world_rig from line correspondences and prints it as JSON.
     Pose(commands::pose::Args),
@@ -42,18 +45,7 @@ enum Command {
         command: commands::visibility::Command,
     },
     /// Subscribes to the pose service (or the status service) and prints one line per sample.
-    Listen {
-        /// Stop after N samples (default: until Ctrl-C).
-        #[arg(long)]
-        count: Option<u64>,
-        /// The status service instead: tracker state, search, per-sensor rates and drops, stage
-        /// timings.
-        #[arg(long)]
-        status: bool,
-        /// The tracker's service prefix (its `run --services`): PREFIX/pose, PREFIX/status.
-        #[arg(long, value_name = "PREFIX", default_value = "omnitrack")]
-        services: String,
-    },
+    Listen(commands::listen::Args),
     /// Prints a shell completion script for omnitrack (bash, zsh, fish, elvish or powershell).
     Completions {
         /// The shell.
@@ -69,13 +61,17 @@ enum Command {
 fn main() -> ExitCode {
     let cli: Cli = omnitrack::runtime::cli::parse_or_exit("omnitrack", "omnitrack demo");
     match run(cli.command) {
-        Ok(()) => ExitCode::SUCCESS,
+        Ok(()) => ExitCode::from(commands::exit::SUCCESS),
         // The reader went away (`… | head`): nothing is left to say, and no one to say it to.
-        Err(e) if commands::is_broken_pipe(&*e) => ExitCode::SUCCESS,
-        Err(message) => {
-            eprintln!("omnitrack: {message}");
-            ExitCode::from(2)
-        }
+        Err(e) if commands::is_broken_pipe(&*e) => ExitCode::from(commands::exit::SUCCESS),
+        Err(e) => match e.downcast_ref::<commands::Exit>() {
+            // Said already; the code says the rest (a run without a pose, a check that failed).
+            Some(commands::Exit(code)) => ExitCode::from(*code),
+            None => {
+                eprintln!("omnitrack: {e}");
+                ExitCode::from(commands::exit::FAILURE)
+            }
+        },
     }
 }
 
@@ -99,24 +95,7 @@ fn run(command: Command) -> CommandResult {
         Command::Pose(args) => commands::pose::run(args),
         Command::Edges(args) => commands::edges::run(args),
         Command::Visibility { command } => commands::visibility::run(command),
-        Command::Listen {
-            count,
-            status: false,
-            services,
-        } => Ok(omnitrack::publish::listen(
-            &commands::service_name(&services, "pose")?,
-            count,
-            &mut std::io::stdout().lock(),
-        )?),
-        Command::Listen {
-            count,
-            status: true,
-            services,
-        } => Ok(omnitrack::publish::listen_status(
-            &commands::service_name(&services, "status")?,
-            count,
-            &mut std::io::stdout().lock(),
-        )?),
+        Command::Listen(args) => commands::listen::run(args),
         Command::Segments(args) => commands::segments::run(args),
         Command::Completions { shell } => {
             let mut cli = <Cli as clap::CommandFactory>::command();
@@ -128,10 +107,31 @@ fn run(command: Command) -> CommandResult {
         }
         Command::Manpage => {
             let cli = <Cli as clap::CommandFactory>::command();
-            clap_mangen::Man::new(cli).render(&mut std::io::stdout().lock())?;
+            // Into memory first, then out: a closed pipe is one error, not half a page.
+            let mut page = Vec::new();
+            render_manpage(cli, &mut page)?;
+            std::io::Write::write_all(&mut std::io::stdout().lock(), &page).map_err(commands::stdout_error)?;
             Ok(())
         }
     }
+}
+
+/// The manual page: clap_mangen's sections, with the exit codes as an EXIT STATUS section of
+/// their own (clap_mangen would run the help's text of them together as "EXTRA").
+fn render_manpage(cli: clap::Command, out: &mut dyn std::io::Write) -> std::io::Result<()> {
+    let man = clap_mangen::Man::new(cli);
+    man.render_title(out)?;
+    man.render_name_section(out)?;
+    man.render_synopsis_section(out)?;
+    man.render_description_section(out)?;
+    man.render_options_section(out)?;
+    man.render_subcommands_section(out)?;
+    writeln!(out, ".SH \"EXIT STATUS\"")?;
+    for line in commands::EXIT_STATUS_HELP.lines().skip(1) {
+        let (code, meaning) = line.trim().split_once("  ").unwrap_or((line.trim(), ""));
+        writeln!(out, ".TP\n{code}\n{}", meaning.trim().replace('-', "\\-"))?;
+    }
+    man.render_version_section(out)
 }
 
 #[cfg(test)]

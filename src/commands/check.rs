@@ -1,10 +1,17 @@
 //! `omnitrack check`: validates a rig, a model and a tracker config, and summarises each on
-//! standard error.
+//! standard error, or, with `--json`, as one JSON object per file on standard output
+//! (docs/interfaces.md, "JSON output").
+//!
+//! Each file given is checked, also after another failed: a script (or a person) hears of every
+//! file that is wrong at once (without `--json`, one line each, after the summaries of the valid
+//! ones). The model is checked against the config as `run` would use it
+//! (the config given, or the shipped values when none is given or it is not valid).
 
 use super::CommandResult;
 use omnitrack::config::TrackerConfig;
 use omnitrack::{Model, Rig};
-use std::path::PathBuf;
+use serde::Serialize;
+use std::path::{Path, PathBuf};
 
 /// `check`'s arguments: any of the three files.
 #[derive(clap::Args)]
@@ -18,93 +25,265 @@ pub struct Args {
     /// A tracker config to validate (every key's type and range).
     #[arg(long, value_name = "tracker.toml")]
     config: Option<PathBuf>,
+    /// One JSON object per file checked on standard output instead of the summary on standard
+    /// error (fields in docs/interfaces.md); the exit code is the same.
+    #[arg(long)]
+    json: bool,
 }
 
-pub fn run(Args { rig, model, config }: Args) -> CommandResult {
-    if rig.is_none() && model.is_none() && config.is_none() {
+/// What `check` found in one file: one line of `--json`.
+#[derive(Serialize)]
+struct Finding<'a> {
+    file: &'a Path,
+    /// `rig`, `model` or `config`.
+    kind: &'static str,
+    ok: bool,
+    /// Why the file is refused (one line, as without `--json`); `null` when it is valid.
+    error: Option<String>,
+    /// What would not stop `run` but deserves a look.
+    warnings: Vec<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    rig: Option<RigFinding>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    model: Option<ModelFinding>,
+}
+
+#[derive(Serialize)]
+struct RigFinding {
+    name: String,
+    sensors: Vec<SensorFinding>,
+    /// Devices whose frame several sensors share (each sensor a window of it).
+    shared_devices: Vec<SharedDevice>,
+}
+
+#[derive(Serialize)]
+struct SensorFinding {
+    id: usize,
+    width: u32,
+    height: u32,
+    lens: &'static str,
+    max_off_axis_deg: f64,
+    centre_m: [f64; 3],
+}
+
+#[derive(Serialize)]
+struct SharedDevice {
+    /// `sensors 0 and 1`, for the text.
+    #[serde(skip)]
+    label: String,
+    sensors: Vec<usize>,
+    /// The V4L2 device or the USB3 Vision serial.
+    device: Option<String>,
+    min_width: u32,
+    min_height: u32,
+}
+
+#[derive(Serialize)]
+struct ModelFinding {
+    vertices: usize,
+    faces: usize,
+    segments: usize,
+    free_segments: usize,
+    degenerate_faces: usize,
+    nonplanar_faces: usize,
+    welded_vertices: usize,
+    ignored_records: usize,
+    degenerate_lines: usize,
+}
+
+impl<'a> Finding<'a> {
+    fn new(file: &'a Path, kind: &'static str) -> Finding<'a> {
+        Finding {
+            file,
+            kind,
+            ok: true,
+            error: None,
+            warnings: Vec::new(),
+            rig: None,
+            model: None,
+        }
+    }
+
+    fn failed(mut self, error: impl std::fmt::Display) -> Finding<'a> {
+        self.ok = false;
+        self.error = Some(error.to_string());
+        self
+    }
+}
+
+pub fn run(a: Args) -> CommandResult {
+    if a.rig.is_none() && a.model.is_none() && a.config.is_none() {
         return Err("check needs at least one of --rig, --model, --config".into());
     }
-    if let Some(path) = rig {
-        let rig = Rig::load(&path)?;
-        eprintln!("{}: rig '{}', {} sensors", path.display(), rig.name, rig.sensors.len());
+    let mut findings = Vec::new();
+    if let Some(path) = &a.rig {
+        findings.push(check_rig(path));
+    }
+    // The config before the model: the model is checked against it as `run` will use it.
+    let mut cfg = TrackerConfig::default();
+    let mut config_finding = None;
+    if let Some(path) = &a.config {
+        let mut f = Finding::new(path, "config");
+        match TrackerConfig::load(path) {
+            Ok(c) => cfg = c,
+            Err(e) => f = f.failed(e),
+        }
+        config_finding = Some(f);
+    }
+    if let Some(path) = &a.model {
+        findings.push(check_model(path, &cfg));
+    }
+    findings.extend(config_finding);
+    let failed = findings.iter().filter(|f| !f.ok).count();
+    if a.json {
+        for f in &findings {
+            super::print_json(f)?;
+        }
+    } else {
+        // What is wrong last, one line per file: the last line of the output says it.
+        let (bad, good): (Vec<&Finding>, Vec<&Finding>) = findings.iter().partition(|f| !f.ok);
+        for f in good.into_iter().chain(bad) {
+            say(f);
+        }
+    }
+    if failed > 0 {
+        return Err(Box::new(super::Exit(super::exit::FAILURE)));
+    }
+    Ok(())
+}
+
+fn check_rig(path: &Path) -> Finding<'_> {
+    let f = Finding::new(path, "rig");
+    let rig = match Rig::load(path) {
+        Ok(r) => r,
+        Err(e) => return f.failed(e),
+    };
+    // How live capture will open the rig's cameras: a shared device without crops is an error
+    // here rather than at the first `run`.
+    let devices = match omnitrack::capture::device::capture_devices(&rig) {
+        Ok(d) => d,
+        Err(e) => return f.failed(format!("{}: {e}", path.display())),
+    };
+    Finding {
+        rig: Some(RigFinding {
+            name: rig.name.clone(),
+            sensors: rig
+                .sensors
+                .iter()
+                .map(|s| {
+                    let c = s.centre();
+                    SensorFinding {
+                        id: s.id,
+                        width: s.width,
+                        height: s.height,
+                        lens: s.lens.model_name(),
+                        max_off_axis_deg: s.max_off_axis().to_degrees(),
+                        centre_m: [c.x, c.y, c.z],
+                    }
+                })
+                .collect(),
+            shared_devices: devices
+                .iter()
+                .filter(|d| !d.direct)
+                .map(|d| SharedDevice {
+                    label: d.label.clone(),
+                    sensors: d.sensors().collect(),
+                    device: d.device.clone().or_else(|| d.usb_serial.clone()),
+                    min_width: d.width,
+                    min_height: d.height,
+                })
+                .collect(),
+        }),
+        ..f
+    }
+}
+
+fn check_model<'a>(path: &'a Path, cfg: &TrackerConfig) -> Finding<'a> {
+    let mut f = Finding::new(path, "model");
+    let m = match Model::load(path) {
+        Ok(m) => m,
+        Err(e) => return f.failed(e),
+    };
+    if m.segments.is_empty() {
+        return f.failed(format!(
+            "{}: the model has no segments: nothing for the edges to match",
+            path.display()
+        ));
+    }
+    let v = &cfg.visibility;
+    if let Err(e) = omnitrack::visibility::check_grid(&m, v.node_spacing_m, v.node_heights_m.len()) {
+        return f.failed(format!("{}: {e}", path.display()));
+    }
+    // A table is often built on a desk machine and copied to the rig's: a build this machine
+    // could not hold is said, not refused (`run` without --visibility, or `visibility build`
+    // here, refuses it before allocating). The device build cannot build tables at all.
+    #[cfg(feature = "desk")]
+    {
+        let opts = omnitrack::visibility::build::BuildOptions::from_config(v);
+        let available = omnitrack::visibility::build::available_memory();
+        if let Err(e) = omnitrack::visibility::build::check_memory(&m, &opts, available) {
+            f.warnings
+                .push(format!("{e}; a table built elsewhere (--visibility) needs none of it"));
+        }
+    }
+    f.model = Some(ModelFinding {
+        vertices: m.vertices.len(),
+        faces: m.faces.len(),
+        segments: m.segments.len(),
+        free_segments: m.segments.iter().filter(|s| s.is_free()).count(),
+        degenerate_faces: m.stats.degenerate_faces,
+        nonplanar_faces: m.stats.nonplanar_faces,
+        welded_vertices: m.stats.welded_vertices,
+        ignored_records: m.stats.ignored_records,
+        degenerate_lines: m.stats.degenerate_lines,
+    });
+    f
+}
+
+/// A finding as the lines people read on standard error (an error as `omnitrack: …`).
+fn say(f: &Finding) {
+    let path = f.file.display();
+    if let Some(e) = &f.error {
+        eprintln!("omnitrack: {e}");
+        return;
+    }
+    for w in &f.warnings {
+        eprintln!("{path}: warning: {w}");
+    }
+    if let Some(rig) = &f.rig {
+        eprintln!("{path}: rig '{}', {} sensors", rig.name, rig.sensors.len());
         for s in &rig.sensors {
-            let c = s.centre();
+            let c = s.centre_m;
             eprintln!(
                 "  sensor {}: {}×{}, {} lens seeing up to {:.1}° off its axis, centre ({:.3}, {:.3}, {:.3}) m",
-                s.id,
-                s.width,
-                s.height,
-                s.lens.model_name(),
-                s.max_off_axis().to_degrees(),
-                c.x,
-                c.y,
-                c.z
+                s.id, s.width, s.height, s.lens, s.max_off_axis_deg, c[0], c[1], c[2]
             );
         }
-        // How live capture will open the rig's cameras: a shared device without crops is an error
-        // here rather than at the first `run`.
-        let devices =
-            omnitrack::capture::device::capture_devices(&rig).map_err(|e| format!("{}: {e}", path.display()))?;
-        for d in devices.iter().filter(|d| !d.direct) {
+        for d in &rig.shared_devices {
             eprintln!(
                 "  {}: windows of one device's frame ({}), at least {}×{}",
                 d.label,
-                d.device
-                    .as_deref()
-                    .or(d.usb_serial.as_deref())
-                    .unwrap_or("its own camera"),
-                d.width,
-                d.height
+                d.device.as_deref().unwrap_or("its own camera"),
+                d.min_width,
+                d.min_height
             );
         }
     }
-    // The config first: the model is checked against it as `run` will use it.
-    let cfg = match &config {
-        Some(path) => TrackerConfig::load(path)?,
-        None => TrackerConfig::default(),
-    };
-    if let Some(path) = model {
-        let m = Model::load(&path)?;
-        if m.segments.is_empty() {
-            return Err(format!(
-                "{}: the model has no segments: nothing for the edges to match",
-                path.display()
-            )
-            .into());
-        }
-        let v = &cfg.visibility;
-        omnitrack::visibility::check_grid(&m, v.node_spacing_m, v.node_heights_m.len())
-            .map_err(|e| format!("{}: {e}", path.display()))?;
-        // A table is often built on a desk machine and copied to the rig's: a build this machine
-        // could not hold is said, not refused (`run` without --visibility, or `visibility build`
-        // here, refuses it before allocating). The device build cannot build tables at all.
-        #[cfg(feature = "desk")]
-        {
-            let opts = omnitrack::visibility::build::BuildOptions::from_config(v);
-            let available = omnitrack::visibility::build::available_memory();
-            if let Err(e) = omnitrack::visibility::build::check_memory(&m, &opts, available) {
-                eprintln!(
-                    "{}: warning: {e}; a table built elsewhere (--visibility) needs none of it",
-                    path.display()
-                );
-            }
-        }
+    if let Some(m) = &f.model {
         eprintln!(
-            "{}: {} vertices, {} faces, {} segments ({} free); skipped {} degenerate faces, \
+            "{path}: {} vertices, {} faces, {} segments ({} free); skipped {} degenerate faces, \
              split {} non-planar faces, welded {} duplicate vertices, ignored {} records",
-            path.display(),
-            m.vertices.len(),
-            m.faces.len(),
-            m.segments.len(),
-            m.segments.iter().filter(|s| s.is_free()).count(),
-            m.stats.degenerate_faces,
-            m.stats.nonplanar_faces,
-            m.stats.welded_vertices,
-            m.stats.ignored_records
+            m.vertices,
+            m.faces,
+            m.segments,
+            m.free_segments,
+            m.degenerate_faces,
+            m.nonplanar_faces,
+            m.welded_vertices,
+            m.ignored_records
         );
     }
-    if let Some(path) = config {
-        eprintln!("{}: tracker config valid", path.display());
+    if f.kind == "config" {
+        eprintln!("{path}: tracker config valid");
     }
-    Ok(())
 }

@@ -2,6 +2,8 @@
 //! pipeline, poses on the iceoryx2 pose service and, if asked, a TUM trajectory; progress and
 //! the summary on standard error.
 
+mod report;
+
 use super::CommandResult;
 use omnitrack::capture::SourceSpec;
 use omnitrack::config::TrackerConfig;
@@ -46,6 +48,10 @@ pub struct Args {
     /// Replay at the recorded frame rate (default: as fast as the tracker goes).
     #[arg(long)]
     realtime: bool,
+    /// Print the run's summary as one JSON object on standard output at the end (fields in
+    /// docs/interfaces.md); the human lines stay on standard error.
+    #[arg(long)]
+    json: bool,
 }
 
 /// `--init x,y,z[,radius_m]` (docs/interfaces.md): the search volume's centre and radius; without
@@ -74,82 +80,13 @@ fn parse_init(text: &str, default_diameter: f64) -> Result<omnitrack::tracker::S
 pub fn run(a: Args) -> CommandResult {
     use omnitrack::capture::{Pacing, SourceOptions};
     use omnitrack::runtime::load_or_build_table;
-    use omnitrack::runtime::pipeline::{
-        init_logging, open_pipeline_source, run_pipeline, FrameSink, PipelineOptions, TumSink,
-    };
-    use omnitrack::runtime::{FrameRecord, RunOptions, SinkError};
-    use omnitrack::tracker::TrackerEvent;
+    use omnitrack::runtime::pipeline::{init_logging, open_pipeline_source, run_pipeline, PipelineOptions, TumSink};
+    use omnitrack::runtime::RunOptions;
 
     let (pose_service, status_service) = (
         super::service_name(&a.services, "pose")?,
         super::service_name(&a.services, "status")?,
     );
-
-    /// Progress lines on standard error and, if asked, the TUM trajectory.
-    struct RunSink {
-        tum: Option<TumSink>,
-        /// Searches run, those that had no cell to search, and those widened to the nearest
-        /// valid nodes: why no pose came out, if none did.
-        searches: u64,
-        empty: u64,
-        widened: u64,
-    }
-    impl FrameSink for RunSink {
-        fn frame(&mut self, r: &FrameRecord) -> Result<(), SinkError> {
-            match r.result.event {
-                Some(TrackerEvent::Searched(rep)) => {
-                    self.searches += 1;
-                    self.empty += u64::from(rep.cells_in_volume == 0);
-                    if let Some(d) = rep.widened_to_m {
-                        self.widened += 1;
-                        eprintln!(
-                            "omnitrack: frame {}: no valid visibility node in the search volume; searched the nearest, {:.1} m about its centre",
-                            r.sequence, d
-                        );
-                    }
-                    let volume = match rep.diameter_m {
-                        Some(d) => format!("a {d:.1} m volume"),
-                        None => "the whole model".to_string(),
-                    };
-                    eprintln!(
-                        "omnitrack: frame {}: in {volume}, looked at {} of {} cells (positions scored under the vanishing directions), searched {} of {} (segment-edge triplets) in {:.0} ms",
-                        r.sequence,
-                        rep.plan_cells_scanned,
-                        rep.plan_cells_in_volume,
-                        rep.cells_searched,
-                        rep.cells_in_volume,
-                        rep.elapsed.as_secs_f64() * 1e3
-                    )
-                }
-                Some(TrackerEvent::Committed { candidates, .. }) => {
-                    eprintln!(
-                        "omnitrack: frame {}: tracking ({candidates} candidates weighed)",
-                        r.sequence
-                    )
-                }
-                Some(TrackerEvent::LostLock) => {
-                    eprintln!("omnitrack: frame {}: lost lock, re-initialising", r.sequence)
-                }
-                Some(TrackerEvent::Relocalised) | None => {}
-            }
-            match &mut self.tum {
-                Some(t) => t.frame(r),
-                None => Ok(()),
-            }
-        }
-        /// A late record (a search's frame and those kept during it) carries its events and
-        /// pose like any other.
-        fn late(&mut self, r: &FrameRecord) -> Result<(), SinkError> {
-            self.frame(r)
-        }
-        fn finish(&mut self) -> Result<(), SinkError> {
-            match &mut self.tum {
-                Some(t) => t.finish(),
-                None => Ok(()),
-            }
-        }
-    }
-
     if let Some(out) = &a.trajectory {
         let inputs = [Some(&a.model), a.rig.as_ref(), a.visibility.as_ref(), a.config.as_ref()];
         refuse_to_overwrite(out, inputs.into_iter().flatten())?;
@@ -185,12 +122,7 @@ pub fn run(a: Args) -> CommandResult {
     let source = open_pipeline_source(&a.source, rig.as_ref(), &options)?;
     let (table, origin) = load_or_build_table(&a.model, &model, a.visibility.as_deref(), &cfg)?;
     eprintln!("omnitrack: {origin}");
-    let mut sink = RunSink {
-        tum: a.trajectory.as_deref().map(TumSink::create).transpose()?,
-        searches: 0,
-        empty: 0,
-        widened: 0,
-    };
+    let mut sink = RunSink::new(a.trajectory.as_deref().map(TumSink::create).transpose()?);
     let publish = (!a.no_publish).then_some(());
     let opts = PipelineOptions {
         run: RunOptions {
@@ -214,11 +146,15 @@ pub fn run(a: Args) -> CommandResult {
         .into());
     }
     let stats = &summary.tracker;
+    let poses = sink.on_time + sink.late;
     eprintln!(
-        "omnitrack: {} frames, {} tracked ({:.1} %), {} losses, {} re-initialisations, {} relocalisations",
-        stats.frames,
-        stats.tracked,
-        100.0 * stats.tracked as f64 / stats.frames.max(1) as f64,
+        "omnitrack: {} frames, {} with a pose ({:.1} %): {} on time, {} late (kept during a search, worked out after it); \
+         {} losses, {} re-initialisations, {} relocalisations",
+        summary.frames_processed,
+        poses,
+        100.0 * poses as f64 / summary.frames_processed.max(1) as f64,
+        sink.on_time,
+        sink.late,
         stats.losses,
         stats.reinitialisations,
         stats.relocalisations
@@ -231,21 +167,175 @@ pub fn run(a: Args) -> CommandResult {
             stats.searches_cancelled
         );
     }
-    if stats.tracked == 0 {
-        eprintln!(
-            "omnitrack: no pose: {}",
-            no_pose_reason(stats.frames, sink.searches, sink.empty, sink.widened)
-        );
+    let no_pose = (poses == 0).then(|| no_pose_reason(&summary, &sink));
+    let code = if no_pose.is_some() {
+        super::exit::NO_POSE
+    } else {
+        super::exit::SUCCESS
+    };
+    if a.json {
+        super::print_json(&report::RunReport::new(
+            &summary,
+            &sink,
+            a.trajectory.as_deref(),
+            no_pose.as_deref(),
+            code,
+        ))?;
     }
-    Ok(())
+    if let Some(reason) = &no_pose {
+        eprintln!("omnitrack: no pose: {reason}");
+    }
+    match code {
+        super::exit::SUCCESS => Ok(()),
+        code => Err(Box::new(super::Exit(code))),
+    }
+}
+
+/// What `run` counts of the frames handed to its sink, writes to the trajectory if asked, and
+/// says on standard error as it goes (searches, commits, losses, a long search's progress).
+pub struct RunSink {
+    tum: Option<omnitrack::runtime::pipeline::TumSink>,
+    /// Frames with a pose of their own, and earlier frames' poses worked out late (kept during
+    /// a search): together, every pose the run found.
+    on_time: u64,
+    late: u64,
+    /// The first frame's and the first pose's capture times.
+    first_frame_ns: Option<u64>,
+    first_pose_ns: Option<u64>,
+    /// Searches reported, those that had no cell to search, and those widened to the nearest
+    /// valid nodes: why no pose came out, if none did.
+    searches: u64,
+    empty: u64,
+    widened: u64,
+}
+
+impl RunSink {
+    fn new(tum: Option<omnitrack::runtime::pipeline::TumSink>) -> RunSink {
+        RunSink {
+            tum,
+            on_time: 0,
+            late: 0,
+            first_frame_ns: None,
+            first_pose_ns: None,
+            searches: 0,
+            empty: 0,
+            widened: 0,
+        }
+    }
+
+    /// The events of a record (a frame's own, or a late one), on standard error.
+    fn say(&mut self, r: &omnitrack::runtime::FrameRecord) {
+        use omnitrack::tracker::TrackerEvent;
+        match r.result.event {
+            Some(TrackerEvent::Searched(rep)) => {
+                self.searches += 1;
+                self.empty += u64::from(rep.cells_in_volume == 0);
+                if let Some(d) = rep.widened_to_m {
+                    self.widened += 1;
+                    eprintln!(
+                        "omnitrack: frame {}: no valid visibility node in the search volume; searched the nearest, {:.1} m about its centre",
+                        r.sequence, d
+                    );
+                }
+                let volume = match rep.diameter_m {
+                    Some(d) => format!("a {d:.1} m volume"),
+                    None => "the whole model".to_string(),
+                };
+                eprintln!(
+                    "omnitrack: frame {}: in {volume}, looked at {} of {} cells (positions scored under the vanishing directions), searched {} of {} (segment-edge triplets) in {:.0} ms",
+                    r.sequence,
+                    rep.plan_cells_scanned,
+                    rep.plan_cells_in_volume,
+                    rep.cells_searched,
+                    rep.cells_in_volume,
+                    rep.elapsed.as_secs_f64() * 1e3
+                )
+            }
+            Some(TrackerEvent::Committed { candidates, .. }) => {
+                eprintln!(
+                    "omnitrack: frame {}: tracking ({candidates} candidates weighed)",
+                    r.sequence
+                )
+            }
+            Some(TrackerEvent::LostLock) => {
+                eprintln!("omnitrack: frame {}: lost lock, re-initialising", r.sequence)
+            }
+            Some(TrackerEvent::Relocalised) | None => {}
+        }
+        if r.result.pose.is_some() {
+            self.first_pose_ns = Some(self.first_pose_ns.map_or(r.timestamp_ns, |t| t.min(r.timestamp_ns)));
+        }
+    }
+}
+
+impl omnitrack::runtime::pipeline::FrameSink for RunSink {
+    fn frame(&mut self, r: &omnitrack::runtime::FrameRecord) -> Result<(), omnitrack::runtime::SinkError> {
+        self.first_frame_ns.get_or_insert(r.timestamp_ns);
+        self.on_time += u64::from(r.result.pose.is_some());
+        self.say(r);
+        match &mut self.tum {
+            Some(t) => t.frame(r),
+            None => Ok(()),
+        }
+    }
+    /// A late record (a search's frame and those kept during it) carries its events and pose
+    /// like any other, and its pose counts: the trajectory has it.
+    fn late(&mut self, r: &omnitrack::runtime::FrameRecord) -> Result<(), omnitrack::runtime::SinkError> {
+        self.late += u64::from(r.result.pose.is_some());
+        self.say(r);
+        match &mut self.tum {
+            Some(t) => t.late(r),
+            None => Ok(()),
+        }
+    }
+    fn finish(&mut self) -> Result<(), omnitrack::runtime::SinkError> {
+        match &mut self.tum {
+            Some(t) => t.finish(),
+            None => Ok(()),
+        }
+    }
+    /// A search of more than a second: one line a second on standard error, so a whole-model
+    /// search (seconds without a pose) is not silence.
+    fn search_progress(&mut self, p: &omnitrack::runtime::pipeline::SearchSnapshot) {
+        use omnitrack::publish::SearchKind;
+        let kind = match p.kind {
+            Some(SearchKind::Relocalisation) => "relocalisation",
+            Some(SearchKind::Reinitialisation) => "re-initialisation",
+            Some(SearchKind::Initialisation) | None => "initialisation",
+        };
+        let (whole, d) = match p.diameter_m {
+            Some(d) => ("", d),
+            None => ("the whole model", 0.0),
+        };
+        // Straight to the unbuffered standard error: nothing is allocated.
+        if whole.is_empty() {
+            eprintln!(
+                "omnitrack: {kind} search of a {d:.1} m volume: {:.0} % of its work after {:.1} s",
+                100.0 * p.fraction_done(),
+                p.elapsed.as_secs_f64()
+            );
+        } else {
+            eprintln!(
+                "omnitrack: {kind} search of {whole}: {:.0} % of its work after {:.1} s",
+                100.0 * p.fraction_done(),
+                p.elapsed.as_secs_f64()
+            );
+        }
+    }
 }
 
 /// Why a run gave no pose, in one line, from what its searches reported.
-fn no_pose_reason(frames: u64, searches: u64, empty: u64, widened: u64) -> String {
-    if frames == 0 {
+fn no_pose_reason(summary: &omnitrack::runtime::pipeline::PipelineSummary, sink: &RunSink) -> String {
+    let stats = &summary.tracker;
+    let (searches, empty, widened) = (sink.searches, sink.empty, sink.widened);
+    if summary.frames_processed == 0 {
         "no frame came from the source".to_string()
+    } else if stats.searches == 0 {
+        "no search started (no frame had edges enough to search with)".to_string()
+    } else if searches == 0 && stats.searches_cancelled > 0 {
+        "the stop cut the search short before it finished".to_string()
     } else if searches == 0 {
-        "no search finished".to_string()
+        "no search finished before the frames ended".to_string()
     } else if empty == searches {
         "the visibility table has no valid node (nowhere in the model has room for a person to stand: check the model's floors and scale, or rebuild the table)".to_string()
     } else if widened == searches {

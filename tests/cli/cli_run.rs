@@ -164,15 +164,16 @@ fn a_short_replay_writes_a_tum_trajectory_near_the_truth() {
 }
 
 /// A hint whose volume holds no valid node (20 m above the lab) is searched out to the nearest
-/// nodes and says so; a run that gives no pose ends with one line saying why. One frame: a
-/// search's answers are confirmed on later frames, so none can commit.
+/// nodes and says so; a run that gives no pose ends with one line saying why, and exit code 3
+/// (docs/interfaces.md, "Exit codes"; it was 0, issue 49), its JSON summary saying the same.
+/// One frame: a search's answers are confirmed on later frames, so none can commit.
 #[cfg(feature = "desk")]
 #[test]
 fn a_hint_with_no_valid_node_is_widened_and_a_run_without_a_pose_says_why() {
     let lab = crate::common::lab_recording(6);
     let t0 = lab.truth[0].pose.translation.vector;
     let init = format!("{},{},{},0.5", t0.x, t0.y, t0.z + 20.0);
-    let (code, _, stderr) = omnitrack(&[
+    let (code, stdout, stderr) = omnitrack(&[
         "run",
         "--model",
         lab.rec.join("model.obj").to_str().unwrap(),
@@ -183,14 +184,25 @@ fn a_hint_with_no_valid_node_is_widened_and_a_run_without_a_pose_says_why() {
         "--frames",
         "1",
         "--no-publish",
+        "--json",
     ]);
-    assert_eq!(code, 0, "{stderr}");
+    assert_eq!(code, 3, "{stderr}");
     assert!(
         stderr.contains("no valid visibility node in the search volume; searched the nearest"),
         "{stderr}"
     );
     let last = last_line(&stderr);
-    assert!(last.starts_with("omnitrack: no pose: "), "{stderr}");
+    let reason = last
+        .strip_prefix("omnitrack: no pose: ")
+        .unwrap_or_else(|| panic!("{stderr}"));
+    assert!(reason.contains("no valid visibility node"), "{reason}");
+    assert_eq!(stdout.lines().count(), 1, "one JSON line: {stdout:?}");
+    let summary: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    assert_eq!(summary["exit_code"], 3);
+    assert_eq!(summary["no_pose_reason"], reason);
+    assert_eq!(summary["poses"]["total"], 0);
+    assert!(summary["poses"]["first_timestamp_ns"].is_null());
+    assert_eq!(summary["end"], "max_frames");
 }
 
 /// A reader that goes away (`omnitrack … | head -c1`) ends the command quietly: no panic, no

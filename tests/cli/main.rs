@@ -5,6 +5,7 @@ mod common;
 
 mod cli_pose;
 mod cli_record;
+mod cli_report;
 mod cli_run;
 mod cli_stop;
 mod cli_visibility;

@@ -837,6 +837,162 @@ fn a_search_volume_without_a_valid_node_says_so_on_the_status() {
     assert_eq!(SearchState::try_from(statuses[0].search), Ok(SearchState::None));
 }
 
+/// Runs the fixture's recording through the pipeline with the default config into a
+/// [`Recorder`] (stopping after `stop_after` records, if given); prints the summary and
+/// returns it.
+fn run_recorded(
+    f: &Fixture,
+    opts: &PipelineOptions,
+    stop_after: Option<usize>,
+) -> omnitrack::runtime::pipeline::PipelineSummary {
+    let mut sink = Recorder {
+        records: Vec::new(),
+        tum: None,
+        stop_after: stop_after.map(|n| (n, Arc::clone(&opts.stop))),
+    };
+    let summary = run_pipeline(
+        replay(&f.rec),
+        &f.model,
+        &f.table,
+        &TrackerConfig::default(),
+        opts,
+        &mut sink,
+    )
+    .unwrap();
+    eprintln!("{summary}");
+    summary
+}
+
+/// A lossless run with `max_frames` reads exactly that many frames: every frame read is
+/// processed, none dropped or left (it read two ahead, counting one "dropped": "10 processed of
+/// 12 captured, 1 dropped", issue 49). A stop leaves what was read unprocessed as `left`, not
+/// dropped, and the counts still add up.
+#[test]
+fn a_lossless_run_reads_exactly_the_frames_it_processes() {
+    let _serial = serial();
+    let f = fixture();
+    let mut opts = options(f, "exact");
+    opts.pose_service = None;
+    opts.status_service = None;
+    opts.run.max_frames = Some(10);
+    let summary = run_recorded(f, &opts, None);
+    assert_eq!(summary.reason, RunEnd::MaxFrames);
+    assert_eq!(
+        (
+            summary.frames_captured,
+            summary.frames_processed,
+            summary.frames_dropped,
+            summary.frames_left
+        ),
+        (10, 10, 0, 0)
+    );
+    for (k, s) in summary.sensors.iter().enumerate() {
+        assert_eq!((s.delivered, s.lost()), (10, 0), "sensor {k}: {s:?}");
+    }
+    let text = summary.to_string();
+    assert!(
+        text.starts_with("10 frames processed of 10 captured") && text.contains(", 0 dropped;"),
+        "{text}"
+    );
+
+    // Stopped after 5 records: whatever capture had read beyond them is left, never dropped.
+    let opts = options(f, "exact-stop");
+    let summary = run_recorded(f, &opts, Some(5));
+    assert_eq!(summary.reason, RunEnd::Stopped);
+    assert_eq!(summary.frames_dropped, 0);
+    assert_eq!(
+        summary.frames_captured,
+        summary.frames_processed + summary.frames_left,
+        "{summary}"
+    );
+    for (k, s) in summary.sensors.iter().enumerate() {
+        assert_eq!(s.overwritten, 0, "sensor {k}: {s:?}");
+        assert_eq!(s.delivered + s.left, summary.frames_captured, "sensor {k}: {s:?}");
+    }
+}
+
+/// A search longer than a second is reported to the sink, on the sink's thread, about once a
+/// second while it runs: never before its first second, never twice within a second, its work
+/// growing; and not after it ends.
+#[test]
+fn a_long_search_reports_its_progress_about_once_a_second() {
+    let _serial = serial();
+    let f = fixture();
+    let mut opts = options(f, "progress");
+    opts.pose_service = None;
+    opts.status_service = None;
+    // The whole model, with a budget of 3 s of work (in the reference machine's microseconds):
+    // seconds on any machine.
+    opts.run.hint = None;
+    opts.run.max_frames = Some(2);
+    let mut cfg = TrackerConfig::default();
+    cfg.initialisation.whole_model_time_budget_ms = 3000.0;
+
+    struct Progress {
+        started: Instant,
+        calls: Vec<(Instant, omnitrack::runtime::pipeline::SearchSnapshot)>,
+        records: usize,
+        sink_thread: Option<std::thread::ThreadId>,
+        wrong_thread: bool,
+    }
+    impl FrameSink for Progress {
+        fn frame(&mut self, _: &FrameRecord) -> Result<(), SinkError> {
+            self.records += 1;
+            Ok(())
+        }
+        fn search_progress(&mut self, p: &omnitrack::runtime::pipeline::SearchSnapshot) {
+            let me = std::thread::current().id();
+            self.wrong_thread |= self.sink_thread.is_some_and(|t| t != me);
+            self.calls.push((Instant::now(), *p));
+        }
+    }
+    let mut sink = Progress {
+        started: Instant::now(),
+        calls: Vec::new(),
+        records: 0,
+        sink_thread: Some(std::thread::current().id()),
+        wrong_thread: false,
+    };
+    let summary = run_pipeline(replay(&f.rec), &f.model, &f.table, &cfg, &opts, &mut sink).unwrap();
+    let took = sink.started.elapsed();
+    let search = summary.tracker.first_search.expect("a search ran");
+    eprintln!(
+        "{} progress calls over a {search:?} search ({took:?} in all): {:?}",
+        sink.calls.len(),
+        sink.calls
+            .iter()
+            .map(|(_, p)| (p.elapsed, p.work_done))
+            .collect::<Vec<_>>()
+    );
+    assert!(!sink.wrong_thread, "progress reported off the sink's thread");
+    assert!(search > Duration::from_millis(1200), "{search:?}: too short to test");
+    assert!(!sink.calls.is_empty(), "a {search:?} search said nothing");
+    // About once a second: at most one per started second of the search, and one in its last
+    // two seconds at the latest.
+    assert!(
+        sink.calls.len() as f64 <= search.as_secs_f64() + 1.0,
+        "{} calls in {search:?}",
+        sink.calls.len()
+    );
+    for w in sink.calls.windows(2) {
+        assert!(
+            w[1].0 - w[0].0 >= Duration::from_millis(950),
+            "two calls {:?} apart",
+            w[1].0 - w[0].0
+        );
+        assert!(w[1].1.work_done >= w[0].1.work_done && w[1].1.elapsed > w[0].1.elapsed);
+    }
+    for (_, p) in &sink.calls {
+        assert!(p.elapsed >= Duration::from_secs(1), "{p:?}");
+        assert_eq!(p.kind, Some(omnitrack::publish::SearchKind::Initialisation), "{p:?}");
+        assert_eq!(p.diameter_m, None, "the whole model: {p:?}");
+        assert_eq!(p.work_budget, 3_000_000, "{p:?}");
+        assert!(p.work_done <= 2 * p.work_budget, "{p:?}");
+    }
+    assert!(sink.calls.last().unwrap().1.work_done > 0);
+    assert_eq!(sink.records, 2);
+}
+
 /// A pose service that cannot be opened (here: the name is taken by a service of another
 /// message type) stops the run before its first frame, and the summary says why; with
 /// `require_services` off the run goes on without it.

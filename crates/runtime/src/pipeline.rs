@@ -24,6 +24,9 @@
 //!   The frame goes back to the pool before publishing.
 //! - the **caller's thread** runs the sink, fed by a bounded channel of [`SINK_BUFFER`] records;
 //!   when it is full the tracker waits (the trajectory is never short of a processed frame).
+//!   Between records it looks at the tracker's search every tick, and tells the sink how far a
+//!   search of more than a second has got, about once a second
+//!   ([`FrameSink::search_progress`]): the frame path never does.
 //!
 //! Scheduling (`priority`): where frames come in real time, process and the edge workers run at
 //! `SCHED_FIFO` `[budgets] realtime_priority`, capture and assembly one below, the search thread
@@ -33,11 +36,14 @@
 //! Latest frame wins: the hand-over to the tracker holds one frame; a newer frame replaces a
 //! pending one, which goes back to the pool and is counted as dropped (whole frame, and per
 //! sensor for each valid image in it). With [`PipelineOptions::lossless`] capture waits instead
-//! (offline replays and evaluations).
+//! (offline replays and evaluations): nothing is dropped, and a whole-rig source reads no more
+//! than `max_frames`.
 //!
-//! Every image a source produces is counted exactly once per sensor ([`SensorSummary`]):
-//! delivered to the tracker, overwritten (latest frame wins), a fault of the source, or missed
-//! its sync window. The status sample's per-sensor `frames_dropped` is everything but delivered
+//! Every frame handed into the pool is counted once ([`PipelineSummary`]): processed, dropped
+//! (replaced by a newer one) or left (the run ended while it waited). Every image a source
+//! produces is counted exactly once per sensor ([`SensorSummary`]): delivered to the tracker,
+//! overwritten (latest frame wins), a fault of the source, missed its sync window, or left. The
+//! status sample's per-sensor `frames_dropped` is everything but delivered
 //! ([`SensorSummary::lost`]); its `frame_rate_hz` is the rate of delivered images over the last
 //! status interval (0 for a dead sensor); its stage p50/p99 are over the whole run so far.
 //!
@@ -91,13 +97,14 @@ mod summary;
 pub use live::{live_sensors, open_pipeline_source, LiveDevice};
 pub use logging::init_logging;
 pub use omnitrack_io::publish::Stage;
+pub use omnitrack_tracker::SearchSnapshot;
 pub use options::{PipelineOptions, PipelineSource, PipelineThread, SensorCapture};
 #[cfg(unix)]
 pub use priority::current_thread_policy;
 pub use priority::{upstream_priority, Realtime, ThreadPolicy};
 pub use publishing::inside_publish;
 pub use signals::{stop_on_signals, SignalGuard};
-pub use sink::{FrameSink, TrajectoryFileError, TumSink};
+pub use sink::{FrameSink, TrajectoryFileError, TumSink, PROGRESS_AFTER, PROGRESS_EVERY};
 pub use stats::{stage_budget, Histogram, SensorSummary, StageClock, StageSummary};
 pub use summary::{PipelineSummary, RunEnd};
 
@@ -171,6 +178,9 @@ pub fn run_pipeline(
         PipelineSource::Rig(_) => Vec::new(),
     };
     let (ready_tx, ready_rx) = bounded::<usize>(1);
+    // What is still in the hand-over once every thread has ended: a capture thread may post a
+    // frame after the process thread's last look (it had room again), and that frame was read.
+    let leftover = ready_rx.clone();
     let (records_tx, records_rx) = bounded::<FrameRecord>(SINK_BUFFER);
     pool::warm_channel(&ready_tx, &ready_rx, || 0);
     let no_record = || FrameRecord::late(0, 0, FrameResult::empty(TrackerState::Initialising));
@@ -218,6 +228,9 @@ pub fn run_pipeline(
                 Ok(s) => source_stats = source_stats.or(s),
                 Err(panic) => std::panic::resume_unwind(panic),
             }
+        }
+        while let Ok(h) = leftover.try_recv() {
+            shared.leave(pool, h);
         }
         (outcome, source_stats, sink_error)
     });

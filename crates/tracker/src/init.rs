@@ -165,6 +165,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 mod grid_scan;
+mod progress;
 mod run;
 mod scoring;
 mod translation;
@@ -172,6 +173,7 @@ mod triplets;
 mod types;
 pub mod work;
 
+pub use progress::{SearchProgress, SearchSnapshot};
 pub use types::{Candidate, InitOptions, InitReport, SearchVolume};
 
 /// Dihedral-angle bins of the edge masks (rad).
@@ -344,6 +346,8 @@ pub struct Initialiser<'m> {
     backstop_hit: bool,
     /// The backstop falls at this many times the budget ([`BACKSTOP_FACTOR`] by default).
     backstop_factor: u32,
+    /// How far the run under way has got, for whoever watches ([`Self::progress`]).
+    progress: Arc<SearchProgress>,
     /// Set by the owner to stop a search early (module `background`: a tracker shutting down,
     /// or its pipeline stopping, does not wait for a search nobody will read).
     cancel: Vec<Arc<AtomicBool>>,
@@ -426,6 +430,7 @@ impl<'m> Initialiser<'m> {
             backstop: Instant::now(),
             backstop_hit: false,
             backstop_factor: BACKSTOP_FACTOR,
+            progress: Arc::new(SearchProgress::default()),
             cancel: Vec::new(),
             grid_order: resident(Vec::with_capacity(max_set)),
             grid_segs: resident(Vec::with_capacity(max_set)),
@@ -521,6 +526,11 @@ impl<'m> Initialiser<'m> {
             .clamp(1, LANES)
     }
 
+    /// How far this initialiser's run under way has got (shared: watch it from any thread).
+    pub fn progress(&self) -> &Arc<SearchProgress> {
+        &self.progress
+    }
+
     fn cancelled(&self) -> bool {
         self.cancel.iter().any(|c| c.load(Ordering::Relaxed))
     }
@@ -538,6 +548,7 @@ impl<'m> Initialiser<'m> {
         let cast = rays.saturating_sub(self.rays_charged) / work::RAYS_PER_UNIT;
         self.rays_charged = rays;
         self.work = self.work.saturating_add(units.max(cast));
+        self.progress.set_work(self.work);
     }
 
     /// Occlusion rays cast so far (`visibility::at_pose`, the grid's lanes included): what the

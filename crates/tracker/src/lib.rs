@@ -81,6 +81,6 @@ mod vote;
 
 pub use background::{search_link, SearchJob, SearchLink, SearchWorker};
 pub use correspondence::{CorrespondenceState, CorrespondenceTable, HeldEdge, Track};
-pub use init::{Candidate, InitOptions, InitReport, Initialiser, SearchVolume};
+pub use init::{Candidate, InitOptions, InitReport, Initialiser, SearchProgress, SearchSnapshot, SearchVolume};
 pub use report::{FrameResult, SearchKind, StateCounts, TrackerEvent, TrackerState, TrackerStats, Weighed};
 pub use tracker::{Tracker, CATCH_UP_FRAMES};

@@ -74,6 +74,8 @@ pub struct TrackerStats {
     pub tracked: u64,
     /// Initialisation searches after the first (re-initialisations after a loss).
     pub reinitialisations: u64,
+    /// Searches launched, of every kind (initialisation, re-initialisation, relocalisation).
+    pub searches: u64,
     pub losses: u64,
     /// Frames rescued by a local search after the motion prior failed.
     pub relocalisations: u64,

@@ -160,6 +160,8 @@ pub struct Tracker<'m> {
     late: Vec<(u64, FrameResult)>,
     /// Stops a search on the worker when the tracker goes (no one will read it).
     cancel: Arc<AtomicBool>,
+    /// The searcher's progress ([`Tracker::search_progress`]).
+    progress: Arc<crate::init::SearchProgress>,
     /// The owner's flags that stop a search too ([`Tracker::stop_searches_on`]).
     stops: Vec<Arc<AtomicBool>>,
 }
@@ -191,6 +193,7 @@ impl<'m> Tracker<'m> {
         let cancel = Arc::new(AtomicBool::new(false));
         let mut searcher = Initialiser::new(rig, model, table, opts, solver.clone(), max_edges);
         searcher.add_cancel(&cancel);
+        let progress = Arc::clone(searcher.progress());
         let job = Box::new(SearchJob::new(searcher, max_edges));
         let narrow = init.view_share() < NARROW_VIEW_SHARE;
         let max_set = (0..table.node_count() as u32)
@@ -252,8 +255,16 @@ impl<'m> Tracker<'m> {
             late: Vec::with_capacity(BACKLOG_FRAMES + 1),
             defer: false,
             cancel,
+            progress,
             stops: Vec::new(),
         }
+    }
+
+    /// How far the search under way has got (initialisation, relocalisation and
+    /// re-initialisation alike, on the worker or inline): shared, so a thread other than the
+    /// frame path's can watch a search of seconds and say so (`omnitrack run`'s progress lines).
+    pub fn search_progress(&self) -> &Arc<crate::init::SearchProgress> {
+        &self.progress
     }
 
     /// Runs the searches on a worker from now on (module `background`): `link` sends jobs to a

@@ -134,14 +134,35 @@ pub enum ListenError {
 /// already published before the call (history 1) is printed first. Waits on the service's event,
 /// so an idle listener sleeps.
 pub fn listen(service: &str, count: Option<u64>, out: &mut dyn Write) -> Result<(), ListenError> {
-    let subscriber = PoseSubscriber::create(service)?;
-    print_samples(|t| subscriber.wait(t), format_pose_line, count, out)
+    listen_as(service, count, out, format_pose_line)
 }
 
 /// [`listen`] for the status service: one line per [`StatusSample`] (format in the module doc).
 pub fn listen_status(service: &str, count: Option<u64>, out: &mut dyn Write) -> Result<(), ListenError> {
+    listen_status_as(service, count, out, format_status_line)
+}
+
+/// [`listen`] with the caller's line `format` (`omnitrack listen --json`: one JSON object per
+/// line); the newline and the flush after each sample are this function's.
+pub fn listen_as(
+    service: &str,
+    count: Option<u64>,
+    out: &mut dyn Write,
+    format: fn(&PoseSample, &mut dyn Write) -> std::io::Result<()>,
+) -> Result<(), ListenError> {
+    let subscriber = PoseSubscriber::create(service)?;
+    print_samples(|t| subscriber.wait(t), format, count, out)
+}
+
+/// [`listen_status`] with the caller's line `format`.
+pub fn listen_status_as(
+    service: &str,
+    count: Option<u64>,
+    out: &mut dyn Write,
+    format: fn(&StatusSample, &mut dyn Write) -> std::io::Result<()>,
+) -> Result<(), ListenError> {
     let subscriber = StatusSubscriber::create(service)?;
-    print_samples(|t| subscriber.wait(t), format_status_line, count, out)
+    print_samples(|t| subscriber.wait(t), format, count, out)
 }
 
 fn print_samples<T>(

@@ -59,7 +59,9 @@ use iceoryx2::service::port_factory::{event as event_factory, publish_subscribe 
 use domain::Domain;
 
 pub use domain::{COUNTER_SUFFIX, SHM_DIR};
-pub use listen::{format_pose_line, format_status_line, listen, listen_status, ListenError};
+pub use listen::{
+    format_pose_line, format_status_line, listen, listen_as, listen_status, listen_status_as, ListenError,
+};
 pub use sample::{
     PoseSample, SearchKind, SearchState, Stage, StatusSample, TrackerState, WireError, POSE_WIRE_BYTES,
     STATUS_MAX_SENSORS, STATUS_SOURCE_BYTES, STATUS_STAGES,

@@ -27,7 +27,12 @@ use std::time::{Duration, Instant};
 fn capture_rig(source: &mut dyn FrameSource, shared: &Shared, pool: &Pool, handover: Handover) -> SourceStats {
     shared.thread_started(PipelineThread::Capture { sensor: None });
     let mut seq = 0u64;
-    while let Some(h) = pool.take(shared) {
+    // A lossless run with `max_frames` reads that many and no more: read ahead, they would be
+    // counted as captured and left.
+    while shared.capture_limit.is_none_or(|m| seq < m) {
+        let Some(h) = pool.take(shared) else {
+            break;
+        };
         let mut slot = pool.slot(h);
         let started = Instant::now();
         // A source's own wait (a real-time replay's gap, a reopening) ends at a stop.

@@ -6,7 +6,6 @@
 //! or, lossless, where capture waits.
 
 use super::shared::{lock, Shared};
-use super::stats::SensorCounters;
 use super::TICK;
 use crossbeam::channel::{bounded, Receiver, RecvTimeoutError, Select, SendTimeoutError, Sender, TrySendError};
 use omnitrack_core::frame::FrameSet;
@@ -110,7 +109,8 @@ pub(super) struct Handover {
 
 impl Handover {
     /// Hands frame `h` to the tracker: the latest frame wins (or, lossless, waits). False once
-    /// the pipeline stops.
+    /// the pipeline stops (the frame is then counted as left, `Shared::leave`). Every frame
+    /// posted is counted as captured, and ends processed, dropped or left.
     pub(super) fn post(&self, shared: &Shared, pool: &Pool, h: usize) -> bool {
         shared.frames_captured.fetch_add(1, Ordering::Relaxed);
         let mut h = h;
@@ -120,13 +120,13 @@ impl Handover {
                     Ok(()) => return true,
                     Err(SendTimeoutError::Timeout(x)) => {
                         if shared.stopping() {
-                            pool.release(x);
+                            shared.leave(pool, x);
                             return false;
                         }
                         h = x;
                     }
                     Err(SendTimeoutError::Disconnected(x)) => {
-                        pool.release(x);
+                        shared.leave(pool, x);
                         return false;
                     }
                 }
@@ -142,7 +142,7 @@ impl Handover {
                     }
                 }
                 Err(TrySendError::Disconnected(x)) => {
-                    pool.release(x);
+                    shared.leave(pool, x);
                     return false;
                 }
             }
@@ -151,15 +151,6 @@ impl Handover {
 
     /// A frame replaced before the tracker took it: counted, back to the pool.
     fn drop_frame(&self, shared: &Shared, pool: &Pool, h: usize) {
-        {
-            let slot = pool.slot(h);
-            for (img, c) in slot.frame.sensors().iter().zip(shared.sensors.iter()) {
-                if img.valid {
-                    SensorCounters::add(&c.overwritten, 1);
-                }
-            }
-        }
-        shared.frames_dropped.fetch_add(1, Ordering::Relaxed);
-        pool.release(h);
+        shared.give_back(pool, h, &shared.frames_dropped, |c| &c.overwritten);
     }
 }

@@ -178,18 +178,10 @@ impl Processor<'_, '_, '_> {
             self.hand_over_late(self.last_sequence);
         }
         self.shared.halt.store(true, Ordering::Relaxed);
-        // A frame still waiting for the tracker is dropped like any replaced one.
+        // A frame still waiting for the tracker was read but is left: not dropped (no newer
+        // frame replaced it), not processed.
         while let Ok(h) = self.ready.try_recv() {
-            {
-                let slot = self.pool.slot(h);
-                for (img, c) in slot.frame.sensors().iter().zip(self.shared.sensors.iter()) {
-                    if img.valid {
-                        SensorCounters::add(&c.overwritten, 1);
-                    }
-                }
-            }
-            self.shared.frames_dropped.fetch_add(1, Ordering::Relaxed);
-            self.pool.release(h);
+            self.shared.leave(self.pool, h);
         }
         self.publish_status();
         ProcessOutcome {
@@ -431,6 +423,7 @@ pub(super) fn run_process(
             // ends at its next check and is discarded (no pose from half a search).
             tracker.stop_searches_on(std::sync::Arc::clone(shared.stop));
             tracker.stop_searches_on(std::sync::Arc::clone(&shared.halt));
+            let _ = shared.search.set(std::sync::Arc::clone(tracker.search_progress()));
             tracker
         },
         poses,

@@ -4,13 +4,15 @@
 //! In: the [`PipelineOptions`] and the budgets. Out: what every thread reads and counts into;
 //! [`run_pipeline`](super::run_pipeline) turns it into the summary at the end.
 
+use super::pool::Pool;
 use super::priority::{self, Realtime};
 use super::stats::SensorCounters;
 use super::{stage_budget, PipelineOptions, PipelineThread, Stage, StageClock};
 use omnitrack_config::BudgetConfig;
 use omnitrack_io::capture::SourceError;
+use omnitrack_tracker::SearchProgress;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::{Arc, Mutex, MutexGuard};
+use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
 use std::time::Duration;
 
 /// State shared by all pipeline threads: flags and counters (atomics), the capture clock.
@@ -22,14 +24,23 @@ pub(super) struct Shared<'o> {
     pub(super) sensors: Box<[SensorCounters]>,
     pub(super) frames_captured: AtomicU64,
     pub(super) frames_dropped: AtomicU64,
+    /// Frames read but never processed: the run ended while they waited (`summary`'s
+    /// `frames_left`).
+    pub(super) frames_left: AtomicU64,
     pub(super) capture: Mutex<StageClock>,
     pub(super) source_error: Mutex<Option<SourceError>>,
     pub(super) lossless: bool,
+    /// A lossless run reads no more frames than it will process (`max_frames`): a whole-rig
+    /// source stops there instead of reading ahead frames the run would then leave.
+    pub(super) capture_limit: Option<u64>,
     pub(super) hook: Option<fn(PipelineThread)>,
     /// `[budgets] realtime_priority` (0: off).
     realtime_priority: u8,
     /// What the frame-path threads got so far (`priority`).
     pub(super) realtime: Mutex<Realtime>,
+    /// The tracker's search progress, set by the process thread once the tracker is made; the
+    /// sink's thread watches it (`sink::drain`).
+    pub(super) search: OnceLock<Arc<SearchProgress>>,
 }
 
 impl<'o> Shared<'o> {
@@ -40,9 +51,11 @@ impl<'o> Shared<'o> {
             sensors: (0..sensors).map(|_| SensorCounters::default()).collect(),
             frames_captured: AtomicU64::new(0),
             frames_dropped: AtomicU64::new(0),
+            frames_left: AtomicU64::new(0),
             capture: Mutex::new(StageClock::new(stage_budget(Stage::Capture, budgets))),
             source_error: Mutex::new(None),
             lossless: opts.lossless,
+            capture_limit: opts.run.max_frames.filter(|_| opts.lossless),
             hook: opts.on_thread_start,
             realtime_priority: if opts.lossless { 0 } else { budgets.realtime_priority },
             realtime: Mutex::new(if budgets.realtime_priority == 0 {
@@ -52,6 +65,7 @@ impl<'o> Shared<'o> {
             } else {
                 Realtime::Granted(budgets.realtime_priority)
             }),
+            search: OnceLock::new(),
         }
     }
 }
@@ -82,6 +96,33 @@ impl Shared<'_> {
         if let Some(hook) = self.hook {
             hook(t);
         }
+    }
+
+    /// A frame read but left unprocessed as the run ends: counted (whole, and per sensor for
+    /// each valid image in it) and its slot back to the pool.
+    pub(super) fn leave(&self, pool: &Pool, h: usize) {
+        self.give_back(pool, h, &self.frames_left, |c| &c.left);
+    }
+
+    /// A frame that will not be processed: `frames` counts it, each sensor's `counter` each of
+    /// its valid images, and its slot goes back to the pool.
+    pub(super) fn give_back(
+        &self,
+        pool: &Pool,
+        h: usize,
+        frames: &AtomicU64,
+        counter: impl Fn(&SensorCounters) -> &AtomicU64,
+    ) {
+        {
+            let slot = pool.slot(h);
+            for (img, c) in slot.frame.sensors().iter().zip(self.sensors.iter()) {
+                if img.valid {
+                    SensorCounters::add(counter(c), 1);
+                }
+            }
+        }
+        frames.fetch_add(1, Ordering::Relaxed);
+        pool.release(h);
     }
 
     pub(super) fn record_capture(&self, d: Duration) {

@@ -9,10 +9,12 @@
 use super::shared::Shared;
 use super::PipelineThread;
 use crate::{FrameRecord, SinkError};
-use crossbeam::channel::Receiver;
+use crossbeam::channel::{Receiver, RecvTimeoutError};
+use omnitrack_tracker::{SearchProgress, SearchSnapshot};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::Ordering;
+use std::time::{Duration, Instant};
 
 /// Where processed frames go, on the caller's thread.
 pub trait FrameSink {
@@ -28,7 +30,19 @@ pub trait FrameSink {
     fn finish(&mut self) -> Result<(), SinkError> {
         Ok(())
     }
+    /// A search has run for more than [`PROGRESS_AFTER`] (a whole-model search takes seconds,
+    /// in which no frame gets a pose): how far it has got. Called on the caller's thread, never
+    /// on the frame path, at most once per [`PROGRESS_EVERY`] while it runs. Ignored unless a
+    /// sink wants it.
+    fn search_progress(&mut self, progress: &SearchSnapshot) {
+        let _ = progress;
+    }
 }
+
+/// A search is reported to [`FrameSink::search_progress`] once it has run this long ...
+pub const PROGRESS_AFTER: Duration = Duration::from_secs(1);
+/// ... and then at most this often.
+pub const PROGRESS_EVERY: Duration = Duration::from_secs(1);
 
 impl<F: FnMut(&FrameRecord) -> Result<(), SinkError>> FrameSink for F {
     fn frame(&mut self, record: &FrameRecord) -> Result<(), SinkError> {
@@ -233,7 +247,22 @@ impl FrameSink for TumSink {
 pub(super) fn drain(sink: &mut dyn FrameSink, records: &Receiver<FrameRecord>, shared: &Shared) -> Option<SinkError> {
     shared.thread_started(PipelineThread::Sink);
     let mut sink_error: Option<SinkError> = None;
-    for record in records.iter() {
+    let mut progress = ProgressWatch::default();
+    loop {
+        // The records, and between them a look at the search under way every tick.
+        let record = match records.recv_timeout(super::TICK) {
+            Ok(record) => Some(record),
+            Err(RecvTimeoutError::Timeout) => None,
+            Err(RecvTimeoutError::Disconnected) => break,
+        };
+        if sink_error.is_none() {
+            if let Some(search) = shared.search.get() {
+                progress.look(search, sink);
+            }
+        }
+        let Some(record) = record else {
+            continue;
+        };
         if sink_error.is_none() {
             let handed = if record.late {
                 sink.late(&record)
@@ -252,6 +281,30 @@ pub(super) fn drain(sink: &mut dyn FrameSink, records: &Receiver<FrameRecord>, s
         sink_error.get_or_insert(e);
     }
     sink_error
+}
+
+/// When the sink was last told of a search's progress.
+#[derive(Default)]
+struct ProgressWatch {
+    said_at: Option<Instant>,
+}
+
+impl ProgressWatch {
+    /// Tells the sink how far the search under way has got, if it has run longer than
+    /// [`PROGRESS_AFTER`] and nothing was said within [`PROGRESS_EVERY`].
+    fn look(&mut self, search: &SearchProgress, sink: &mut dyn FrameSink) {
+        let now = Instant::now();
+        if self.said_at.is_some_and(|t| now.duration_since(t) < PROGRESS_EVERY) {
+            return;
+        }
+        let Some(snapshot) = search.snapshot() else {
+            return;
+        };
+        if snapshot.elapsed >= PROGRESS_AFTER {
+            self.said_at = Some(now);
+            sink.search_progress(&snapshot);
+        }
+    }
 }
 
 #[cfg(test)]

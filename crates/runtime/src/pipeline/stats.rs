@@ -189,6 +189,7 @@ pub(crate) struct SensorCounters {
     pub overwritten: AtomicU64,
     pub faults: AtomicU64,
     pub sync_missed: AtomicU64,
+    pub left: AtomicU64,
 }
 
 impl SensorCounters {
@@ -202,6 +203,7 @@ impl SensorCounters {
             overwritten: self.overwritten.load(Ordering::Relaxed),
             faults: self.faults.load(Ordering::Relaxed),
             sync_missed: self.sync_missed.load(Ordering::Relaxed),
+            left: self.left.load(Ordering::Relaxed),
         }
     }
 }
@@ -220,13 +222,16 @@ pub struct SensorSummary {
     /// Images that missed their instant's assembly window (per-sensor capture only): too late,
     /// too early, or never came while the other sensors' images did.
     pub sync_missed: u64,
+    /// Valid images of frames read but never processed because the run ended first (a stop, or
+    /// `max_frames` reached while capture had read ahead): neither dropped nor delivered.
+    pub left: u64,
 }
 
 impl SensorSummary {
     /// Every image of this sensor that did not reach the tracker: what the status sample's
     /// `frames_dropped` carries.
     pub fn lost(&self) -> u64 {
-        self.overwritten + self.faults + self.sync_missed
+        self.overwritten + self.faults + self.sync_missed + self.left
     }
 }
 

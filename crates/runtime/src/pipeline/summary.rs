@@ -47,11 +47,17 @@ pub struct PipelineSummary {
     pub reason: RunEnd,
     /// Start-up done → last frame processed.
     pub elapsed: Duration,
-    /// Frames handed into the pool by capture (or assembly).
+    /// Frames read from the source and handed into the pool by capture (or assembly). Each
+    /// ends processed, dropped or left: `frames_captured = frames_processed + frames_dropped +
+    /// frames_left`. A lossless run with `max_frames` reads no more than it processes.
     pub frames_captured: u64,
     pub frames_processed: u64,
-    /// Whole frames replaced by a newer one before the tracker took them (latest frame wins).
+    /// Whole frames replaced by a newer one before the tracker took them (latest frame wins;
+    /// always 0 in a lossless run).
     pub frames_dropped: u64,
+    /// Frames read but never processed because the run ended while they waited (a stop, or
+    /// `max_frames` reached while a live source had read ahead).
+    pub frames_left: u64,
     /// Indexed by sensor id.
     pub sensors: Vec<SensorSummary>,
     /// Indexed by [`Stage::index`].
@@ -89,11 +95,18 @@ impl fmt::Display for PipelineSummary {
         let lat = self.stage(Stage::Frame);
         write!(
             f,
-            "{} frames processed of {} captured ({:.1} frames/s), {} dropped; latency p50 {:.1} ms, p99 {:.1} ms; overruns:",
+            "{} frames processed of {} captured ({:.1} frames/s), {} dropped",
             self.frames_processed,
             self.frames_captured,
             self.frame_rate_hz(),
             self.frames_dropped,
+        )?;
+        if self.frames_left > 0 {
+            write!(f, ", {} left unprocessed at the end", self.frames_left)?;
+        }
+        write!(
+            f,
+            "; latency p50 {:.1} ms, p99 {:.1} ms; overruns:",
             lat.p50.as_secs_f64() * 1e3,
             lat.p99.as_secs_f64() * 1e3
         )?;
@@ -134,6 +147,7 @@ pub(super) fn summarize(
         frames_captured: shared.frames_captured.load(Ordering::Relaxed),
         frames_processed: outcome.frames_processed,
         frames_dropped: shared.frames_dropped.load(Ordering::Relaxed),
+        frames_left: shared.frames_left.load(Ordering::Relaxed),
         sensors: shared.sensors.iter().map(SensorCounters::snapshot).collect(),
         stages,
         tracker: outcome.tracker,

@@ -74,8 +74,10 @@ pub(super) struct GridLane {
     merit: MeritScratch,
     /// Per rotation, the lane's best positions (score, position).
     best: [GridBest; MAX_ROTATIONS],
-    /// Work charged, and the lane's rays already charged.
+    /// Work charged, the part of it told to the search's progress, and the lane's rays
+    /// already charged.
     work: u64,
+    said: u64,
     rays_charged: u64,
     /// Cells whose every position was scored, and the first of the lane's cells that was not
     /// (`None`: all of them were).
@@ -94,6 +96,7 @@ impl GridLane {
             merit: MeritScratch::new(GRID_SEGMENTS),
             best: std::array::from_fn(|_| GridBest::new()),
             work: 0,
+            said: 0,
             rays_charged: 0,
             scanned: 0,
             resume: None,
@@ -160,6 +163,7 @@ impl Initialiser<'_> {
                 best.clear();
             }
             lane.work = 0;
+            lane.said = 0;
             lane.rays_charged = lane.sight.rays_cast();
             lane.scanned = 0;
             lane.resume = None;
@@ -235,6 +239,8 @@ impl Initialiser<'_> {
     /// Whether `lane` has spent `limit`, or the wall clock's backstop has fallen or the search
     /// was cancelled: checked in every lane, so that none runs on after the others stop.
     fn lane_spent(&self, lane: &mut GridLane, limit: u64) -> bool {
+        self.progress.add_work(lane.work - lane.said);
+        lane.said = lane.work;
         if lane.work >= limit {
             return true;
         }

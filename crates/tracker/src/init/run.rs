@@ -18,6 +18,7 @@ impl Initialiser<'_> {
     pub fn run(&mut self, edges: &[Edge], volume: &SearchVolume, rng: &mut SmallRng) -> (&[Candidate], InitReport) {
         let started = Instant::now();
         let limit = self.work_limit();
+        let _running = self.progress.begin(limit, volume.diameter_m);
         self.work = 0;
         self.rays_charged = self.at_pose.rays_cast();
         self.backstop_hit = false;
@@ -116,7 +117,9 @@ impl Initialiser<'_> {
                     let (drawn, tilted) = me.sample_cell(w, node, volume, rng);
                     done.samples += drawn;
                     done.tilted += tilted;
-                    done.work += work::CELL + matches / 50 * work::CELL_PER_50_MATCHES + drawn * work::CELL_PER_SAMPLE;
+                    let charge = work::CELL + matches / 50 * work::CELL_PER_50_MATCHES + drawn * work::CELL_PER_SAMPLE;
+                    done.work += charge;
+                    me.progress.add_work(charge);
                 }
                 done
             };

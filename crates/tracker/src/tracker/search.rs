@@ -131,6 +131,8 @@ impl<'m> Tracker<'m> {
             job.add_cancel(stop);
         }
         self.pending = Some(pending);
+        self.stats.searches += 1;
+        self.progress.set_kind(self.search_under_way());
         match &self.link {
             Some(link) => {
                 if let Err(e) = link.jobs.send(job) {
