@@ -26,6 +26,8 @@ pub(crate) struct HoldSummary {
     pub(crate) wrong: usize,
     pub(crate) none: usize,
     pub(crate) losses: usize,
+    /// Frames of fewer than `min_inliers` lines the motion filter took.
+    pub(crate) filtered_few_lines: usize,
 }
 
 /// The `--hold N` mode (module doc): `stretches` starts spread over the recording.
@@ -61,7 +63,6 @@ pub(crate) fn hold(
         let mut tracker = Tracker::new(rig, model, table, cfg, None, 1 + k as u64);
         // Each frame's pose by its time; late answers fill in the frames they belong to.
         let mut poses: Vec<(u64, Option<omnitrack::geometry::Pose>)> = Vec::with_capacity(HOLD_FRAMES);
-        let mut losses = 0;
         for i in 0..HOLD_FRAMES {
             if !source.next_frame(&mut frame).unwrap() {
                 break;
@@ -73,7 +74,6 @@ pub(crate) fn hold(
             } else {
                 tracker.process(edges, ts)
             };
-            losses += usize::from(matches!(r.event, Some(TrackerEvent::LostLock)));
             poses.push((ts, r.pose));
             for (lt, late) in tracker.late() {
                 if let Some(slot) = poses.iter_mut().find(|(t, _)| t == lt) {
@@ -106,6 +106,10 @@ pub(crate) fn hold(
             }
         }
         tracker.finish();
+        // Losses are counted by the tracker: one concluded late (a relocalisation that found
+        // nothing) carries its event in `late()`, not in the frame's own result.
+        let losses = tracker.stats().losses as usize;
+        sum.filtered_few_lines += tracker.stats().filtered_few_lines as usize;
         for (lt, late) in tracker.late() {
             if let Some(slot) = poses.iter_mut().find(|(t, _)| t == lt) {
                 slot.1 = slot.1.or(late.pose);
@@ -137,13 +141,14 @@ pub(crate) fn hold(
     }
     let pct = |n: usize| 100.0 * n as f64 / sum.frames.max(1) as f64;
     println!(
-        "{name}: held from the truth over {} stretches of {HOLD_FRAMES} frames: {:.1} % of {} frames within 10 cm / 1°, {:.1} % more than 30 cm or 3° off, {:.1} % without a pose, {} losses of lock",
+        "{name}: held from the truth over {} stretches of {HOLD_FRAMES} frames: {:.1} % of {} frames within 10 cm / 1°, {:.1} % more than 30 cm or 3° off, {:.1} % without a pose, {} losses of lock, {} frames of few lines taken by the motion filter",
         starts.len(),
         pct(sum.right),
         sum.frames,
         pct(sum.wrong),
         pct(sum.none),
-        sum.losses
+        sum.losses,
+        sum.filtered_few_lines
     );
     sum
 }

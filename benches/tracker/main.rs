@@ -318,6 +318,7 @@ fn main() {
             held.wrong += h.wrong;
             held.none += h.none;
             held.losses += h.losses;
+            held.filtered_few_lines += h.filtered_few_lines;
             continue;
         }
         if a.init_trials > 0 {
@@ -380,12 +381,13 @@ fn main() {
     if a.hold > 0 {
         let pct = |n: usize| 100.0 * n as f64 / held.frames.max(1) as f64;
         println!(
-            "all: {:.1} % of {} frames within 10 cm / 1°, {:.1} % more than 30 cm or 3° off, {:.1} % without a pose, {} losses of lock",
+            "all: {:.1} % of {} frames within 10 cm / 1°, {:.1} % more than 30 cm or 3° off, {:.1} % without a pose, {} losses of lock, {} frames of few lines taken by the motion filter",
             pct(held.right),
             held.frames,
             pct(held.wrong),
             pct(held.none),
-            held.losses
+            held.losses,
+            held.filtered_few_lines
         );
     }
 }

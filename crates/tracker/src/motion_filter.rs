@@ -218,19 +218,6 @@ impl MotionFilter {
         Vector6::new(dp.x, dp.y, dp.z, dr.x, dr.y, dr.z)
     }
 
-    /// The squared Mahalanobis distance of `measured` (covariance `cov`) from the prediction at
-    /// `time_ns`; `None` when `cov` carries no information.
-    pub fn distance2(&self, time_ns: u64, measured: &Pose, cov: &Matrix6<f64>) -> Option<f64> {
-        if !usable(cov) {
-            return None;
-        }
-        let (predicted, p) = self.predict(time_ns);
-        let s = p + cov;
-        let y = Self::innovation(&predicted, measured);
-        let chol = s.cholesky()?;
-        Some(y.dot(&chol.solve(&y)))
-    }
-
     /// Moves to `time_ns` and fuses `measured` with covariance `cov`, unless it lies outside
     /// [`GATE_CHI2_6`] or carries no information (then the state is only moved on).
     pub fn update(&mut self, time_ns: u64, measured: &Pose, cov: &Matrix6<f64>) -> Fused {
@@ -268,6 +255,18 @@ impl MotionFilter {
         self.cov = symmetric(i_kh * self.cov * i_kh.transpose() + k * cov * k.transpose());
         Fused::Yes(d2)
     }
+}
+
+/// The squared Mahalanobis distance of `measured` (covariance `cov`) from `predicted` (covariance
+/// `predicted_cov`, as [`MotionFilter::predict`] gives them); `None` when `cov` carries no
+/// information.
+pub fn distance2(predicted: &Pose, predicted_cov: &Matrix6<f64>, measured: &Pose, cov: &Matrix6<f64>) -> Option<f64> {
+    if !usable(cov) {
+        return None;
+    }
+    let y = MotionFilter::innovation(predicted, measured);
+    let chol = (predicted_cov + cov).cholesky()?;
+    Some(y.dot(&chol.solve(&y)))
 }
 
 /// Whether a measurement covariance carries information: finite and positive definite.

@@ -141,7 +141,10 @@ fn a_jump_is_refused_and_a_measurement_without_information_is_not_fused() {
     assert!((filter.pose().translation.vector.x - before.translation.vector.x - 0.03).abs() < 0.01);
     let blind = Matrix6::from_diagonal_element(f64::INFINITY);
     assert_eq!(filter.update(11 * 33_333_333, &jump, &blind), Fused::NoInformation);
-    assert!(filter.distance2(12 * 33_333_333, &jump, &blind).is_none());
+    let (predicted, predicted_cov) = filter.predict(12 * 33_333_333);
+    assert!(distance2(&predicted, &predicted_cov, &jump, &blind).is_none());
+    let d2 = distance2(&predicted, &predicted_cov, &jump, &cov).expect("informative");
+    assert!(d2 > GATE_CHI2_6);
 }
 
 /// A pose measured well in some directions and hardly in others (a wall seen face on fixes the

@@ -40,7 +40,7 @@ use super::Tracker;
 use crate::correspondence::{CorrespondenceState, HeldEdge};
 use crate::init::Candidate;
 use crate::matching::{best_edge, Gate, Predicted};
-use crate::motion_filter::{Fused, GATE_CHI2_6};
+use crate::motion_filter::{distance2, Fused, GATE_CHI2_6};
 use crate::report::{FrameResult, TrackerEvent, TrackerState};
 use nalgebra::{Isometry3, Matrix6, Point3, Translation3, UnitQuaternion};
 use omnitrack_config::SolverMethod;
@@ -250,9 +250,9 @@ impl Tracker<'_> {
         let min_len = self.cfg.edges.min_edge_length_deg.to_radians();
 
         // 1. Prediction.
-        let filtering = self.cfg.motion.filter && self.filter.started();
+        let forecast = (self.cfg.motion.filter && self.filter.started()).then(|| self.filter.predict(timestamp_ns));
         let predicted = match (self.cfg.maintenance.constant_velocity_prior, self.previous) {
-            _ if filtering => self.filter.predict(timestamp_ns).0,
+            _ if forecast.is_some() => forecast.map_or(self.pose, |(p, _)| p),
             (true, Some((prev, prev_t))) if prev_t < self.last_time => {
                 constant_velocity(&prev, prev_t, &self.pose, self.last_time, timestamp_ns)
             }
@@ -402,15 +402,11 @@ impl Tracker<'_> {
         // (their covariance says where), provided it continues the motion (inside the filter's
         // gate) and the prediction is still sharp enough to tell a slide from the motion: its
         // position σ within a third of the jump limit.
-        if !good && filtering {
+        if let (false, Some((_, predicted_cov))) = (good, &forecast) {
             if let Some(p) = pose.filter(|p| self.set.len() >= SMALLEST_SAMPLE && within_jump(p)) {
-                let (_, prior_cov) = self.filter.predict(timestamp_ns);
-                let sharp = largest_position_sigma(&prior_cov) <= mcfg.max_jump_m / 3.0;
+                let sharp = largest_position_sigma(predicted_cov) <= mcfg.max_jump_m / 3.0;
                 let cov = self.measured_covariance(&p);
-                let continues = self
-                    .filter
-                    .distance2(timestamp_ns, &p, &cov)
-                    .is_some_and(|d2| d2 <= GATE_CHI2_6);
+                let continues = distance2(&predicted, predicted_cov, &p, &cov).is_some_and(|d2| d2 <= GATE_CHI2_6);
                 if sharp && continues {
                     good = true;
                     self.stats.filtered_few_lines += 1;
