@@ -345,6 +345,8 @@ fn tracking_searches_and_relocalisations_allocate_nothing_and_touch_no_new_memor
     eprintln!("{stats:?}; page faults after the walk (frame, faults): {faults_after_walk:?}");
     assert!(counted >= 160 && tracking_frames >= 160, "{counted} frames counted");
     assert!(stats.relocalisations >= 2, "{stats:?}");
+    // The frames after each turn held the relocalised poses: published, none withdrawn.
+    assert_eq!(stats.relocalisations_withdrawn, 0, "{stats:?}");
     assert_eq!(stats.losses, 0, "{stats:?}");
     assert_eq!(allocated, 0, "allocations while tracking, relocalisations included");
     assert_eq!(searches, 1);
@@ -362,6 +364,73 @@ fn tracking_searches_and_relocalisations_allocate_nothing_and_touch_no_new_memor
 /// nothing: its candidates explain less than `accept_explained_fraction` of what they predict,
 /// or less than `accept_support_fraction` of the longest edges, or no candidate is a clear
 /// winner over the others. The next whole frames search again and commit to the truth.
+/// A relocalised pose is published only once a later frame's maintenance holds it (module
+/// `tracker::relocalise`, "On probation"). The rig walks, turns back skipping two frames (the
+/// motion prior fails: a relocalisation), and the next frames show nothing: the relocalised pose
+/// is withdrawn unpublished, the lock is lost, and the walk back finds the rig again. The same
+/// turn followed by frames that show the building publishes it (the test above).
+#[test]
+fn a_relocalised_pose_no_later_frame_holds_is_withdrawn_unpublished() {
+    let f = fixture();
+    let (mut source, rig, cfg, mut frame, mut detector) = replay(f);
+    let mut recorded = Vec::with_capacity(FRAMES);
+    while source.next_frame(&mut frame).unwrap() {
+        recorded.push(detector.detect(&frame).to_vec());
+    }
+    let period_ns = f.truth[1].timestamp_ns - f.truth[0].timestamp_ns;
+    let last = recorded.len() - 1;
+    // The walk; back from its end two frames skipped; four frames that show nothing; back on.
+    let schedule: Vec<Option<usize>> = (0..=last)
+        .map(Some)
+        .chain([Some(last - 3)])
+        .chain([None; 4])
+        .chain((20..=last - 8).rev().map(Some))
+        .collect();
+    let mut tracker = Tracker::new(&rig, &f.model, &f.table, &cfg, Some(hint(f)), 1);
+    let mut published = std::collections::HashMap::new();
+    let mut relocalised_late = 0;
+    let blind = Vec::new();
+    for (k, i) in schedule.iter().enumerate() {
+        let ts = k as u64 * period_ns;
+        let r = tracker.process(i.map_or(&blind, |i| &recorded[i]), ts);
+        if let Some(p) = r.pose {
+            published.insert(ts, p);
+        }
+        for (t, late) in tracker.late() {
+            relocalised_late += usize::from(matches!(late.event, Some(TrackerEvent::Relocalised)));
+            if let Some(p) = late.pose {
+                published.insert(*t, p);
+            }
+        }
+    }
+    tracker.finish();
+    let stats = tracker.stats();
+    assert!(stats.relocalisations >= 1, "{stats:?}");
+    assert!(stats.relocalisations_withdrawn >= 1, "{stats:?}");
+    assert_eq!(relocalised_late, 0, "a relocalised answer was published: {stats:?}");
+    assert!(stats.losses >= 1, "{stats:?}");
+    // Nothing was published for the turn's frame or the blind ones.
+    for k in last + 1..=last + 5 {
+        let ts = k as u64 * period_ns;
+        assert!(!published.contains_key(&ts), "frame {k} of the schedule has a pose");
+    }
+    // Found again on the walk back, and nothing published anywhere is wrong.
+    let after = (last + 6..schedule.len())
+        .filter(|&k| published.contains_key(&(k as u64 * period_ns)))
+        .count();
+    assert!(after >= 20, "{after} frames posed on the walk back: {stats:?}");
+    for (k, i) in schedule.iter().enumerate() {
+        let (Some(i), Some(p)) = (i, published.get(&(k as u64 * period_ns))) else {
+            continue;
+        };
+        let (dp, dr) = errors(f, f.truth[*i].timestamp_ns, p);
+        assert!(
+            dp < 0.15 && dr < 1.0,
+            "frame {k} (recording frame {i}): {dp:.3} m {dr:.2}°"
+        );
+    }
+}
+
 #[test]
 fn a_frame_that_shows_too_little_commits_nothing_and_the_next_frames_find_the_truth() {
     let f = fixture();

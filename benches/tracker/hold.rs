@@ -15,7 +15,7 @@ use omnitrack::tracker::{FrameResult, Tracker, TrackerEvent};
 use omnitrack::trajectory::Stamped;
 use omnitrack::{Model, Rig};
 
-/// Frames per stretch: 3 s at the scenarios' 30 Hz.
+/// Frames per stretch: 18 s of `lab` or `corridor` (5 Hz), 6 s of `handheld` (15 Hz).
 pub(crate) const HOLD_FRAMES: usize = 90;
 
 /// What `hold` counted over every stretch of one recording.
@@ -28,7 +28,43 @@ pub(crate) struct HoldSummary {
     pub(crate) losses: usize,
     /// Frames of fewer than `min_inliers` lines the motion filter took.
     pub(crate) filtered_few_lines: usize,
+    /// Relocalisations, and of them those withdrawn unpublished (no later frame held the pose).
+    pub(crate) relocalised: usize,
+    pub(crate) withdrawn: usize,
 }
+
+impl HoldSummary {
+    /// Adds another recording's counts.
+    pub(crate) fn add(&mut self, o: &HoldSummary) {
+        self.frames += o.frames;
+        self.right += o.right;
+        self.wrong += o.wrong;
+        self.none += o.none;
+        self.losses += o.losses;
+        self.filtered_few_lines += o.filtered_few_lines;
+        self.relocalised += o.relocalised;
+        self.withdrawn += o.withdrawn;
+    }
+
+    /// A row of the results table.
+    pub(crate) fn row(&self, name: &str) -> String {
+        let pct = |n: usize| 100.0 * n as f64 / self.frames.max(1) as f64;
+        format!(
+            "| {name} | {} | {:.1} % | {:.1} % | {:.1} % | {} | {} ({}) | {} |",
+            self.frames,
+            pct(self.right),
+            pct(self.wrong),
+            pct(self.none),
+            self.losses,
+            self.relocalised,
+            self.withdrawn,
+            self.filtered_few_lines
+        )
+    }
+}
+
+/// The results table's header.
+pub(crate) const HOLD_HEADER: &str = "| recording | frames | within 10 cm / 1° | more than 30 cm or 3° off | no pose | losses of lock | relocalised (withdrawn) | frames of few lines the filter took |\n| --- | --- | --- | --- | --- | --- | --- | --- |";
 
 /// The `--hold N` mode (module doc): `stretches` starts spread over the recording.
 #[allow(clippy::too_many_arguments)]
@@ -79,6 +115,41 @@ pub(crate) fn hold(
                 if let Some(slot) = poses.iter_mut().find(|(t, _)| t == lt) {
                     slot.1 = slot.1.or(late.pose);
                 }
+                if verbose {
+                    let at = poses.iter().position(|(t, _)| t == lt).map_or(0, |j| start + j);
+                    let err = late.pose.zip(truth_at(*lt)).map(|(p, g)| {
+                        format!(
+                            "{:.1} cm {:.2}°",
+                            (p.translation.vector - g.translation.vector).norm() * 100.0,
+                            p.rotation.angle_to(&g.rotation).to_degrees()
+                        )
+                    });
+                    eprintln!(
+                        "      late answer for frame {at}: {:?} {}{}",
+                        late.state,
+                        err.unwrap_or_else(|| "no pose".into()),
+                        match late.event {
+                            Some(TrackerEvent::LostLock) => " LOST",
+                            Some(TrackerEvent::Relocalised) => " relocalised",
+                            Some(TrackerEvent::Committed { .. }) => " committed",
+                            Some(TrackerEvent::Searched(ref s)) => {
+                                eprint!(
+                                    " [searched: {} rotations, plan cells {} of {}, triplet cells {} of {}, diameter {:?}, work {}{}]",
+                                    s.rotations,
+                                    s.plan_cells_scanned,
+                                    s.plan_cells_in_volume,
+                                    s.cells_searched,
+                                    s.cells_in_volume,
+                                    s.diameter_m,
+                                    s.work,
+                                    if s.backstop { ", backstop" } else { "" }
+                                );
+                                ""
+                            }
+                            None => "",
+                        }
+                    );
+                }
             }
             if verbose {
                 let err = r.pose.zip(truth_at(ts)).map(|(p, g)| {
@@ -100,7 +171,8 @@ pub(crate) fn hold(
                         Some(TrackerEvent::LostLock) => " LOST",
                         Some(TrackerEvent::Relocalised) => " relocalised",
                         Some(TrackerEvent::Committed { .. }) => " committed",
-                        _ => "",
+                        Some(TrackerEvent::Searched(_)) => " searched",
+                        None => "",
                     }
                 );
             }
@@ -110,6 +182,8 @@ pub(crate) fn hold(
         // nothing) carries its event in `late()`, not in the frame's own result.
         let losses = tracker.stats().losses as usize;
         sum.filtered_few_lines += tracker.stats().filtered_few_lines as usize;
+        sum.relocalised += tracker.stats().relocalisations as usize;
+        sum.withdrawn += tracker.stats().relocalisations_withdrawn as usize;
         for (lt, late) in tracker.late() {
             if let Some(slot) = poses.iter_mut().find(|(t, _)| t == lt) {
                 slot.1 = slot.1.or(late.pose);

@@ -72,7 +72,7 @@ mod run;
 use buildings::buildings;
 use detailed::detailed;
 use figure15::figure15;
-use hold::{hold, HoldSummary};
+use hold::{hold, HoldSummary, HOLD_HEADER};
 use init_trials::{init_trials, WINDOW_AND_AFTER};
 use run::{hint_at_start, run_once};
 
@@ -255,6 +255,7 @@ fn main() {
         figure15(&rig);
     }
     let mut held = HoldSummary::default();
+    let mut held_rows = Vec::new();
     for name in &a.scenarios {
         let scenario = Scenario::get(*name);
         let frames = a.frames.unwrap_or(if a.full { scenario.paper_frames } else { 300 });
@@ -313,12 +314,8 @@ fn main() {
                 a.hold,
                 a.verbose,
             );
-            held.frames += h.frames;
-            held.right += h.right;
-            held.wrong += h.wrong;
-            held.none += h.none;
-            held.losses += h.losses;
-            held.filtered_few_lines += h.filtered_few_lines;
+            held.add(&h);
+            held_rows.push(h.row(name.as_str()));
             continue;
         }
         if a.init_trials > 0 {
@@ -389,5 +386,32 @@ fn main() {
             held.losses,
             held.filtered_few_lines
         );
+        held_rows.push(held.row("all"));
+        let table = format!("{HOLD_HEADER}\n{}", held_rows.join("\n"));
+        let note = format!(
+            "{table}\n\n{} stretches of {} frames per recording ({} frames, seed {}), each started at the true pose; \
+             a frame counts by its pose on time or late. {}.",
+            a.hold,
+            hold::HOLD_FRAMES,
+            a.frames.unwrap_or(300),
+            a.seed,
+            match &a.config {
+                Some(c) => format!("Config {} (NOT the shipped one)", c.display()),
+                None => "The shipped configuration".into(),
+            }
+        );
+        let title = format!("Maintenance held from the truth (`--hold`), rig {}", rig.name);
+        let command = format!(
+            "cargo bench --bench tracker -- {}--no-figure15 --hold {}",
+            a.rig
+                .as_ref()
+                .map_or(String::new(), |r| format!("--rig {} ", r.display())),
+            a.hold
+        );
+        let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+        match omnitrack::desk::results::write(root, &format!("hold-{}", rig.name), &title, &command, &note) {
+            Ok(path) => eprintln!("results in {}", path.display()),
+            Err(e) => eprintln!("results file not written: {e}"),
+        }
     }
 }

@@ -248,12 +248,18 @@ fn run_and_listen_json_have_every_documented_field() {
             "losses",
             "reinitialisations",
             "relocalisations",
+            "relocalisations_withdrawn",
             "first_search_s",
             "search_time_s"
         ])
     );
     assert!(u(&tracker["searches"]) >= 1);
-    for k in ["searches_cancelled", "losses", "reinitialisations"] {
+    for k in [
+        "searches_cancelled",
+        "losses",
+        "reinitialisations",
+        "relocalisations_withdrawn",
+    ] {
         assert_eq!(u(&tracker[k]), 0, "{k}");
     }
     let _ = u(&tracker["relocalisations"]);

@@ -79,6 +79,9 @@ pub struct TrackerStats {
     pub losses: u64,
     /// Frames rescued by a local search after the motion prior failed.
     pub relocalisations: u64,
+    /// Of those, the relocalised poses the next frame's maintenance did not hold (module
+    /// `relocalise`, "On probation"): withdrawn unpublished, and the lock counted lost.
+    pub relocalisations_withdrawn: u64,
     /// Wall time of the first search and of all searches.
     pub first_search: Option<Duration>,
     pub search_time: Duration,

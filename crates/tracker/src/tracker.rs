@@ -95,6 +95,21 @@ struct Tail {
     timestamp_ns: u64,
 }
 
+/// Most relocalised frames held back at once (module `relocalise`, "On probation"); the chain's
+/// limit is `maintenance.lost_after_frames`, at most this.
+const PROBATION_LINKS: usize = 8;
+
+/// Relocalised frames' answers, held until a frame's maintenance holds the pose (module
+/// `relocalise`, "On probation").
+#[derive(Debug, Clone, Default)]
+struct Probation {
+    /// The frames' stamps and answers, oldest first.
+    links: heapless::Vec<(u64, FrameResult), PROBATION_LINKS>,
+    /// The last pose maintenance held before the first of them, and its time: where the rig
+    /// is searched for when they are withdrawn.
+    held: Option<(Pose, u64)>,
+}
+
 /// The tracker for one rig, model and visibility table.
 pub struct Tracker<'m> {
     model: &'m Model,
@@ -125,6 +140,8 @@ pub struct Tracker<'m> {
     last_good: Option<Pose>,
     /// When `last_good` was seen (ns).
     last_good_time: u64,
+    /// Relocalised frames' answers waiting for a frame to hold their pose.
+    probation: Probation,
     /// Post-loss searches double their volume after each widened attempt fails.
     volume_level: u32,
     confirming: [Confirming; 4],
@@ -231,6 +248,7 @@ impl<'m> Tracker<'m> {
             last_time: 0,
             last_good: None,
             last_good_time: 0,
+            probation: Probation::default(),
             volume_level: 0,
             confirming: [Confirming {
                 pose: Pose::identity(),
@@ -252,7 +270,7 @@ impl<'m> Tracker<'m> {
             pending: None,
             backlog: Backlog::new(BACKLOG_FRAMES, max_edges),
             scratch: resident(Vec::with_capacity(max_edges)),
-            late: Vec::with_capacity(BACKLOG_FRAMES + 1),
+            late: Vec::with_capacity(BACKLOG_FRAMES + 1 + PROBATION_LINKS),
             defer: false,
             cancel,
             progress,
@@ -453,6 +471,9 @@ impl<'m> Tracker<'m> {
                 None => break,
             }
         }
+        // Relocalised poses no later frame held are not published.
+        self.stats.relocalisations_withdrawn += self.probation.links.len() as u64;
+        self.probation.links.clear();
         let before = self.backlog.dropped;
         while self.backlog.pop_into(&mut self.scratch).is_some() {
             self.backlog.dropped += 1;

@@ -72,6 +72,7 @@ struct Searches {
     losses: u64,
     reinitialisations: u64,
     relocalisations: u64,
+    relocalisations_withdrawn: u64,
     first_search_s: Option<f64>,
     search_time_s: f64,
 }
@@ -193,6 +194,7 @@ impl<'a> RunReport<'a> {
                 losses: stats.losses,
                 reinitialisations: stats.reinitialisations,
                 relocalisations: stats.relocalisations,
+                relocalisations_withdrawn: stats.relocalisations_withdrawn,
                 first_search_s: stats.first_search.map(|d| d.as_secs_f64()),
                 search_time_s: stats.search_time.as_secs_f64(),
             },

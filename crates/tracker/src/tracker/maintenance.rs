@@ -418,6 +418,20 @@ impl Tracker<'_> {
         // less than the jump limits, or the view may just be poorer (people, clutter): a local
         // search decides, and replaces the pose only with one that explains clearly more (by
         // the search's own measure, without the hue gate).
+        // Relocalised poses on probation are published when this frame holds the pose; when
+        // as many relocalised frames as lose the lock went unheld, they are withdrawn and the
+        // lock is lost (module `relocalise`).
+        if !self.probation.links.is_empty() {
+            if good {
+                self.release_probation();
+            } else if self.probation.links.len() >= self.probation_limit() {
+                let mut r = self.lose_lock();
+                r.solve_time = solve_started.elapsed().saturating_sub(match_time);
+                r.match_time = match_time;
+                r.samples = samples;
+                return r;
+            }
+        }
         let suspect = good && (result.explained as f64) < self.explained_floor(0);
         if !good || suspect {
             // When the prior failed (typically a turn faster than the motion model expects,
@@ -502,15 +516,24 @@ impl Tracker<'_> {
             self.pose = predicted;
             self.filter.coast(timestamp_ns);
             if self.bad_frames >= lost_after_frames {
-                self.state = TrackerState::Lost;
-                self.stats.losses += 1;
-                self.search_attempts = 0;
-                self.confirm_count = 0;
-                self.tracks.clear();
-                result.state = TrackerState::Lost;
-                result.event = Some(TrackerEvent::LostLock);
+                let lost = self.lose_lock();
+                result.state = lost.state;
+                result.event = lost.event;
             }
         }
+        result
+    }
+
+    /// The lock is lost: the next frames search, around `last_good`.
+    pub(super) fn lose_lock(&mut self) -> FrameResult {
+        self.withdraw_probation();
+        self.state = TrackerState::Lost;
+        self.stats.losses += 1;
+        self.search_attempts = 0;
+        self.confirm_count = 0;
+        self.tracks.clear();
+        let mut result = FrameResult::empty(TrackerState::Lost);
+        result.event = Some(TrackerEvent::LostLock);
         result
     }
 

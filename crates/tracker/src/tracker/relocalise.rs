@@ -6,11 +6,29 @@
 //! In: the frame's [`Edge`]s, the predicted and solved poses, what the frame concludes without
 //! a relocalisation (`Tail`). Out: the chosen pose (tracking continues from it with a fresh
 //! S_t) or the frame's own conclusion.
+//!
+//! **On probation.** A relocalised pose is a search's answer on one frame, taken with less
+//! evidence than a commit (no rival beaten by a margin, no confirmation frames): that is what
+//! lets it answer a turn the motion model missed within a frame or two. But where one frame
+//! cannot tell places apart (a 50° view of one of a room's repeated bays, a quarter-turn twin),
+//! it takes the wrong one, and the next frames, failing again from there, relocalised again:
+//! on the one-pinhole rig 55 of 69 relocalised frames were more than 30 cm or 3° off, 30 of
+//! them in such chains, each link moving the pose up to a metre (docs/decisions.md). So a
+//! relocalised frame's answer is held back until a later frame's maintenance holds the pose (a
+//! good frame: enough accepted lines within the jump limits of its prediction), and then
+//! published, late, as it was anyway (the search ran off the frame path). A fast turn may take
+//! a few relocalised frames before maintenance holds again: up to `lost_after_frames` of them
+//! wait together. When that many went unheld they are withdrawn unpublished
+//! ([`TrackerStats::relocalisations_withdrawn`](crate::TrackerStats)) and the lock is lost, as
+//! after that many bad frames; the searches that follow start from the last pose maintenance
+//! held, with an initialisation's standard of evidence. (Withdrawing after a single unheld
+//! frame also ended the wrong chains, but halved the frames held within 10 cm on the narrow
+//! rig's `lab`: right chains of two or three relocalised frames are common in its turns.)
 
 use super::{PendingSearch, Relocalisation, Tail, Tracker};
 use crate::background::STARTS;
 use crate::init::{Candidate, SearchVolume};
-use crate::report::{FrameResult, TrackerEvent};
+use crate::report::{FrameResult, TrackerEvent, TrackerState};
 use nalgebra::{Point3, UnitQuaternion};
 use omnitrack_core::geometry::Pose;
 use omnitrack_edges::Edge;
@@ -227,6 +245,7 @@ impl Tracker<'_> {
             .last_good
             .map(|p| (p, self.last_good_time))
             .filter(|(_, t)| *t < timestamp_ns);
+        let held = since;
         let mut r = self.commit(&best.pose, job.edges(), timestamp_ns);
         self.job = Some(job);
         if let Some((p, t)) = since {
@@ -237,7 +256,50 @@ impl Tracker<'_> {
         r.match_time += reloc.tail.result.match_time;
         r.solve_time = reloc.tail.result.solve_time;
         r.samples += reloc.tail.result.samples;
-        r
+        // On probation (module doc): the answer waits for a frame to hold the pose.
+        let mut shown = FrameResult::empty(TrackerState::Tracking);
+        shown.match_time = r.match_time;
+        shown.solve_time = r.solve_time;
+        shown.samples = r.samples;
+        if self.probation.links.is_empty() {
+            self.probation.held = held;
+        }
+        if self.probation.links.push((timestamp_ns, r)).is_err() {
+            // Longer than any configured chain: the oldest link goes unpublished.
+            self.probation.links.remove(0);
+            self.stats.relocalisations_withdrawn += 1;
+            let _ = self.probation.links.push((timestamp_ns, r));
+        }
+        shown
+    }
+
+    /// How many relocalised frames may wait for a frame that holds their pose: as many as the
+    /// bad frames that lose the lock.
+    pub(super) fn probation_limit(&self) -> usize {
+        (self.cfg.maintenance.lost_after_frames as usize).clamp(1, super::PROBATION_LINKS)
+    }
+
+    /// A frame held the pose: the relocalised frames before it are published (late).
+    pub(super) fn release_probation(&mut self) {
+        for k in 0..self.probation.links.len() {
+            let (t, r) = self.probation.links[k];
+            self.note_late(t, r);
+        }
+        self.probation.links.clear();
+    }
+
+    /// The relocalised frames no frame held are withdrawn unpublished; the searches that follow
+    /// start from the last pose maintenance held before them.
+    pub(super) fn withdraw_probation(&mut self) {
+        if self.probation.links.is_empty() {
+            return;
+        }
+        self.stats.relocalisations_withdrawn += self.probation.links.len() as u64;
+        self.probation.links.clear();
+        if let Some((pose, t)) = self.probation.held.take() {
+            self.last_good = Some(pose);
+            self.last_good_time = t;
+        }
     }
 }
 
