@@ -27,11 +27,19 @@ fn every_manual_page_cited_is_made() {
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
         .collect();
     names.sort();
-    for page in ["omnitrack.1", "omnitrack-run.1", "omnitrack-visibility-build.1", "omnitrack-listen.1"] {
+    for page in [
+        "omnitrack.1",
+        "omnitrack-run.1",
+        "omnitrack-visibility-build.1",
+        "omnitrack-listen.1",
+    ] {
         assert!(names.iter().any(|n| n == page), "{page} not in {names:?}");
     }
     assert!(!names.iter().any(|n| n.contains("help")), "{names:?}");
-    assert_eq!(omnitrack_manual::dangling_citations(&out).unwrap(), Vec::<String>::new());
+    assert_eq!(
+        omnitrack_manual::dangling_citations(&out).unwrap(),
+        Vec::<String>::new()
+    );
     // `manpage` alone prints the binary's page, the same as the file.
     let (code, page, _) = omnitrack(&["manpage"]);
     assert_eq!(code, 0);

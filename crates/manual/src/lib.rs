@@ -132,8 +132,12 @@ pub fn cited_pages(roff: &str) -> Vec<String> {
     // roff writes a hyphen as `\-`.
     let roff = roff.replace("\\-", "-");
     for word in roff.split(|c: char| c.is_whitespace() || c == '"') {
-        let Some((name, rest)) = word.split_once('(') else { continue };
-        let Some((section, _)) = rest.split_once(')') else { continue };
+        let Some((name, rest)) = word.split_once('(') else {
+            continue;
+        };
+        let Some((section, _)) = rest.split_once(')') else {
+            continue;
+        };
         let name = name.trim_start_matches("\\fB").trim_start_matches("\\fR");
         if !name.is_empty()
             && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
@@ -229,7 +233,12 @@ mod tests {
         let names: Vec<&str> = pages.iter().map(|(n, _)| n.as_str()).collect();
         assert_eq!(
             names,
-            ["demo-bin.1", "demo-bin-run.1", "demo-bin-table.1", "demo-bin-table-build.1"]
+            [
+                "demo-bin.1",
+                "demo-bin-run.1",
+                "demo-bin-table.1",
+                "demo-bin-table-build.1"
+            ]
         );
         for (name, page) in &pages {
             let text = String::from_utf8(page.clone()).unwrap();
@@ -242,7 +251,10 @@ mod tests {
         let top = String::from_utf8(pages[0].1.clone()).unwrap();
         assert!(cited_pages(&top).contains(&"demo-bin-run.1".to_string()), "{top}");
         let run = String::from_utf8(pages[1].1.clone()).unwrap();
-        assert!(run.contains(".SH \"EXIT STATUS\"\n.TP\n0\nfine\n.TP\n2\nbad input\n"), "{run}");
+        assert!(
+            run.contains(".SH \"EXIT STATUS\"\n.TP\n0\nfine\n.TP\n2\nbad input\n"),
+            "{run}"
+        );
         assert!(run.contains("\\-\\-fast"), "{run}");
     }
 
