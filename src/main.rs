@@ -13,6 +13,7 @@ use std::process::ExitCode;
 #[command(
     name = "omnitrack",
     version,
+    long_version = long_version(),
     about = "6-DOF tracking of an omnidirectional rig in a known building model",
     after_help = commands::EXIT_STATUS_HELP
 )]
@@ -57,6 +58,21 @@ enum Command {
     /// Prints the model segments of an OBJ as CSV: x1,y1,z1,x2,y2,z2,faces (OBJ face numbers,
     /// space-separated; empty for a free `l` segment).
     Segments(commands::segments::Args),
+}
+
+/// `omnitrack --version`: the version and the sources this build reads (`v4l` and `usb` are
+/// cargo features: the Debian package's binary has both).
+fn long_version() -> &'static str {
+    let mut sources = vec!["replay"];
+    if cfg!(feature = "v4l") {
+        sources.push("v4l");
+    }
+    if cfg!(feature = "usb") {
+        sources.push("usb");
+    }
+    let text = format!("{} (sources: {})", env!("CARGO_PKG_VERSION"), sources.join(", "));
+    // Once per process: clap's derive takes a `&'static str`.
+    Box::leak(text.into_boxed_str())
 }
 
 fn main() -> ExitCode {
