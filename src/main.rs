@@ -13,6 +13,7 @@ use std::process::ExitCode;
 #[command(
     name = "omnitrack",
     version,
+    long_version = long_version(),
     about = "6-DOF tracking of an omnidirectional rig in a known building model",
     after_help = commands::EXIT_STATUS_HELP
 )]
@@ -49,13 +50,29 @@ enum Command {
     /// Prints a shell completion script for omnitrack (bash, zsh, fish, elvish or powershell).
     Completions {
         /// The shell.
-        shell: clap_complete::Shell,
+        shell: omnitrack_manual::Shell,
     },
-    /// Prints omnitrack's manual page (roff; `omnitrack manpage | man -l -`).
-    Manpage,
+    /// Prints omnitrack's manual page (roff; `omnitrack manpage | man -l -`), or writes it and a
+    /// page per command (omnitrack-run.1, …) into a directory.
+    Manpage(omnitrack_manual::ManpageArgs),
     /// Prints the model segments of an OBJ as CSV: x1,y1,z1,x2,y2,z2,faces (OBJ face numbers,
     /// space-separated; empty for a free `l` segment).
     Segments(commands::segments::Args),
+}
+
+/// `omnitrack --version`: the version and the sources this build reads (`v4l` and `usb` are
+/// cargo features: the Debian package's binary has both).
+fn long_version() -> &'static str {
+    let mut sources = vec!["replay"];
+    if cfg!(feature = "v4l") {
+        sources.push("v4l");
+    }
+    if cfg!(feature = "usb") {
+        sources.push("usb");
+    }
+    let text = format!("{} (sources: {})", env!("CARGO_PKG_VERSION"), sources.join(", "));
+    // Once per process: clap's derive takes a `&'static str`.
+    Box::leak(text.into_boxed_str())
 }
 
 fn main() -> ExitCode {
@@ -98,40 +115,24 @@ fn run(command: Command) -> CommandResult {
         Command::Listen(args) => commands::listen::run(args),
         Command::Segments(args) => commands::segments::run(args),
         Command::Completions { shell } => {
-            let mut cli = <Cli as clap::CommandFactory>::command();
-            // Into memory first: clap_complete panics on a failed write.
-            let mut script = Vec::new();
-            clap_complete::generate(shell, &mut cli, "omnitrack", &mut script);
-            std::io::Write::write_all(&mut std::io::stdout().lock(), &script).map_err(commands::stdout_error)?;
+            omnitrack_manual::run_completions(&manual(), shell).map_err(commands::stdout_error)?;
             Ok(())
         }
-        Command::Manpage => {
-            let cli = <Cli as clap::CommandFactory>::command();
-            // Into memory first, then out: a closed pipe is one error, not half a page.
-            let mut page = Vec::new();
-            render_manpage(cli, &mut page)?;
-            std::io::Write::write_all(&mut std::io::stdout().lock(), &page).map_err(commands::stdout_error)?;
+        Command::Manpage(args) => {
+            let result = omnitrack_manual::run_manpage(&manual(), &args);
+            match args.dir {
+                None => result.map_err(commands::stdout_error)?,
+                Some(_) => result?,
+            }
             Ok(())
         }
     }
 }
 
-/// The manual page: clap_mangen's sections, with the exit codes as an EXIT STATUS section of
-/// their own (clap_mangen would run the help's text of them together as "EXTRA").
-fn render_manpage(cli: clap::Command, out: &mut dyn std::io::Write) -> std::io::Result<()> {
-    let man = clap_mangen::Man::new(cli);
-    man.render_title(out)?;
-    man.render_name_section(out)?;
-    man.render_synopsis_section(out)?;
-    man.render_description_section(out)?;
-    man.render_options_section(out)?;
-    man.render_subcommands_section(out)?;
-    writeln!(out, ".SH \"EXIT STATUS\"")?;
-    for line in commands::EXIT_STATUS_HELP.lines().skip(1) {
-        let (code, meaning) = line.trim().split_once("  ").unwrap_or((line.trim(), ""));
-        writeln!(out, ".TP\n{code}\n{}", meaning.trim().replace('-', "\\-"))?;
-    }
-    man.render_version_section(out)
+/// The manual pages and completions: the command line's, with the exit codes as an EXIT STATUS
+/// section of the pages that list them.
+fn manual() -> omnitrack_manual::Manual {
+    omnitrack_manual::Manual::new(<Cli as clap::CommandFactory>::command()).exit_status(commands::EXIT_STATUS_HELP)
 }
 
 #[cfg(test)]

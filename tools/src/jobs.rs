@@ -1,6 +1,6 @@
 //! The longer jobs behind three subcommands: `render` (a synthetic recording of a rig moving
 //! through a model), `model from-ifc` (IfcOpenShell in its own venv) and `eval --json` (an
-//! evaluation as JSON).
+//! evaluation as JSON); and the manual of `completions` and `manpage`.
 //!
 //! In: the subcommands' parsed arguments. Out: files written, or JSON; errors as one line.
 
@@ -99,4 +99,18 @@ pub(crate) fn from_ifc(file: &std::path::Path, out: &std::path::Path, storey: Op
         s.welded_vertices
     );
     Ok(())
+}
+
+/// `completions` and `manpage`: the manual of the command line (crates/manual).
+pub fn manual() -> omnitrack_manual::Manual {
+    omnitrack_manual::Manual::new(<crate::Cli as clap::CommandFactory>::command())
+}
+
+/// A manual written, or why not: a reader gone is no failure.
+pub fn manual_result(result: std::io::Result<()>) -> Result<(), crate::Failure> {
+    match result {
+        Ok(()) => Ok(()),
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Err(crate::Failure::ReaderGone),
+        Err(e) => Err(crate::Failure::Message(e.to_string())),
+    }
 }

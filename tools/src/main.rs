@@ -23,7 +23,7 @@
 mod jobs;
 mod look;
 
-use jobs::{eval_json, from_ifc, render};
+use jobs::{eval_json, from_ifc, manual, manual_result, render};
 
 use clap::{Parser, Subcommand};
 use omnitrack::desk::eval::{evaluate_files, EvalOptions};
@@ -154,6 +154,14 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Prints a shell completion script for omnitrack-desk (bash, zsh, fish, elvish or powershell).
+    Completions {
+        /// The shell.
+        shell: omnitrack_manual::Shell,
+    },
+    /// Prints omnitrack-desk's manual page (roff), or writes it and a page per command into a
+    /// directory.
+    Manpage(omnitrack_manual::ManpageArgs),
 }
 
 #[derive(Subcommand)]
@@ -547,6 +555,8 @@ fn run(command: Command) -> Result<(), Failure> {
                 print_out(&evaluation.table())
             }
         }
+        Command::Completions { shell } => manual_result(omnitrack_manual::run_completions(&manual(), shell)),
+        Command::Manpage(args) => manual_result(omnitrack_manual::run_manpage(&manual(), &args)),
     }
 }
 #[cfg(test)]

@@ -56,3 +56,34 @@ fn a_closed_standard_output_ends_quietly_and_a_full_one_is_an_error() {
         );
     }
 }
+
+/// `omnitrack-desk` has completions and a manual page per command (it had neither), and every
+/// page a page cites is among them.
+#[test]
+fn completions_and_a_manual_page_for_every_command() {
+    for shell in ["bash", "zsh", "fish"] {
+        let out = desk(&["completions", shell], Stdio::piped());
+        let script = String::from_utf8_lossy(&out.stdout);
+        assert!(out.status.success(), "{shell}");
+        assert!(
+            script.contains("omnitrack-desk") && script.contains("extrude"),
+            "{shell}: {script}"
+        );
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let out = desk(&["manpage", "--dir", dir.path().to_str().unwrap()], Stdio::piped());
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    for page in [
+        "omnitrack-desk.1",
+        "omnitrack-desk-rig-from-kalibr.1",
+        "omnitrack-desk-eval.1",
+    ] {
+        assert!(dir.path().join(page).is_file(), "no {page}");
+    }
+    assert_eq!(
+        omnitrack_manual::dangling_citations(dir.path()).unwrap(),
+        Vec::<String>::new()
+    );
+    let out = desk(&["manpage"], Stdio::piped());
+    assert!(String::from_utf8_lossy(&out.stdout).contains(".TH omnitrack-desk 1"));
+}

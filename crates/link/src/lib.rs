@@ -23,6 +23,14 @@
 //!
 //! The link is not on the device path: it allocates per sample (Zenoh's buffers) and runs beside
 //! the tracker, which never waits for it.
+//!
+//! Latency (`listen --latency`): a pose's age on arrival is `now − timestamp_ns` only where both
+//! are read on one clock. `send` attaches to every sample which machine it runs on ([`boot_id`]:
+//! processes of one boot, network namespaces included, share `CLOCK_MONOTONIC`), and `listen`
+//! counts an age only for a sample from its own boot whose stamp is on that clock now (within
+//! [`MAX_LIVE_AGE`] before it: a live source's). A replay's stamps are its recording's time, and
+//! another host's clock is not this one's: those samples are counted as not comparable, with
+//! the reason ([`NotComparable`]), never as an age.
 
 use omnitrack_io::publish::{format_pose_line, PoseSample, PoseSubscriber, SamplePublisher, WireError};
 use std::io::Write;
@@ -104,6 +112,64 @@ pub fn monotonic_ns() -> u64 {
     ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
 }
 
+/// Oldest a stamp on this host's monotonic clock can be and still be a live capture's: a replay's
+/// stamps (its recording's time) are older, or ahead.
+pub const MAX_LIVE_AGE: Duration = Duration::from_secs(10);
+
+/// What `send` attaches to every sample: this prefix, then the sender's [`boot_id`].
+const CLOCK_ATTACHMENT: &str = "omnitrack-link clock v1 boot_id=";
+
+/// This machine's boot id (`/proc/sys/kernel/random/boot_id`): two processes read the same
+/// `CLOCK_MONOTONIC` exactly when their boot ids are equal.
+pub fn boot_id() -> Option<String> {
+    let id = std::fs::read_to_string("/proc/sys/kernel/random/boot_id").ok()?;
+    let id = id.trim();
+    (!id.is_empty()).then(|| id.to_string())
+}
+
+/// Why a pose's age on arrival cannot be read off its stamp.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub enum NotComparable {
+    /// The sample carries no sender clock (an older `omnitrack-link send`, or another program).
+    UnknownSender,
+    /// The sender runs on another machine (or boot): its monotonic clock is not this one's.
+    OtherHost,
+    /// The stamp is not this clock's time now (older than [`MAX_LIVE_AGE`], or ahead): a replay
+    /// stamps its recording's time.
+    NotLive,
+}
+
+impl std::fmt::Display for NotComparable {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            NotComparable::UnknownSender => "the sender does not say which clock it runs on",
+            NotComparable::OtherHost => "the sender runs on another host, whose clock is not this one's",
+            NotComparable::NotLive => "the stamps are not this host's clock now (a replay's are its recording's time)",
+        })
+    }
+}
+
+/// The age on arrival of a pose stamped `stamp_ns`, received at `now_ns` (this host's monotonic
+/// clock, boot `own_boot`) with the sender's attachment `attachment`; or why it has none.
+pub fn pose_age_us(
+    stamp_ns: u64,
+    now_ns: u64,
+    attachment: Option<&[u8]>,
+    own_boot: Option<&str>,
+) -> Result<f64, NotComparable> {
+    let sender_boot = attachment
+        .and_then(|a| std::str::from_utf8(a).ok())
+        .and_then(|a| a.strip_prefix(CLOCK_ATTACHMENT))
+        .ok_or(NotComparable::UnknownSender)?;
+    if own_boot != Some(sender_boot) {
+        return Err(NotComparable::OtherHost);
+    }
+    match now_ns.checked_sub(stamp_ns) {
+        Some(age) if age <= MAX_LIVE_AGE.as_nanos() as u64 => Ok(age as f64 / 1e3),
+        _ => Err(NotComparable::NotLive),
+    }
+}
+
 /// What `send` did.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct SendSummary {
@@ -127,12 +193,15 @@ pub fn send(
         .wait()
         .map_err(|e| zenoh_error(&format!("cannot publish on {key}"), e))?;
     let mut summary = SendSummary::default();
+    // Which clock the stamps may be compared with (see the module doc).
+    let clock = boot_id().map(|id| format!("{CLOCK_ATTACHMENT}{id}").into_bytes());
     while !stop.load(Ordering::Relaxed) && count.is_none_or(|n| summary.forwarded < n) {
         let Some(sample) = subscriber.wait(Duration::from_millis(100))? else {
             continue;
         };
         publisher
             .put(sample.to_wire().to_vec())
+            .attachment(clock.clone())
             .wait()
             .map_err(|e| zenoh_error(&format!("cannot put on {key}"), e))?;
         summary.forwarded += 1;
@@ -148,8 +217,11 @@ pub struct ListenSummary {
     /// Sequence numbers skipped between consecutive samples (a publisher restart resets them
     /// and counts nothing).
     pub missing: u64,
-    /// `now − timestamp_ns` of each sample on this host's monotonic clock (µs), when asked.
+    /// `now − timestamp_ns` of each sample on this host's monotonic clock (µs), when asked and
+    /// comparable ([`pose_age_us`]).
     pub latencies_us: Vec<f64>,
+    /// Samples whose age could not be read, by reason, when asked.
+    pub not_comparable: std::collections::BTreeMap<NotComparable, u64>,
 }
 
 impl ListenSummary {
@@ -169,7 +241,8 @@ pub struct ListenOptions {
     pub count: Option<u64>,
     /// Stop when none came for this long.
     pub idle: Option<Duration>,
-    /// Keep each pose's age on arrival ([`ListenSummary::latencies_us`]).
+    /// Keep each pose's age on arrival where the clocks are comparable
+    /// ([`ListenSummary::latencies_us`], [`ListenSummary::not_comparable`]).
     pub latency: bool,
     /// Publish each pose on this local iceoryx2 service too, so that programs on the far host
     /// read it with the same zero-copy subscriber as on the rig (`omnitrack listen --services`).
@@ -203,6 +276,7 @@ pub fn listen(
         .wait()
         .map_err(|e| zenoh_error(&format!("cannot subscribe to {key}"), e))?;
     let mut summary = ListenSummary::default();
+    let own_boot = boot_id();
     let mut last_seq: Option<u64> = None;
     let mut last_at = Instant::now();
     while !stop.load(Ordering::Relaxed) && count.is_none_or(|n| summary.received < n) {
@@ -230,9 +304,11 @@ pub fn listen(
         last_seq = Some(pose.sequence);
         summary.received += 1;
         if latency {
-            summary
-                .latencies_us
-                .push(now.saturating_sub(pose.timestamp_ns) as f64 / 1e3);
+            let attachment = sample.attachment().map(|a| a.to_bytes());
+            match pose_age_us(pose.timestamp_ns, now, attachment.as_deref(), own_boot.as_deref()) {
+                Ok(age) => summary.latencies_us.push(age),
+                Err(why) => *summary.not_comparable.entry(why).or_default() += 1,
+            }
         }
         if let Some(local) = &local {
             local.publish(&pose)?;
@@ -252,4 +328,52 @@ pub fn stop_on_signals() -> Arc<AtomicBool> {
         let _ = signal_hook::flag::register(signal, Arc::clone(&stop));
     }
     stop
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const S: u64 = 1_000_000_000;
+
+    fn from(boot: &str) -> Vec<u8> {
+        format!("{CLOCK_ATTACHMENT}{boot}").into_bytes()
+    }
+
+    #[test]
+    fn an_age_is_read_only_on_one_clock_and_for_a_live_stamp() {
+        let me = Some("b0");
+        let now = 5_000 * S;
+        assert_eq!(pose_age_us(now - 2_000_000, now, Some(&from("b0")), me), Ok(2_000.0));
+        // A replay printed 1,340 s here before: its stamps are its recording's time.
+        assert_eq!(
+            pose_age_us(now - 1_340 * S, now, Some(&from("b0")), me),
+            Err(NotComparable::NotLive)
+        );
+        assert_eq!(
+            pose_age_us(now + S, now, Some(&from("b0")), me),
+            Err(NotComparable::NotLive)
+        );
+        assert_eq!(
+            pose_age_us(now - 1_000, now, Some(&from("b1")), me),
+            Err(NotComparable::OtherHost)
+        );
+        assert_eq!(
+            pose_age_us(now - 1_000, now, Some(&from("b0")), None),
+            Err(NotComparable::OtherHost)
+        );
+        assert_eq!(
+            pose_age_us(now - 1_000, now, None, me),
+            Err(NotComparable::UnknownSender)
+        );
+        assert_eq!(
+            pose_age_us(now - 1_000, now, Some(b"something else"), me),
+            Err(NotComparable::UnknownSender)
+        );
+    }
+
+    #[test]
+    fn this_machine_has_a_boot_id() {
+        assert!(boot_id().is_some_and(|id| id.len() == 36), "{:?}", boot_id());
+    }
 }

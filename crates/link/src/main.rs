@@ -3,13 +3,16 @@
 //! ```text
 //! omnitrack-link send   [--service omnitrack/pose] [--key omnitrack/pose] [--listen EP]... [--connect EP]... [--count N]
 //! omnitrack-link listen [--key omnitrack/pose] [--listen EP]... [--connect EP]... [--count N] [--idle-s S] [--latency] [--republish SERVICE]
+//! omnitrack-link completions SHELL
+//! omnitrack-link manpage [--dir DIR]
 //! ```
 //!
 //! `send` runs beside the tracker; `listen` on the far host prints one line per pose, as
 //! `omnitrack listen` does, and with `--latency` a closing line with the poses' age on arrival
-//! (on this host's monotonic clock: meaningful where the sender's capture clock is the same,
-//! i.e. the same machine or network namespaces of one machine). Errors are one line on standard
-//! error and exit code 1; a broken standard output ends quietly.
+//! where it can be read (a live source's stamps, the sender on this machine: the same machine
+//! or network namespaces of one machine), and otherwise says that the clocks are not comparable
+//! and why (see the library doc). Errors are one line on standard error and exit code 1; a
+//! broken standard output ends quietly.
 
 use clap::{Parser, Subcommand};
 use omnitrack_link::{listen, send, stop_on_signals, Endpoints, LinkError, ListenOptions, POSE_KEY};
@@ -62,7 +65,8 @@ enum Command {
         /// Stop when no pose came for this many seconds.
         #[arg(long = "idle-s")]
         idle_s: Option<f64>,
-        /// Print the poses' age on arrival (p50, p99, max) when done.
+        /// Print the poses' age on arrival (p50, p99, max) when done, where the clocks are
+        /// comparable (a live source's stamps, the sender on this machine); otherwise say why not.
         #[arg(long)]
         latency: bool,
         /// Publish each pose on this local iceoryx2 service too (e.g. omnitrack/pose), for
@@ -70,6 +74,14 @@ enum Command {
         #[arg(long, value_name = "SERVICE")]
         republish: Option<String>,
     },
+    /// Prints a shell completion script for omnitrack-link (bash, zsh, fish, elvish or powershell).
+    Completions {
+        /// The shell.
+        shell: omnitrack_manual::Shell,
+    },
+    /// Prints omnitrack-link's manual page (roff), or writes it and a page per command into a
+    /// directory.
+    Manpage(omnitrack_manual::ManpageArgs),
 }
 
 fn endpoints(n: &Network) -> Endpoints {
@@ -114,16 +126,47 @@ fn run(cli: Cli) -> Result<(), LinkError> {
             };
             let s = listen(&network.key, &endpoints(&network), &options, &stop, &mut out)?;
             eprintln!("received {} poses, {} missing", s.received, s.missing);
-            if let (Some(p50), Some(p99), Some(max)) = (
-                s.latency_quantile_us(0.5),
-                s.latency_quantile_us(0.99),
-                s.latency_quantile_us(1.0),
-            ) {
-                eprintln!("latency: p50 {p50:.0} µs, p99 {p99:.0} µs, max {max:.0} µs");
+            if latency {
+                eprintln!("{}", latency_line(&s));
             }
         }
+        Command::Completions { shell } => omnitrack_manual::run_completions(&manual(), shell)?,
+        Command::Manpage(args) => omnitrack_manual::run_manpage(&manual(), &args)?,
     }
     Ok(())
+}
+
+fn manual() -> omnitrack_manual::Manual {
+    omnitrack_manual::Manual::new(<Cli as clap::CommandFactory>::command())
+}
+
+/// `latency: p50 … µs, p99 … µs, max … µs (N poses)`, and the poses whose age cannot be read
+/// with the reason; or `latency: not comparable: …` when none can.
+fn latency_line(s: &omnitrack_link::ListenSummary) -> String {
+    let reasons: Vec<String> = s
+        .not_comparable
+        .iter()
+        .map(|(why, n)| format!("{n} poses: {why}"))
+        .collect();
+    let quantiles = (
+        s.latency_quantile_us(0.5),
+        s.latency_quantile_us(0.99),
+        s.latency_quantile_us(1.0),
+    );
+    match quantiles {
+        (Some(p50), Some(p99), Some(max)) => {
+            let mut line = format!(
+                "latency: p50 {p50:.0} µs, p99 {p99:.0} µs, max {max:.0} µs ({} poses)",
+                s.latencies_us.len()
+            );
+            if !reasons.is_empty() {
+                line += &format!("; not comparable: {}", reasons.join("; "));
+            }
+            line
+        }
+        _ if reasons.is_empty() => "latency: no pose received".to_string(),
+        _ => format!("latency: not comparable: {}", reasons.join("; ")),
+    }
 }
 
 fn main() {
