@@ -10,7 +10,7 @@
 //!
 //! `omnitrack-desk model from-ifc FILE.ifc --out MODEL.obj [--storey NAME]` converts an IFC
 //! building (what architects deliver) into the coarse OBJ model through IfcOpenShell
-//! (`tools/ifc_to_obj.py`, in its own venv).
+//! (`tools/ifc_to_obj.py`, carried in the binary; IfcOpenShell in a venv of the user's cache).
 //!
 //! `omnitrack-desk eval GT.tum EST.tum [--align] [--rpe-delta N] [--max-diff S]` compares an
 //! estimated trajectory with the ground truth (ATE and RPE, evo's definitions) and prints a table.
@@ -20,10 +20,12 @@
 //! tool quietly with success, as it ends `omnitrack`; standard output that cannot be written (a
 //! full disk) is an error like any other.
 
+mod ifc;
 mod jobs;
 mod look;
 
-use jobs::{eval_json, from_ifc, render};
+use ifc::from_ifc;
+use jobs::{eval_json, render};
 
 use clap::{Parser, Subcommand};
 use omnitrack::desk::eval::{evaluate_files, EvalOptions};
@@ -238,7 +240,8 @@ enum ModelCommand {
     /// The coarse OBJ model of an IFC building: walls, slabs, roofs, doors, windows, stairs,
     /// columns, beams and curtain walls, in metres, z up, in the IFC project's coordinates;
     /// furniture and services left out. Runs IfcOpenShell (PyPI `ifcopenshell`), which it
-    /// installs into tools/.venv-ifc on first use.
+    /// installs on first use into the user's cache (~/.cache/omnitrack/ifc-venv, or under
+    /// $OMNITRACK_CACHE or $XDG_CACHE_HOME), saying so.
     FromIfc {
         /// The IFC file (STEP, IFC2X3 or IFC4).
         file: PathBuf,
