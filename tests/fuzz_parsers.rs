@@ -255,19 +255,30 @@ fn small_rig() -> String {
         .to_string()
 }
 
+/// The sphere lens models not in a shipped rig: an EUCM and an omni (unified + radtan) sensor.
+fn sphere_rig() -> String {
+    "name = \"spheres\"\n[[sensors]]\nid = 0\nresolution = [8, 6]\nmodel = \"eucm\"\n\
+     intrinsics = [4.0, 4.0, 3.5, 2.5]\ndistortion = [0.6, 1.1]\nrotation_wxyz = [1.0, 0.0, 0.0, 0.0]\n\
+     translation_m = [0.0, 0.0, 0.0]\n[[sensors]]\nid = 1\nresolution = [8, 6]\nmodel = \"omni\"\n\
+     intrinsics = [8.0, 8.0, 3.5, 2.5]\ndistortion = [0.9, -0.2, 0.05, 0.001, 0.0]\n\
+     rotation_wxyz = [0.0, 0.0, 1.0, 0.0]\ntranslation_m = [0.0, 0.0, 0.0]\n"
+        .to_string()
+}
+
 #[test]
 fn rig_files() {
     let seeds = [
         "firmware_config/ladybug2.toml",
         "tools/rigs/dual_fisheye.toml",
         "tools/rigs/dual_fisheye_one_frame.toml",
+        "tools/rigs/dual_double_sphere.toml",
         "tools/rigs/equirect.toml",
         "tools/rigs/pinhole1.toml",
         "tools/rigs/pinhole4.toml",
     ]
     .iter()
     .map(|f| file(f))
-    .chain([small_rig().into_bytes()])
+    .chain([small_rig().into_bytes(), sphere_rig().into_bytes()])
     .collect();
     fuzz("rig TOML", 1, seeds, |b| {
         Rig::from_toml_str(&text(b), "rig.toml")

@@ -45,7 +45,7 @@ fn camchain(rig: &Rig) -> String {
             Lens::Kb4(l) => ("equidistant", l.k.to_vec()),
             Lens::Radtan(l) => ("radtan", l.d[..4].to_vec()),
             Lens::Pinhole(_) => ("none", vec![]),
-            Lens::Equirectangular(_) => unreachable!("not a Kalibr model"),
+            _ => unreachable!("not a pinhole Kalibr model"),
         };
         let c = s.lens.principal_point();
         let _ = writeln!(y, "  camera_model: pinhole");
