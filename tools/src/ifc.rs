@@ -71,9 +71,7 @@ pub(crate) fn from_ifc(file: &Path, out: &Path, storey: Option<&str>) -> Result<
             }
         }
     }
-    let status = child
-        .wait()
-        .map_err(|e| format!("python3 (the IFC converter): {e}"))?;
+    let status = child.wait().map_err(|e| format!("python3 (the IFC converter): {e}"))?;
     if !status.success() {
         let _ = std::fs::remove_file(&partial);
         // The script's error is its last line; anything above it is pip's or Python's noise.

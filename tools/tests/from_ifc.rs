@@ -112,8 +112,7 @@ fn ifcopenshell_goes_into_the_users_cache_with_a_line_that_says_so() {
     let venv = venv.display().to_string();
     assert_eq!(lines.len(), 2, "{stderr}");
     assert!(
-        lines[0].starts_with("from-ifc: installing IfcOpenShell (PyPI ifcopenshell) into ")
-            && lines[0].contains(&venv),
+        lines[0].starts_with("from-ifc: installing IfcOpenShell (PyPI ifcopenshell) into ") && lines[0].contains(&venv),
         "{stderr}"
     );
     assert!(
