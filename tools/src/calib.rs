@@ -10,6 +10,8 @@ use clap::Subcommand;
 use omnitrack::Rig;
 use std::path::{Path, PathBuf};
 
+// The variants are the subcommands' names: `rig from-kalibr`, `rig from-basalt`, `rig from-opencv`.
+#[allow(clippy::enum_variant_names)]
 #[derive(Subcommand)]
 pub(crate) enum RigCommand {
     /// A rig file from a Kalibr camera chain (camchain.yaml): `pinhole` cameras with

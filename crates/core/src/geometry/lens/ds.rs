@@ -63,7 +63,7 @@ impl DoubleSphere {
             let d2 = (sin * sin + s * s).sqrt();
             let den = alpha * d2 + (1.0 - alpha) * s;
             let dden = -alpha * xi * sin / d2 - (1.0 - alpha) * sin;
-            (den > 0.0).then(|| cos * den - sin * dden)
+            (den > 0.0).then_some(cos * den - sin * dden)
         };
         let lens = Self {
             fx,

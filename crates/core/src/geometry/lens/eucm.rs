@@ -47,7 +47,7 @@ impl Eucm {
             let d = (beta * sin * sin + cos * cos).sqrt();
             let den = alpha * d + (1.0 - alpha) * cos;
             let dden = alpha * (beta - 1.0) * sin * cos / d - (1.0 - alpha) * sin;
-            (den > 0.0).then(|| cos * den - sin * dden)
+            (den > 0.0).then_some(cos * den - sin * dden)
         };
         let lens = Self {
             fx,

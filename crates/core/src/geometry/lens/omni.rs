@@ -87,7 +87,7 @@ impl Omni {
             return None;
         }
         let s = p.z + self.xi * rho;
-        if !(s > 0.0) {
+        if s.is_nan() || s <= 0.0 {
             return None;
         }
         Some((Vector2::new(p.x / s, p.y / s), s, rho))
