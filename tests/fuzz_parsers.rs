@@ -255,19 +255,30 @@ fn small_rig() -> String {
         .to_string()
 }
 
+/// The sphere lens models not in a shipped rig: an EUCM and an omni (unified + radtan) sensor.
+fn sphere_rig() -> String {
+    "name = \"spheres\"\n[[sensors]]\nid = 0\nresolution = [8, 6]\nmodel = \"eucm\"\n\
+     intrinsics = [4.0, 4.0, 3.5, 2.5]\ndistortion = [0.6, 1.1]\nrotation_wxyz = [1.0, 0.0, 0.0, 0.0]\n\
+     translation_m = [0.0, 0.0, 0.0]\n[[sensors]]\nid = 1\nresolution = [8, 6]\nmodel = \"omni\"\n\
+     intrinsics = [8.0, 8.0, 3.5, 2.5]\ndistortion = [0.9, -0.2, 0.05, 0.001, 0.0]\n\
+     rotation_wxyz = [0.0, 0.0, 1.0, 0.0]\ntranslation_m = [0.0, 0.0, 0.0]\n"
+        .to_string()
+}
+
 #[test]
 fn rig_files() {
     let seeds = [
         "firmware_config/ladybug2.toml",
         "tools/rigs/dual_fisheye.toml",
         "tools/rigs/dual_fisheye_one_frame.toml",
+        "tools/rigs/dual_double_sphere.toml",
         "tools/rigs/equirect.toml",
         "tools/rigs/pinhole1.toml",
         "tools/rigs/pinhole4.toml",
     ]
     .iter()
     .map(|f| file(f))
-    .chain([small_rig().into_bytes()])
+    .chain([small_rig().into_bytes(), sphere_rig().into_bytes()])
     .collect();
     fuzz("rig TOML", 1, seeds, |b| {
         Rig::from_toml_str(&text(b), "rig.toml")
@@ -333,7 +344,12 @@ fn kalibr_and_opencv_calibrations() {
                   - [-0.0003434688, 0.0009313133, 0.9999995073, -0.0008536743]\n  - [0.0, 0.0, 0.0, 1.0]\n  \
                   camera_model: pinhole\n  intrinsics: [285.0, 285.0, 191.5, 255.5]\n  distortion_model: equidistant\n  \
                   distortion_coeffs: [-0.015, 0.002, -0.0003, 0.0]\n  resolution: [384, 512]\n";
-    fuzz("Kalibr YAML", 7, vec![kalibr.as_bytes().to_vec()], |b| {
+    let kalibr_seeds = vec![
+        kalibr.as_bytes().to_vec(),
+        file("tests/desk/calibrations/kalibr-euroc-ds-camchain.yaml"),
+        file("tests/desk/calibrations/kalibr-omni-eucm-camchain.yaml"),
+    ];
+    fuzz("Kalibr YAML", 7, kalibr_seeds, |b| {
         omnitrack::desk::kalibr::rig_from_kalibr(&text(b), "camchain.yaml", "k", "cam0")
             .map(|_| ())
             .map_err(|e| e.to_string())
@@ -341,8 +357,24 @@ fn kalibr_and_opencv_calibrations() {
     let opencv = "%YAML:1.0\n---\nK: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n   \
                   data: [ 285., 0., 191.5, 0., 285., 255.5, 0., 0., 1. ]\nD: !!opencv-matrix\n   rows: 4\n   cols: 1\n   \
                   dt: d\n   data: [ -0.015, 0.002, -0.0003, 0. ]\nimage_width: 384\nimage_height: 512\n";
-    fuzz("OpenCV YAML", 8, vec![opencv.as_bytes().to_vec()], |b| {
-        rig_from_opencv(&text(b), "cam.yaml", "o", OpenCvModel::Fisheye, None)
+    let opencv_seeds = vec![
+        opencv.as_bytes().to_vec(),
+        file("tests/desk/calibrations/opencv-tutorial-default.yml"),
+        file("tests/desk/calibrations/ros-camera-info-plumb-bob.yaml"),
+        file("tests/desk/calibrations/ros-camera-info-equidistant.yaml"),
+    ];
+    fuzz("OpenCV YAML", 8, opencv_seeds, |b| {
+        let model = (b.len() % 3 == 0).then_some(OpenCvModel::Fisheye);
+        rig_from_opencv(&text(b), "cam.yaml", "o", model, None)
+            .map(|_| ())
+            .map_err(|e| e.to_string())
+    });
+    let basalt_seeds = vec![
+        file("tests/desk/calibrations/basalt-euroc-ds-calibration.json"),
+        file("tests/desk/calibrations/basalt-tumvi-kb4-eucm-ucm-calibration.json"),
+    ];
+    fuzz("Basalt JSON", 9, basalt_seeds, |b| {
+        omnitrack::desk::basalt::rig_from_basalt(&text(b), "calibration.json", "b", "cam0")
             .map(|_| ())
             .map_err(|e| e.to_string())
     });
@@ -471,6 +503,6 @@ fn a_kalibr_string_with_a_newline_is_echoed_on_one_line() {
     assert_eq!(
         e,
         "c.yaml: cam0: camera model 'pinhole' with distortion 'equi\\ndistant' is not supported (omnitrack reads \
-         pinhole cameras with radtan, equidistant or no distortion)"
+         pinhole with radtan, equidistant or none; omni with radtan or none; ds and eucm with none)"
     );
 }

@@ -917,6 +917,17 @@ fn a_rig_of_two_fisheye_lenses_seeing_past_90_degrees_tracks_as_the_shipped_one(
     assert_eq!(one_frame, poses);
 }
 
+/// Two double-sphere fisheyes back to back (`tools/rigs/dual_double_sphere.toml`, Basalt's and
+/// Kalibr's `ds` model, issue 49): a lens model read from those calibrations goes through the
+/// whole pipeline (rendering, edges, field of view, search, maintenance) as the others do.
+#[test]
+fn a_rig_of_two_double_sphere_lenses_tracks_as_the_shipped_one() {
+    let (f, _) = tracks_through("tools/rigs/dual_double_sphere.toml", 2);
+    let rig = Rig::load(&f.rec.join("rig.toml")).unwrap();
+    assert!(rig.sensors.iter().all(|s| s.lens.model_name() == "ds"));
+    assert!(rig.sensors[0].max_off_axis() > 110f64.to_radians());
+}
+
 #[test]
 fn the_true_pose_draws_fewer_lines_across_plain_surfaces_than_a_wrong_one() {
     use nalgebra::{Translation3, UnitQuaternion};

@@ -8,7 +8,7 @@ Two storeys ("Ground", elevation 0, and "Upper", elevation 3 m), lengths in mill
 architects' files usually are. Ground: four walls round a 6 × 4 m room (200 mm thick, 2.8 m
 high), one with a door opening 0.9 × 2.1 m, a floor slab, a door, a column; plus what the
 converter must leave out: a table (IfcFurniture), a duct segment and a railing. Upper: four
-walls and a slab. Runs in the venv tools/.venv-ifc like ifc_to_obj.py.
+walls and a slab. Runs in the venv of ifc_to_obj.py (in the per-user cache).
 """
 import os
 import sys

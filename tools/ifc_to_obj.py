@@ -3,9 +3,12 @@
 
     python3 tools/ifc_to_obj.py FILE.ifc --out MODEL.obj [--storey NAME]
 
-`omnitrack-desk model from-ifc` runs this; it is not meant to be called by hand, but it can be.
-The script creates (or reuses) the venv tools/.venv-ifc, installs IfcOpenShell (PyPI
-`ifcopenshell`) into it and re-runs itself there.
+`omnitrack-desk model from-ifc` runs this (the binary carries a copy and writes it into the
+cache directory); it is not meant to be called by hand, but it can be. The script creates (or
+reuses) a venv in the per-user cache, never in the source tree: `$OMNITRACK_IFC_VENV` if set (the
+binary sets it), else `ifc-venv` in `$OMNITRACK_CACHE`, `$XDG_CACHE_HOME/omnitrack` or
+`~/.cache/omnitrack`; installs IfcOpenShell (PyPI `ifcopenshell`) into it once, saying so on
+stderr, under a lock so that two conversions never install at once; and re-runs itself there.
 
 Kept: the building's coarse elements, the ones a camera sees as long straight lines that stay
 where the architect drew them: walls, slabs (floors, roofs' slabs, landings), roofs, doors,
@@ -26,8 +29,21 @@ import os
 import subprocess
 import sys
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-VENV = os.path.join(HERE, ".venv-ifc")
+
+def cache_venv():
+    """Where IfcOpenShell lives: the per-user cache's `ifc-venv` (see the module's doc)."""
+    explicit = os.environ.get("OMNITRACK_IFC_VENV")
+    if explicit:
+        return explicit
+    cache = os.environ.get("OMNITRACK_CACHE")
+    if not cache:
+        xdg = os.environ.get("XDG_CACHE_HOME")
+        base = xdg if xdg and os.path.isabs(xdg) else os.path.join(os.path.expanduser("~"), ".cache")
+        cache = os.path.join(base, "omnitrack")
+    return os.path.join(cache, "ifc-venv")
+
+
+VENV = cache_venv()
 PY = os.path.join(VENV, "bin", "python")
 
 # Coarse classes (IfcOpenShell's by_type includes subtypes: IfcWall gives IfcWallStandardCase).
@@ -56,19 +72,42 @@ def ensure_venv():
     if os.path.abspath(sys.prefix) == os.path.abspath(VENV):
         return
     try:
-        if not os.path.exists(PY):
-            print(f"from-ifc: creating {VENV}", file=sys.stderr)
-            subprocess.check_call([sys.executable, "-m", "venv", VENV], stdout=subprocess.DEVNULL)
-        probe = subprocess.run([PY, "-c", "import ifcopenshell.geom"], capture_output=True)
-        if probe.returncode != 0:
-            print("from-ifc: installing ifcopenshell into the venv", file=sys.stderr)
-            subprocess.check_call(
-                [PY, "-m", "pip", "install", "-q", "--disable-pip-version-check", "ifcopenshell"],
-                stdout=subprocess.DEVNULL,
-            )
+        os.makedirs(os.path.dirname(VENV) or ".", exist_ok=True)
+        # One installer at a time: a second conversion waits here, then finds IfcOpenShell there.
+        with open(VENV + ".lock", "w") as lock:
+            try:
+                import fcntl
+
+                fcntl.flock(lock, fcntl.LOCK_EX)
+            except ImportError:  # not POSIX: no lock, as before
+                pass
+            if not os.path.exists(PY):
+                print(f"from-ifc: creating the venv {VENV} (once)", file=sys.stderr, flush=True)
+                subprocess.check_call([sys.executable, "-m", "venv", VENV], stdout=subprocess.DEVNULL)
+            probe = subprocess.run([PY, "-c", "import ifcopenshell.geom"], capture_output=True)
+            if probe.returncode != 0:
+                print(
+                    f"from-ifc: installing IfcOpenShell (PyPI ifcopenshell) into {VENV}, once: about 20 s",
+                    file=sys.stderr,
+                    flush=True,
+                )
+                subprocess.check_call(
+                    [PY, "-m", "pip", "install", "-q", "--disable-pip-version-check", "ifcopenshell"],
+                    stdout=subprocess.DEVNULL,
+                )
     except (OSError, subprocess.CalledProcessError) as e:
         fail(f"cannot set up IfcOpenShell in {VENV}: {e}")
     os.execv(PY, [PY] + sys.argv)
+
+
+def check_input(path):
+    """A missing file or one that is not IFC is said before any venv is made or installed."""
+    if not os.path.isfile(path):
+        fail(f"{path}: no such file")
+    with open(path, "rb") as fh:
+        head = fh.read(64)
+    if not head.lstrip().startswith(b"ISO-10303-21"):
+        fail(f"{path}: not an IFC file (an IFC file starts with ISO-10303-21; IFC-XML and ifcZIP are not read)")
 
 
 def parse_args(argv):
@@ -108,18 +147,13 @@ def storey_of(element, util):
 
 def main():
     path, out, storey_name = parse_args(sys.argv[1:])
+    check_input(path)
     ensure_venv()
     import ifcopenshell
     import ifcopenshell.geom
     import ifcopenshell.util.element as util
     import ifcopenshell.util.unit as unit
 
-    if not os.path.isfile(path):
-        fail(f"{path}: no such file")
-    with open(path, "rb") as fh:
-        head = fh.read(64)
-    if not head.lstrip().startswith(b"ISO-10303-21"):
-        fail(f"{path}: not an IFC file (an IFC file starts with ISO-10303-21; IFC-XML and ifcZIP are not read)")
     try:
         model = ifcopenshell.open(path)
     except Exception as e:  # IfcOpenShell raises its own types for every parse failure

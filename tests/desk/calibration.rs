@@ -45,7 +45,7 @@ fn camchain(rig: &Rig) -> String {
             Lens::Kb4(l) => ("equidistant", l.k.to_vec()),
             Lens::Radtan(l) => ("radtan", l.d[..4].to_vec()),
             Lens::Pinhole(_) => ("none", vec![]),
-            Lens::Equirectangular(_) => unreachable!("not a Kalibr model"),
+            _ => unreachable!("not a pinhole Kalibr model"),
         };
         let c = s.lens.principal_point();
         let _ = writeln!(y, "  camera_model: pinhole");
@@ -202,7 +202,9 @@ image_height: 512
 #[test]
 fn an_opencv_fisheye_calibration_is_the_shipped_rigs_first_sensor() {
     use omnitrack::desk::opencv_calib::{rig_from_opencv, OpenCvModel};
-    let rig = rig_from_opencv(OPENCV_FISHEYE, "cam.yaml", "one", OpenCvModel::Fisheye, None).unwrap();
+    let rig = rig_from_opencv(OPENCV_FISHEYE, "cam.yaml", "one", Some(OpenCvModel::Fisheye), None)
+        .unwrap()
+        .0;
     let shipped = shipped();
     assert_eq!(rig.sensors.len(), 1);
     let (a, b) = (&rig.sensors[0], &shipped.sensors[0]);
@@ -228,7 +230,9 @@ distortion_coefficients: !!opencv-matrix
        0.00019358999999999999, 1.7618711400000001e-05,
        0.0011999999999999999 ]
 ";
-    let rig = rig_from_opencv(default, "cam.yaml", "one", OpenCvModel::Default, Some((752, 480))).unwrap();
+    let rig = rig_from_opencv(default, "cam.yaml", "one", Some(OpenCvModel::Default), Some((752, 480)))
+        .unwrap()
+        .0;
     assert!(matches!(rig.sensors[0].lens, Lens::Radtan(r) if r.d[4] == 0.0012));
     assert_eq!((rig.sensors[0].width, rig.sensors[0].height), (752, 480));
 }
@@ -260,14 +264,14 @@ fn what_an_opencv_file_lacks_is_named_in_one_line() {
         (
             OPENCV_FISHEYE.replace("rows: 4", "rows: 8").replace(
                 "0.002, -0.00029999999999999997, 0. ]",
-                "0.002, -0.0003, 0., 0., 0., 0., 0. ]",
+                "0.002, -0.0003, 0., 0., 0.1, 0., 0. ]",
             ),
             OpenCvModel::Default,
-            "8 coefficients",
+            "8 coefficients with k4, k5, k6 = [0.1, 0.0, 0.0]",
         ),
     ];
     for (yaml, model, expected) in cases {
-        let line = rig_from_opencv(&yaml, "cam.yaml", "one", model, None)
+        let line = rig_from_opencv(&yaml, "cam.yaml", "one", Some(model), None)
             .unwrap_err()
             .to_string();
         assert!(line.starts_with("cam.yaml"), "{line}");

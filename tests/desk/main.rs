@@ -4,6 +4,7 @@
 mod common;
 
 mod calibration;
+mod calibration_formats;
 mod demo;
 mod eval;
 mod floorplan;

@@ -10,7 +10,7 @@
 //!
 //! `omnitrack-desk model from-ifc FILE.ifc --out MODEL.obj [--storey NAME]` converts an IFC
 //! building (what architects deliver) into the coarse OBJ model through IfcOpenShell
-//! (`tools/ifc_to_obj.py`, in its own venv).
+//! (`tools/ifc_to_obj.py`, carried in the binary; IfcOpenShell in a venv of the user's cache).
 //!
 //! `omnitrack-desk eval GT.tum EST.tum [--align] [--rpe-delta N] [--max-diff S]` compares an
 //! estimated trajectory with the ground truth (ATE and RPE, evo's definitions) and prints a table.
@@ -20,10 +20,13 @@
 //! tool quietly with success, as it ends `omnitrack`; standard output that cannot be written (a
 //! full disk) is an error like any other.
 
+mod calib;
+mod ifc;
 mod jobs;
 mod look;
 
-use jobs::{eval_json, from_ifc, manual, manual_result, render};
+use ifc::from_ifc;
+use jobs::{eval_json, manual, manual_result, render};
 
 use clap::{Parser, Subcommand};
 use omnitrack::desk::eval::{evaluate_files, EvalOptions};
@@ -133,7 +136,7 @@ enum Command {
     /// Rig files from other tools' calibrations.
     Rig {
         #[command(subcommand)]
-        command: RigCommand,
+        command: calib::RigCommand,
     },
     /// Compare an estimated trajectory with the ground truth: ATE and RPE (as evo_ape/evo_rpe).
     Eval {
@@ -165,88 +168,12 @@ enum Command {
 }
 
 #[derive(Subcommand)]
-enum RigCommand {
-    /// A rig file from a Kalibr camera chain (camchain.yaml): `pinhole` cameras with
-    /// `equidistant` (→ kb4), `radtan` (→ radtan) or no distortion; other models are refused.
-    /// The rig frame is the named camera's frame turned to x forward, y left, z up.
-    FromKalibr {
-        /// Kalibr's camera chain (the camchain.yaml of kalibr_calibrate_cameras).
-        camchain: PathBuf,
-        /// Where to write the rig.
-        #[arg(long, value_name = "RIG.toml")]
-        out: PathBuf,
-        /// The camera whose frame, turned, is the rig's.
-        #[arg(long, value_name = "camN", default_value = "cam0")]
-        rig_frame: String,
-        /// The rig's name (default: the output file's stem).
-        #[arg(long)]
-        name: Option<String>,
-    },
-    /// A one-sensor rig from an OpenCV calibration file (cv::FileStorage YAML: K or
-    /// camera_matrix, D or distortion_coefficients, image_width and image_height). The rig
-    /// frame is the camera's turned to x forward, y left, z up.
-    FromOpencv {
-        /// The calibration file.
-        file: PathBuf,
-        /// Where to write the rig.
-        #[arg(long, value_name = "RIG.toml")]
-        out: PathBuf,
-        /// Which OpenCV model the coefficients are (four numbers fit both).
-        #[arg(long, value_enum, default_value = "fisheye")]
-        model: OpenCvLens,
-        /// The image size, when the file does not give it.
-        #[arg(long, value_name = "W,H", value_parser = parse_size)]
-        resolution: Option<(u32, u32)>,
-        /// The rig's name (default: the output file's stem).
-        #[arg(long)]
-        name: Option<String>,
-    },
-}
-
-/// `W,H`, two whole pixel counts.
-fn parse_size(text: &str) -> Result<(u32, u32), String> {
-    let parts: Vec<&str> = text.split(',').map(str::trim).collect();
-    match parts[..] {
-        [w, h] => match (w.parse::<u32>(), h.parse::<u32>()) {
-            (Ok(w), Ok(h)) if w > 0 && h > 0 => Ok((w, h)),
-            _ => Err(format!("{text:?}: expected W,H (two positive whole numbers)")),
-        },
-        _ => Err(format!("{text:?}: expected W,H")),
-    }
-}
-
-/// Writes the rig file `out`, with a header saying where it came from.
-fn write_rig(out: &std::path::Path, rig: &Rig, header: &str) -> Result<(), String> {
-    std::fs::write(out, format!("{header}{}", rig.to_toml_string()))
-        .map_err(|e| format!("{}: cannot write: {e}", out.display()))?;
-    eprintln!("{}: rig '{}', {} sensors", out.display(), rig.name, rig.sensors.len());
-    Ok(())
-}
-
-/// The rig's name: given, or the output file's stem.
-fn rig_name(name: Option<String>, out: &std::path::Path) -> String {
-    name.unwrap_or_else(|| {
-        out.file_stem()
-            .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_else(|| "rig".into())
-    })
-}
-
-/// `--model` of `rig from-opencv`.
-#[derive(Clone, Copy, clap::ValueEnum)]
-enum OpenCvLens {
-    /// cv::fisheye (4 coefficients): kb4.
-    Fisheye,
-    /// The default model, k1, k2, p1, p2[, k3]: radtan.
-    Default,
-}
-
-#[derive(Subcommand)]
 enum ModelCommand {
     /// The coarse OBJ model of an IFC building: walls, slabs, roofs, doors, windows, stairs,
     /// columns, beams and curtain walls, in metres, z up, in the IFC project's coordinates;
     /// furniture and services left out. Runs IfcOpenShell (PyPI `ifcopenshell`), which it
-    /// installs into tools/.venv-ifc on first use.
+    /// installs on first use into the user's cache (~/.cache/omnitrack/ifc-venv, or under
+    /// $OMNITRACK_CACHE or $XDG_CACHE_HOME), saying so.
     FromIfc {
         /// The IFC file (STEP, IFC2X3 or IFC4).
         file: PathBuf,
@@ -345,7 +272,7 @@ fn main() -> ExitCode {
 
 /// Why a command did not complete.
 #[derive(Debug)]
-enum Failure {
+pub(crate) enum Failure {
     /// One line for standard error.
     Message(String),
     /// Standard output's reader went away.
@@ -365,7 +292,7 @@ impl From<&str> for Failure {
 }
 
 /// Writes `text` to standard output, whole. `print!` would panic on a closed pipe (exit 101).
-fn print_out(text: &str) -> Result<(), Failure> {
+pub(crate) fn print_out(text: &str) -> Result<(), Failure> {
     use std::io::Write;
     let mut out = std::io::stdout().lock();
     match out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
@@ -396,52 +323,7 @@ fn run(command: Command) -> Result<(), Failure> {
             eprintln!("{}", look::plot(&model, &trajectory, truth.as_deref(), &out)?);
             Ok(())
         }
-        Command::Rig {
-            command:
-                RigCommand::FromKalibr {
-                    camchain,
-                    out,
-                    rig_frame,
-                    name,
-                },
-        } => {
-            let file = camchain.display().to_string();
-            let yaml = omnitrack::text_file::read_text(&camchain, omnitrack::text_file::SMALL_FILE_LIMIT)
-                .map_err(|e| format!("{file}: cannot read: {e}"))?;
-            let rig = omnitrack::desk::kalibr::rig_from_kalibr(&yaml, &file, &rig_name(name, &out), &rig_frame)
-                .map_err(|e| e.to_string())?;
-            let header = format!(
-                "# Converted by `omnitrack-desk rig from-kalibr` from {file}; rig frame: {rig_frame} turned to\n\
-                 # x forward, y left, z up, origin at its optical centre.\n"
-            );
-            Ok(write_rig(&out, &rig, &header)?)
-        }
-        Command::Rig {
-            command:
-                RigCommand::FromOpencv {
-                    file,
-                    out,
-                    model,
-                    resolution,
-                    name,
-                },
-        } => {
-            use omnitrack::desk::opencv_calib::{rig_from_opencv, OpenCvModel};
-            let shown = file.display().to_string();
-            let yaml = omnitrack::text_file::read_text(&file, omnitrack::text_file::SMALL_FILE_LIMIT)
-                .map_err(|e| format!("{shown}: cannot read: {e}"))?;
-            let model = match model {
-                OpenCvLens::Fisheye => OpenCvModel::Fisheye,
-                OpenCvLens::Default => OpenCvModel::Default,
-            };
-            let rig =
-                rig_from_opencv(&yaml, &shown, &rig_name(name, &out), model, resolution).map_err(|e| e.to_string())?;
-            let header = format!(
-                "# Converted by `omnitrack-desk rig from-opencv` from {shown}; rig frame: the camera's turned to\n\
-                 # x forward, y left, z up, origin at its optical centre.\n"
-            );
-            Ok(write_rig(&out, &rig, &header)?)
-        }
+        Command::Rig { command } => calib::run(command),
         Command::Model {
             command: ModelCommand::FromIfc { file, out, storey },
         } => Ok(from_ifc(&file, &out, storey.as_deref())?),

@@ -1,7 +1,8 @@
 //! `omnitrack-desk model from-ifc` on an IFC house written by IfcOpenShell's own authoring API
 //! (`tools/ifc_sample_house.py`: two storeys in millimetres, a door cut into a wall, furniture,
-//! a duct and a railing that must be left out). The first run installs IfcOpenShell into
-//! tools/.venv-ifc from PyPI.
+//! a duct and a railing that must be left out). The first run installs IfcOpenShell from PyPI
+//! into the per-user cache (`~/.cache/omnitrack/ifc-venv`); the tests of an installed binary
+//! below install nothing.
 
 use omnitrack::visibility::build::{build_table, BuildOptions, Merge};
 use omnitrack::Model;
@@ -41,6 +42,84 @@ fn desk(args: &[&str]) -> (i32, String) {
         out.status.code().unwrap_or(-1),
         String::from_utf8_lossy(&out.stderr).into_owned(),
     )
+}
+
+/// The lines of `stderr` that are not the converter's progress.
+fn errors(stderr: &str) -> usize {
+    stderr.lines().filter(|l| !l.starts_with("from-ifc: ")).count()
+}
+
+/// `omnitrack-desk` as a package installs it: copied out of the build tree into `DIR/bin`, run
+/// from `DIR` with its own cache `DIR/cache` (`$OMNITRACK_CACHE`). (exit code, stderr).
+fn installed(dir: &Path, args: &[&str]) -> (i32, String) {
+    let bin = dir.join("bin");
+    std::fs::create_dir_all(&bin).unwrap();
+    let exe = bin.join("omnitrack-desk");
+    if !exe.exists() {
+        std::fs::copy(env!("CARGO_BIN_EXE_omnitrack-desk"), &exe).unwrap();
+    }
+    let out = Command::new(&exe)
+        .args(args)
+        .current_dir(dir)
+        .env("OMNITRACK_CACHE", dir.join("cache"))
+        .env_remove("OMNITRACK_IFC_VENV")
+        .output()
+        .unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// Issue 49: an installed binary ran `tools/ifc_to_obj.py` by the path it was built at ("can't
+/// open file"). It carries the converter, writes it into the cache and runs it from there: a
+/// file that is not IFC gets the converter's own one-line answer, and nothing is installed for
+/// it (the input is checked before any venv is made).
+#[test]
+fn an_installed_binary_runs_the_converter_it_carries_from_the_cache() {
+    let dir = tempfile::tempdir().unwrap();
+    let notes = dir.path().join("notes.ifc");
+    std::fs::write(&notes, "a shopping list\n").unwrap();
+    let (code, stderr) = installed(dir.path(), &["model", "from-ifc", "notes.ifc", "--out", "notes.obj"]);
+    assert_eq!(code, 2, "{stderr}");
+    assert_eq!(stderr.trim().lines().count(), 1, "{stderr}");
+    assert!(stderr.contains("notes.ifc: not an IFC file"), "{stderr}");
+    let script = dir.path().join("cache/ifc_to_obj.py");
+    assert_eq!(
+        std::fs::read_to_string(&script).unwrap(),
+        std::fs::read_to_string(tools().join("ifc_to_obj.py")).unwrap()
+    );
+    assert!(!dir.path().join("cache/ifc-venv").exists());
+}
+
+/// Issue 49: the first use installed IfcOpenShell into the source tree for ~20 s without a word.
+/// It goes into the cache's `ifc-venv`, and a line says so before it starts. Here the venv's
+/// Python is a stand-in that has no IfcOpenShell and whose pip fails, so nothing is downloaded:
+/// the progress line, then one line naming the venv that could not be set up.
+#[test]
+fn ifcopenshell_goes_into_the_users_cache_with_a_line_that_says_so() {
+    use std::os::unix::fs::PermissionsExt;
+    let dir = tempfile::tempdir().unwrap();
+    let venv = dir.path().join("cache/ifc-venv");
+    std::fs::create_dir_all(venv.join("bin")).unwrap();
+    let python = venv.join("bin/python");
+    std::fs::write(&python, "#!/bin/sh\nexit 1\n").unwrap();
+    std::fs::set_permissions(&python, std::fs::Permissions::from_mode(0o755)).unwrap();
+    std::fs::write(dir.path().join("house.ifc"), "ISO-10303-21;\n").unwrap();
+    let (code, stderr) = installed(dir.path(), &["model", "from-ifc", "house.ifc", "--out", "house.obj"]);
+    assert_eq!(code, 2, "{stderr}");
+    let lines: Vec<&str> = stderr.lines().collect();
+    let venv = venv.display().to_string();
+    assert_eq!(lines.len(), 2, "{stderr}");
+    assert!(
+        lines[0].starts_with("from-ifc: installing IfcOpenShell (PyPI ifcopenshell) into ") && lines[0].contains(&venv),
+        "{stderr}"
+    );
+    assert!(
+        lines[1].contains(&format!("cannot set up IfcOpenShell in {venv}")),
+        "{stderr}"
+    );
+    assert!(!dir.path().join("house.obj").exists());
 }
 
 /// The `o` names of an OBJ file.
@@ -145,7 +224,8 @@ fn a_storey_alone_and_bad_input_in_one_line() {
 
     let (code, stderr) = from_ifc("Attic");
     assert_eq!(code, 2);
-    assert_eq!(stderr.trim().lines().count(), 1, "{stderr}");
+    // One line of error (after the progress lines of a first install, if this test made it).
+    assert_eq!(errors(&stderr), 1, "{stderr}");
     assert!(
         stderr.contains("no storey named 'Attic' (storeys: 'Ground', 'Upper')"),
         "{stderr}"
@@ -162,7 +242,7 @@ fn a_storey_alone_and_bad_input_in_one_line() {
         out.to_str().unwrap(),
     ]);
     assert_eq!(code, 2);
-    assert_eq!(stderr.trim().lines().count(), 1, "{stderr}");
+    assert_eq!(errors(&stderr), 1, "{stderr}");
     assert!(stderr.contains("not an IFC file"), "{stderr}");
     assert!(!out.exists() && !out.with_extension("obj.partial").exists());
 

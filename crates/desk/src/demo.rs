@@ -195,6 +195,13 @@ pub enum DemoError {
     Picture(#[from] PictureError),
 }
 
+/// The per-user cache directory the desk tools share with the demo (`$OMNITRACK_CACHE`, else
+/// `$XDG_CACHE_HOME/omnitrack`, else `~/.cache/omnitrack`, else a fallback named in the second
+/// value), created and checked writable.
+pub fn user_cache_dir() -> Result<(PathBuf, String), DemoError> {
+    choose_cache_dir(None)
+}
+
 fn bar(show: bool, len: u64, template: &str) -> ProgressBar {
     if !show {
         return ProgressBar::hidden();

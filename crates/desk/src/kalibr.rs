@@ -11,17 +11,20 @@
 //! 4×4 transform taking points of camera n−1 into camera n. The chain is walked from the rig
 //! camera both ways: T_ref_cn = T_ref_cn−1 · T_cn_cnm1⁻¹.
 //!
-//! Lenses: `pinhole` + `equidistant` is OpenCV's fisheye model, our `kb4`, coefficient for
-//! coefficient; `pinhole` + `radtan` is OpenCV's default model, our `radtan` (k1, k2, p1, p2);
-//! `pinhole` + `none` is a pinhole. Other models are refused: converting them would need a
-//! refit, and a refit is a calibration, not a conversion.
+//! Lenses, each exactly (parameter for parameter): `pinhole` + `equidistant` is OpenCV's fisheye
+//! model, our `kb4`; `pinhole` + `radtan` is OpenCV's default model, our `radtan` (k1, k2, p1,
+//! p2); `pinhole` + `none` is a pinhole; `omni` + `radtan` or `none` (intrinsics [ξ, fu, fv, pu,
+//! pv]) is our `omni`; `ds` (intrinsics [ξ, α, fu, fv, pu, pv]) our `ds`; `eucm` ([α, β, fu,
+//! fv, pu, pv]) our `eucm`. Other models (`fov`, `omni` + `equidistant`, …) are refused by name:
+//! converting them would need a refit, and a refit is a calibration, not a conversion.
 //!
 //! The rig frame is the reference camera's frame turned to x forward (its optical axis), y left,
 //! z up (its image up), with the origin at its optical centre.
 
-use nalgebra::{Matrix3, Matrix4, Rotation3, Translation3, UnitQuaternion};
-use omnitrack_core::geometry::{Equirectangular, Kb4, Lens, Pinhole, Pose, Radtan};
-use omnitrack_core::rig::{Rig, RigError, Sensor};
+use crate::calib_rig::{assemble, pixel_size, rigid, Camera};
+use nalgebra::Matrix4;
+use omnitrack_core::geometry::{DoubleSphere, Equirectangular, Eucm, Kb4, Lens, Omni, Pinhole, Pose, Radtan};
+use omnitrack_core::rig::{Rig, RigError};
 use yaml_rust2::{Yaml, YamlLoader};
 
 /// Why a camera chain cannot become a rig.
@@ -46,7 +49,8 @@ pub enum KalibrError {
     },
     #[error(
         "{file}: {camera}: camera model '{model}' with distortion '{distortion}' is not supported \
-         (omnitrack reads pinhole cameras with radtan, equidistant or no distortion)"
+         (omnitrack reads pinhole with radtan, equidistant or none; omni with radtan or none; ds and \
+         eucm with none)"
     )]
     Unsupported {
         file: String,
@@ -90,53 +94,27 @@ pub fn rig_from_kalibr(yaml: &str, file: &str, name: &str, rig_frame: &str) -> R
     };
 
     // T_c0_cn for every camera, from the links T_cn_cnm1.
-    let mut t_c0 = vec![Matrix4::identity()];
+    let mut t_c0: Vec<Pose> = vec![Pose::identity()];
     for (n, cam) in cameras.iter().enumerate().skip(1) {
-        let link = matrix4(&cam["T_cn_cnm1"]).map_err(|m| key_error(n, "T_cn_cnm1", m))?;
-        let inverse = rigid_inverse(&link).map_err(|m| key_error(n, "T_cn_cnm1", m))?;
-        t_c0.push(t_c0[n - 1] * inverse);
+        let link = matrix4(&cam["T_cn_cnm1"])
+            .and_then(|m| rigid(&m))
+            .map_err(|m| key_error(n, "T_cn_cnm1", m))?;
+        t_c0.push(t_c0[n - 1] * link.inverse());
     }
-    // The rig is the reference camera turned: rig x = its z, rig y = its −x, rig z = its −y.
-    let turn = Matrix3::new(0.0, 0.0, 1.0, -1.0, 0.0, 0.0, 0.0, -1.0, 0.0);
-    let t_ref_c0 = rigid_inverse(&t_c0[reference]).map_err(|m| key_error(reference, "T_cn_cnm1", m))?;
-
-    let mut sensors = Vec::with_capacity(cameras.len());
+    let mut placed = Vec::with_capacity(cameras.len());
     for (n, cam) in cameras.iter().enumerate() {
         let lens = lens_of(cam, n, file, &names)?;
-        let resolution = numbers(&cam["resolution"], 2).map_err(|m| key_error(n, "resolution", m))?;
-        if resolution
-            .iter()
-            .any(|&r| !(1.0..=65535.0).contains(&r) || r.fract() != 0.0)
-        {
-            return Err(key_error(
-                n,
-                "resolution",
-                format!("must be two pixel counts, found {resolution:?}"),
-            ));
-        }
-        let t_ref_cn = t_ref_c0 * t_c0[n];
-        let r = turn * t_ref_cn.fixed_view::<3, 3>(0, 0);
-        let t = turn * t_ref_cn.fixed_view::<3, 1>(0, 3);
-        let rotation = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(r));
-        sensors.push(Sensor {
-            id: n,
-            width: resolution[0] as u32,
-            height: resolution[1] as u32,
+        let (width, height) = numbers(&cam["resolution"], 2)
+            .and_then(|r| pixel_size(&r))
+            .map_err(|m| key_error(n, "resolution", m))?;
+        placed.push(Camera {
             lens,
-            t_rig_sensor: Pose::from_parts(Translation3::from(t), rotation),
-            device: None,
-            usb_serial: None,
-            crop: None,
+            width,
+            height,
+            t_x_cam: t_c0[n],
         });
     }
-    let rig = Rig {
-        name: name.into(),
-        sensors,
-        usb: None,
-    };
-    // Through the rig file's own checks (and its rounding of the quaternion's print): what the
-    // user gets is exactly what `Rig::load` will read.
-    Ok(Rig::from_toml_str(&rig.to_toml_string(), file)?)
+    Ok(assemble(name, file, placed, reference)?)
 }
 
 fn lens_of(cam: &Yaml, n: usize, file: &str, names: &[String]) -> Result<Lens, KalibrError> {
@@ -157,7 +135,24 @@ fn lens_of(cam: &Yaml, n: usize, file: &str, names: &[String]) -> Result<Lens, K
         Yaml::BadValue | Yaml::Null => "none".to_string(),
         _ => text("distortion_model")?,
     };
-    let i = numbers(&cam["intrinsics"], 4).map_err(|m| key_error("intrinsics", m))?;
+    let unsupported = || KalibrError::Unsupported {
+        file: file.into(),
+        camera: names[n].clone(),
+        // The file's own strings, escaped: a message stays one line whatever they hold.
+        model: model.escape_debug().to_string(),
+        distortion: distortion.escape_debug().to_string(),
+    };
+    // What each model's intrinsics are, in Kalibr's order, for the message of a wrong count.
+    let names_of = match (model.as_str(), distortion.as_str()) {
+        ("pinhole", "equidistant" | "radtan" | "none") | ("equirectangular", "none") => "fu, fv, pu, pv",
+        ("omni", "radtan" | "none") => "xi, fu, fv, pu, pv",
+        ("ds", "none") => "xi, alpha, fu, fv, pu, pv",
+        ("eucm", "none") => "alpha, beta, fu, fv, pu, pv",
+        _ => return Err(unsupported()),
+    };
+    let count = names_of.split(',').count();
+    let i = numbers(&cam["intrinsics"], count)
+        .map_err(|m| key_error("intrinsics", format!("{m} (camera model '{model}' has [{names_of}])")))?;
     let coeffs =
         |count: usize| numbers(&cam["distortion_coeffs"], count).map_err(|m| key_error("distortion_coeffs", m));
     let lens = match (model.as_str(), distortion.as_str()) {
@@ -167,17 +162,18 @@ fn lens_of(cam: &Yaml, n: usize, file: &str, names: &[String]) -> Result<Lens, K
         }
         ("pinhole", "radtan") => Radtan::new(i[0], i[1], i[2], i[3], &coeffs(4)?).map(Lens::Radtan),
         ("pinhole", "none") => Pinhole::new(i[0], i[1], i[2], i[3]).map(Lens::Pinhole),
-        // Not a Kalibr model, but what a 360° camera's stitched stream is.
-        ("equirectangular", "none") => Equirectangular::new(i[0], i[1], i[2], i[3]).map(Lens::Equirectangular),
-        _ => {
-            return Err(KalibrError::Unsupported {
-                file: file.into(),
-                camera: names[n].clone(),
-                // The file's own strings, escaped: a message stays one line whatever they hold.
-                model: model.escape_debug().to_string(),
-                distortion: distortion.escape_debug().to_string(),
-            });
+        ("omni", "radtan" | "none") => {
+            let d = if distortion == "radtan" {
+                coeffs(4)?
+            } else {
+                vec![0.0; 4]
+            };
+            Omni::new(i[1], i[2], i[3], i[4], i[0], [d[0], d[1], d[2], d[3]]).map(Lens::Omni)
         }
+        ("ds", "none") => DoubleSphere::new(i[2], i[3], i[4], i[5], i[0], i[1]).map(Lens::DoubleSphere),
+        ("eucm", "none") => Eucm::new(i[2], i[3], i[4], i[5], i[0], i[1]).map(Lens::Eucm),
+        // Not a Kalibr model, but what a 360° camera's stitched stream is.
+        _ => Equirectangular::new(i[0], i[1], i[2], i[3]).map(Lens::Equirectangular),
     };
     lens.map_err(|e| key_error("intrinsics", e.to_string()))
 }
@@ -218,21 +214,4 @@ fn matrix4(v: &Yaml) -> Result<Matrix4<f64>, String> {
         }
     }
     Ok(m)
-}
-
-/// The inverse of a rigid transform, refusing one that is not (a rotation to 1e-6, last row
-/// 0 0 0 1): a scaled or sheared "transform" is a calibration gone wrong.
-fn rigid_inverse(m: &Matrix4<f64>) -> Result<Matrix4<f64>, String> {
-    let r = m.fixed_view::<3, 3>(0, 0).into_owned();
-    let orthonormal = (r.transpose() * r - Matrix3::identity()).norm() < 1e-6 && (r.determinant() - 1.0).abs() < 1e-6;
-    let last = m.fixed_view::<1, 4>(3, 0);
-    if !orthonormal || (last - nalgebra::RowVector4::new(0.0, 0.0, 0.0, 1.0)).norm() > 1e-9 {
-        return Err("not a rigid transform (its 3×3 block must be a rotation, its last row 0 0 0 1)".into());
-    }
-    let mut inv = Matrix4::identity();
-    let rt = r.transpose();
-    inv.fixed_view_mut::<3, 3>(0, 0).copy_from(&rt);
-    let t = m.fixed_view::<3, 1>(0, 3);
-    inv.fixed_view_mut::<3, 1>(0, 3).copy_from(&(-rt * t));
-    Ok(inv)
 }

@@ -2,6 +2,8 @@
 //! on a workstation, never on the device path. Compiled only with the `desk` feature (on by
 //! default); the device build (`--no-default-features`) leaves it and its dependencies out.
 
+pub mod basalt;
+pub mod calib_rig;
 pub mod demo;
 pub mod eval;
 pub mod floorplan;

@@ -1,23 +1,29 @@
-//! Calibration in: a one-sensor rig from an OpenCV calibration file (`cv::FileStorage` YAML).
+//! Calibration in: a one-sensor rig from an OpenCV calibration file (`cv::FileStorage` YAML) or
+//! a ROS `camera_info` YAML (`camera_calibration_parsers`, what `camera_calibration` saves).
 //!
 //! In: the YAML text as `cv::FileStorage` writes it (`%YAML` header, `!!opencv-matrix` nodes with
-//! `rows`, `cols`, `dt`, `data`), the file's name for messages, the lens model the coefficients
-//! belong to, and the image size when the file does not give it. Out: a [`Rig`] of one sensor
-//! whose frame, turned to x forward, y left, z up, is the rig's; or an [`OpenCvError`] naming
-//! the file and the key in one line.
+//! `rows`, `cols`, `dt`, `data`) or as ROS writes it (the same keys, plain `rows`/`cols`/`data`
+//! maps, and `distortion_model`), the file's name for messages, the lens model if the caller
+//! overrides the file, and the image size when the file does not give it. Out: a [`Rig`] of one
+//! sensor whose frame, turned to x forward, y left, z up, is the rig's, with how its lens model
+//! was chosen; or an [`OpenCvError`] naming the file and the key in one line.
 //!
 //! Keys: the camera matrix as `K` or `camera_matrix` (3×3, zero skew), the distortion as `D` or
-//! `distortion_coefficients`, the size as `image_width` and `image_height` (OpenCV's calibration
-//! sample writes these). `cv::fisheye::calibrate`'s four coefficients are our `kb4`; the default
-//! model's four or five (k1, k2, p1, p2[, k3]) are `radtan`. Four numbers fit both models, so the
-//! caller says which; the rational and thin-prism models (8, 12 or 14 numbers) are refused.
+//! `distortion_coefficients`, the size as `image_width` and `image_height`. The lens model is
+//! what the file says: ROS's `distortion_model` (`plumb_bob` and `rational_polynomial` are
+//! OpenCV's default model, `equidistant` its fisheye), else the `fisheye_model` flag OpenCV's
+//! calibration tutorial writes, else the number of coefficients: 4 are `cv::fisheye`'s (the
+//! default model always writes 5 or more), 5 or 8 the default model's. `cv::fisheye`'s four
+//! coefficients are our `kb4`; the default model's k1, k2, p1, p2[, k3] are `radtan`, and its 8
+//! (the rational model) are read when k4, k5, k6 are 0 (then it is the same lens); the
+//! thin-prism and tilted models (12, 14 numbers) are refused.
 
-use nalgebra::{Translation3, UnitQuaternion, Vector3};
+use crate::calib_rig::{assemble, Camera};
 use omnitrack_core::geometry::{Kb4, Lens, Pose, Radtan};
-use omnitrack_core::rig::{Rig, RigError, Sensor};
+use omnitrack_core::rig::{Rig, RigError};
 use yaml_rust2::{Yaml, YamlLoader};
 
-/// Which of OpenCV's models the coefficients are.
+/// Which of OpenCV's models the coefficients are (to override what the file says).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum OpenCvModel {
     /// `cv::fisheye`: four coefficients, our `kb4`.
@@ -39,14 +45,15 @@ pub enum OpenCvError {
     Rig(#[from] RigError),
 }
 
-/// The rig (named `name`) of one camera calibrated by OpenCV.
+/// The rig (named `name`) of one camera calibrated by OpenCV or ROS, and how its lens model was
+/// chosen (`model` overrides the file).
 pub fn rig_from_opencv(
     yaml: &str,
     file: &str,
     name: &str,
-    model: OpenCvModel,
+    model: Option<OpenCvModel>,
     size: Option<(u32, u32)>,
-) -> Result<Rig, OpenCvError> {
+) -> Result<(Rig, String), OpenCvError> {
     // OpenCV writes a `%YAML:1.0` directive (before 4.x) that YAML parsers refuse, or `%YAML 1.2`.
     let body = match yaml.trim_start().strip_prefix("%YAML") {
         Some(rest) => rest.split_once('\n').map_or("", |(_, b)| b),
@@ -71,21 +78,37 @@ pub fn rig_from_opencv(
     }
     let (d_key, d) = matrix(&root, &["D", "distortion_coefficients"]).map_err(|(key, m)| key_error(&key, m))?;
     let (fx, fy, cx, cy) = (k[0], k[4], k[2], k[5]);
+    let (model, why) = match model {
+        Some(m) => (m, "as --model says".to_string()),
+        None => model_of(&root, d.len()).map_err(|(key, m)| key_error(&key, m))?,
+    };
     let lens = match (model, d.len()) {
         (OpenCvModel::Fisheye, 4) => Kb4::new(fx, fy, cx, cy, [d[0], d[1], d[2], d[3]]).map(Lens::Kb4),
         (OpenCvModel::Default, 4 | 5) => Radtan::new(fx, fy, cx, cy, &d).map(Lens::Radtan),
+        // The rational model without its denominator is the five-coefficient one.
+        (OpenCvModel::Default, 8) if d[5..].iter().all(|&c| c == 0.0) => {
+            Radtan::new(fx, fy, cx, cy, &d[..5]).map(Lens::Radtan)
+        }
+        (OpenCvModel::Default, 8) => {
+            return Err(key_error(
+                &d_key,
+                format!(
+                    "8 coefficients with k4, k5, k6 = {:?}: OpenCV's rational model is not read (recalibrate \
+                     with the default 5 coefficients, or cv::fisheye)",
+                    &d[5..]
+                ),
+            ));
+        }
         (OpenCvModel::Fisheye, n) => {
             return Err(key_error(
                 &d_key,
-                format!("a fisheye lens has 4 coefficients, found {n}"),
+                format!("a fisheye lens (cv::fisheye, {why}) has 4 coefficients, found {n}"),
             ));
         }
         (OpenCvModel::Default, n) => {
             return Err(key_error(
                 &d_key,
-                format!(
-                    "{n} coefficients: only k1, k2, p1, p2[, k3] are read (the rational and thin-prism terms are not)"
-                ),
+                format!("{n} coefficients: only k1, k2, p1, p2[, k3] are read (the thin-prism and tilt terms are not)"),
             ));
         }
     }
@@ -105,23 +128,61 @@ pub fn rig_from_opencv(
             }
         }
     };
-    // The camera's frame turned: rig x = its z, rig y = its −x, rig z = its −y.
-    let turn = UnitQuaternion::from_basis_unchecked(&[-Vector3::y(), -Vector3::z(), Vector3::x()]);
-    let rig = Rig {
-        name: name.into(),
-        sensors: vec![Sensor {
-            id: 0,
-            width,
-            height,
-            lens,
-            t_rig_sensor: Pose::from_parts(Translation3::identity(), turn),
-            device: None,
-            usb_serial: None,
-            crop: None,
-        }],
-        usb: None,
+    let camera = Camera {
+        lens,
+        width,
+        height,
+        t_x_cam: Pose::identity(),
     };
-    Ok(Rig::from_toml_str(&rig.to_toml_string(), file)?)
+    Ok((assemble(name, file, vec![camera], 0)?, why))
+}
+
+/// The model the file says its coefficients are, and where it says so: ROS's
+/// `distortion_model`, OpenCV's tutorial's `fisheye_model`, or the count of coefficients.
+fn model_of(root: &Yaml, count: usize) -> Result<(OpenCvModel, String), (String, String)> {
+    match &root["distortion_model"] {
+        Yaml::BadValue | Yaml::Null => {}
+        Yaml::String(s) => {
+            let model = match s.as_str() {
+                "plumb_bob" | "rational_polynomial" => OpenCvModel::Default,
+                "equidistant" | "fisheye" => OpenCvModel::Fisheye,
+                other => {
+                    return Err((
+                        "distortion_model".into(),
+                        format!(
+                            "'{}' is not read (plumb_bob, rational_polynomial or equidistant)",
+                            other.escape_debug()
+                        ),
+                    ))
+                }
+            };
+            return Ok((model, format!("distortion_model: {s}")));
+        }
+        _ => return Err(("distortion_model".into(), "must be a string such as plumb_bob".into())),
+    }
+    match &root["fisheye_model"] {
+        Yaml::BadValue | Yaml::Null => {}
+        Yaml::Integer(i) if *i == 0 || *i == 1 => {
+            let model = if *i == 1 {
+                OpenCvModel::Fisheye
+            } else {
+                OpenCvModel::Default
+            };
+            return Ok((model, format!("fisheye_model: {i}")));
+        }
+        Yaml::Boolean(b) => {
+            let model = if *b { OpenCvModel::Fisheye } else { OpenCvModel::Default };
+            return Ok((model, format!("fisheye_model: {b}")));
+        }
+        _ => return Err(("fisheye_model".into(), "must be 0 or 1".into())),
+    }
+    Ok(match count {
+        4 => (
+            OpenCvModel::Fisheye,
+            "4 coefficients: cv::fisheye's (--model default reads them as k1, k2, p1, p2)".into(),
+        ),
+        n => (OpenCvModel::Default, format!("{n} coefficients: the default model's")),
+    })
 }
 
 /// The numbers of the first of `keys` present, an `!!opencv-matrix` (its `data`, checked against

@@ -641,6 +641,7 @@ mod tests {
             "firmware_config/ladybug2.toml",
             "tools/rigs/pinhole4.toml",
             "tools/rigs/dual_fisheye.toml",
+            "tools/rigs/dual_double_sphere.toml",
         ] {
             assert!(share(wide) >= NARROW_VIEW_SHARE, "{wide}: {}", share(wide));
         }

@@ -7,7 +7,7 @@
 pub mod lens;
 pub mod observation;
 
-pub use lens::{Equirectangular, Kb4, Lens, LensError, Pinhole, Radtan};
+pub use lens::{DoubleSphere, Equirectangular, Eucm, Kb4, Lens, LensError, Omni, Pinhole, Radtan};
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 pub use observation::{xi, Correspondence, EdgePlane};
 

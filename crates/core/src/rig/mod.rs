@@ -10,7 +10,9 @@ pub mod view;
 
 pub use view::ViewMap;
 
-use crate::geometry::{pose_from_parts, rotation_to_wxyz, Equirectangular, Kb4, Lens, Pinhole, Pose, Radtan};
+use crate::geometry::{
+    pose_from_parts, rotation_to_wxyz, DoubleSphere, Equirectangular, Eucm, Kb4, Lens, Omni, Pinhole, Pose, Radtan,
+};
 use nalgebra::{Point2, Point3, Unit, Vector3};
 use std::fmt::Write as _;
 use std::path::Path;
@@ -74,7 +76,7 @@ pub struct RigError {
 }
 
 /// The lens models a rig file may name.
-const LENS_MODELS: &str = "\"kb4\", \"pinhole\", \"radtan\" or \"equirectangular\"";
+const LENS_MODELS: &str = "\"kb4\", \"pinhole\", \"radtan\", \"equirectangular\", \"ds\", \"eucm\" or \"omni\"";
 
 const SENSOR_KEYS: [&str; 10] = [
     "id",
@@ -105,24 +107,24 @@ impl Sensor {
     /// at a corner for the lenses centred on their axis (θd grows with distance from the
     /// principal point in normalised coordinates), at the middle of a side border for a panorama
     /// (whose corners are its poles, 90° off the axis, and whose side borders are straight
-    /// behind).
+    /// behind). A corner without a ray lies past the lens's own border (a circular fisheye's
+    /// image circle inside its sensor): then the image reaches that border, [`Lens::max_theta`].
     pub fn max_off_axis(&self) -> f64 {
         let (w, h) = (self.width as f64 - 0.5, self.height as f64 - 0.5);
         let (mu, mv) = (0.5 * (w - 0.5), 0.5 * (h - 0.5));
-        [
-            (-0.5, -0.5),
-            (w, -0.5),
-            (-0.5, h),
-            (w, h),
-            (-0.5, mv),
-            (w, mv),
-            (mu, -0.5),
-            (mu, h),
-        ]
-        .iter()
-        .filter_map(|&(u, v)| self.lens.unproject(&Point2::new(u, v)))
-        .map(|r| r.z.clamp(-1.0, 1.0).acos())
-        .fold(0.0, f64::max)
+        let corners = [(-0.5, -0.5), (w, -0.5), (-0.5, h), (w, h)];
+        if corners
+            .iter()
+            .any(|&(u, v)| self.lens.unproject(&Point2::new(u, v)).is_none())
+        {
+            return self.lens.max_theta();
+        }
+        corners
+            .iter()
+            .chain(&[(-0.5, mv), (w, mv), (mu, -0.5), (mu, h)])
+            .filter_map(|&(u, v)| self.lens.unproject(&Point2::new(u, v)))
+            .map(|r| r.z.clamp(-1.0, 1.0).acos())
+            .fold(0.0, f64::max)
     }
 
     /// Unit ray through a pixel, in the rig frame (starting at [`Sensor::centre`]).
@@ -220,12 +222,7 @@ impl Rig {
         for s in &self.sensors {
             let _ = writeln!(out, "\n[[sensors]]\nid = {}", s.id);
             let _ = writeln!(out, "resolution = [{}, {}]", s.width, s.height);
-            let dist = match s.lens {
-                Lens::Pinhole(_) | Lens::Equirectangular(_) => None,
-                Lens::Kb4(l) => Some(l.k.to_vec()),
-                // Four coefficients when k3 is 0, as OpenCV and Kalibr write them.
-                Lens::Radtan(l) => Some(l.d[..if l.d[4] == 0.0 { 4 } else { 5 }].to_vec()),
-            };
+            let dist = s.lens.parameters();
             let c = s.lens.principal_point();
             let intr = [s.lens.fx(), s.lens.fy(), c.x, c.y];
             let _ = writeln!(out, "model = \"{}\"", s.lens.model_name());
@@ -336,6 +333,10 @@ fn parse_sensor(entry: &Value, index: usize, count: usize) -> Result<Sensor, Pla
         None => return Err(fail("model", format!("missing ({LENS_MODELS})"))),
     };
     let i = numbers("intrinsics", 4)?;
+    // A sphere model's parameters, the error naming the model and what it takes.
+    let params = |n: usize, names: &str| {
+        numbers("distortion", n).map_err(|(p, m)| (p, format!("{m} (model \"{model}\" takes [{names}])")))
+    };
     let lens = match model {
         "kb4" => {
             let k = numbers("distortion", 4)?;
@@ -354,6 +355,18 @@ fn parse_sensor(entry: &Value, index: usize, count: usize) -> Result<Sensor, Pla
             };
             let d = numbers("distortion", n)?;
             Radtan::new(i[0], i[1], i[2], i[3], &d).map(Lens::Radtan)
+        }
+        "ds" => {
+            let d = params(2, "ξ, α")?;
+            DoubleSphere::new(i[0], i[1], i[2], i[3], d[0], d[1]).map(Lens::DoubleSphere)
+        }
+        "eucm" => {
+            let d = params(2, "α, β")?;
+            Eucm::new(i[0], i[1], i[2], i[3], d[0], d[1]).map(Lens::Eucm)
+        }
+        "omni" => {
+            let d = params(5, "ξ, k1, k2, p1, p2")?;
+            Omni::new(i[0], i[1], i[2], i[3], d[0], [d[1], d[2], d[3], d[4]]).map(Lens::Omni)
         }
         "pinhole" | "equirectangular" => {
             if t.contains_key("distortion") {
@@ -375,7 +388,9 @@ fn parse_sensor(entry: &Value, index: usize, count: usize) -> Result<Sensor, Pla
     let lens = lens.map_err(|e| {
         let key = if matches!(
             e,
-            crate::geometry::LensError::BadDistortion { .. } | crate::geometry::LensError::Folds { .. }
+            crate::geometry::LensError::BadDistortion { .. }
+                | crate::geometry::LensError::Folds { .. }
+                | crate::geometry::LensError::BadParameter(_)
         ) {
             "distortion"
         } else {

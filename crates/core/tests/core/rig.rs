@@ -213,3 +213,47 @@ fn bad_rig_files_name_the_file_the_sensor_and_the_key() {
     let missing = Rig::load(Path::new("/no/rig.toml")).unwrap_err().to_string();
     assert!(missing.starts_with("/no/rig.toml: cannot read rig file"), "{missing}");
 }
+
+/// The sphere lens models in a rig file (issue 49): `ds` [ξ, α], `eucm` [α, β] and `omni`
+/// [ξ, k1, k2, p1, p2] in `distortion`, read, written back bit for bit, and refused in one line
+/// naming the model's parameters when they are wrong.
+#[test]
+fn sphere_lens_models_read_write_and_refuse_by_name() {
+    let sensor = |model: &str, distortion: &str| {
+        KB4_SENSOR
+            .replace("model = \"kb4\"", &format!("model = \"{model}\""))
+            .replace(
+                "distortion = [0.0, 0.0, 0.0, 0.0]",
+                &format!("distortion = {distortion}"),
+            )
+    };
+    for (model, distortion) in [
+        ("ds", "[-0.2, 0.5]"),
+        ("eucm", "[0.63, 1.04]"),
+        ("omni", "[0.92, -0.26, 0.07, 0.0002, 1.8e-5]"),
+    ] {
+        let text = with_second_sensor(&sensor(model, distortion));
+        let rig = Rig::from_toml_str(&text, "rig.toml").unwrap();
+        assert_eq!(rig.sensors[1].lens.model_name(), model);
+        assert_eq!(Rig::from_toml_str(&rig.to_toml_string(), "again.toml").unwrap(), rig);
+    }
+    for (model, distortion, says) in [
+        (
+            "ds",
+            "[-0.2, 0.5, 0.1]",
+            "rig.toml: sensor 1, key 'distortion': must have 2 numbers, found 3 (model \"ds\" takes [ξ, α])",
+        ),
+        (
+            "omni",
+            "[0.9, 0.0, 0.0, 0.0]",
+            "sensor 1, key 'distortion': must have 5 numbers, found 4 (model \"omni\" takes [ξ, k1, k2, p1, p2])",
+        ),
+        ("eucm", "[0.6, -1.0]", "sensor 1, key 'distortion': eucm: β must be positive, found -1"),
+        ("ds", "[2.0, 0.5]", "sensor 1, key 'distortion': ds: ξ must be in [−1, 1], found 2"),
+        ("fov", "[0.9]", "unknown lens model \"fov\" (expected \"kb4\", \"pinhole\", \"radtan\", \"equirectangular\", \"ds\", \"eucm\" or \"omni\")"),
+    ] {
+        let e = error_of(&with_second_sensor(&sensor(model, distortion)));
+        assert!(e.contains(says), "{e:?} should say {says:?}");
+        assert!(!e.contains('\n'));
+    }
+}

@@ -78,7 +78,7 @@ fn prepare_cache(dir: &Path) -> Result<(), CacheError> {
     create_dir(dir)?;
     std::fs::write(
         dir.join("CACHEDIR.TAG"),
-        "Signature: 8a477f597d28d172789f06886806bc55\n# omnitrack demo cache: recordings, tables, pictures\n",
+        "Signature: 8a477f597d28d172789f06886806bc55\n# omnitrack cache: the demo's recordings, tables and pictures, the desk tools' IfcOpenShell\n",
     )
     .map_err(|source| CacheError::NotWritable {
         dir: dir.to_path_buf(),

@@ -19,13 +19,26 @@
 //! `Equirectangular` sees the whole sphere (a consumer 360° camera's panorama):
 //! u = cx + fx·atan2(x, z), v = cy + fy·asin(y/ρ).
 //!
+//! `DoubleSphere` (Usenko et al. 2018), `Eucm` (Khomutenko et al. 2016) and `Omni` (Mei &
+//! Rives 2007, with radtan distortion) are the wide-angle models of Basalt and Kalibr, read from
+//! their calibrations exactly; each is used on the region where it is one-to-one, and says `None`
+//! outside it.
+//!
 //! Files: the lens type, projection, unprojection and the Jacobian here; `kb4.rs` and `radtan.rs`
-//! the two distorted models' construction, inverses and monotonic domains.
+//! the two distorted models' construction, inverses and monotonic domains; `ds.rs`, `eucm.rs`
+//! and `omni.rs` the three sphere models, each whole.
 
 use nalgebra::{Matrix2x3, Point2, Unit, Vector2, Vector3};
 
+mod ds;
+mod eucm;
 mod kb4;
+mod omni;
 mod radtan;
+
+pub use ds::DoubleSphere;
+pub use eucm::Eucm;
+pub use omni::Omni;
 
 use kb4::{distort_derivative, kb4_scale};
 use radtan::radtan_normalised;
@@ -90,6 +103,9 @@ pub enum Lens {
     Kb4(Kb4),
     Radtan(Radtan),
     Equirectangular(Equirectangular),
+    DoubleSphere(DoubleSphere),
+    Eucm(Eucm),
+    Omni(Omni),
 }
 
 /// Why a lens could not be built from its parameters.
@@ -106,6 +122,9 @@ pub enum LensError {
          the lens would see less than {theta_deg:.1}° off-axis"
     )]
     Folds { k: Vec<f64>, theta_deg: f64 },
+    /// A sphere model's own parameter (ξ, α, β) out of its range, in words.
+    #[error("{0}")]
+    BadParameter(String),
 }
 
 fn check_intrinsics(fx: f64, fy: f64, cx: f64, cy: f64) -> Result<(), LensError> {
@@ -143,13 +162,31 @@ impl Equirectangular {
 }
 
 impl Lens {
-    /// The model's name in a rig file: `pinhole`, `kb4`, `radtan` or `equirectangular`.
+    /// The model's name in a rig file: `pinhole`, `kb4`, `radtan`, `equirectangular`, `ds`,
+    /// `eucm` or `omni`.
     pub fn model_name(&self) -> &'static str {
         match self {
             Lens::Pinhole(_) => "pinhole",
             Lens::Kb4(_) => "kb4",
             Lens::Radtan(_) => "radtan",
             Lens::Equirectangular(_) => "equirectangular",
+            Lens::DoubleSphere(_) => "ds",
+            Lens::Eucm(_) => "eucm",
+            Lens::Omni(_) => "omni",
+        }
+    }
+
+    /// The parameters beyond fx, fy, cx, cy, as the rig file's `distortion` lists them (none
+    /// for `pinhole` and `equirectangular`).
+    pub fn parameters(&self) -> Option<Vec<f64>> {
+        match self {
+            Lens::Pinhole(_) | Lens::Equirectangular(_) => None,
+            Lens::Kb4(l) => Some(l.k.to_vec()),
+            // Four coefficients when k3 is 0, as OpenCV and Kalibr write them.
+            Lens::Radtan(l) => Some(l.d[..if l.d[4] == 0.0 { 4 } else { 5 }].to_vec()),
+            Lens::DoubleSphere(l) => Some(vec![l.xi, l.alpha]),
+            Lens::Eucm(l) => Some(vec![l.alpha, l.beta]),
+            Lens::Omni(l) => Some(vec![l.xi, l.radtan.d[0], l.radtan.d[1], l.radtan.d[2], l.radtan.d[3]]),
         }
     }
 
@@ -184,6 +221,27 @@ impl Lens {
                 cx: c(l.cx),
                 cy: c(l.cy),
             }),
+            Lens::DoubleSphere(l) => Lens::DoubleSphere(DoubleSphere {
+                fx: l.fx * scale,
+                fy: l.fy * scale,
+                cx: c(l.cx),
+                cy: c(l.cy),
+                ..l
+            }),
+            Lens::Eucm(l) => Lens::Eucm(Eucm {
+                fx: l.fx * scale,
+                fy: l.fy * scale,
+                cx: c(l.cx),
+                cy: c(l.cy),
+                ..l
+            }),
+            Lens::Omni(l) => Lens::Omni(Omni {
+                fx: l.fx * scale,
+                fy: l.fy * scale,
+                cx: c(l.cx),
+                cy: c(l.cy),
+                ..l
+            }),
         }
     }
 
@@ -193,6 +251,9 @@ impl Lens {
             Lens::Kb4(l) => l.fx,
             Lens::Radtan(l) => l.fx,
             Lens::Equirectangular(l) => l.fx,
+            Lens::DoubleSphere(l) => l.fx,
+            Lens::Eucm(l) => l.fx,
+            Lens::Omni(l) => l.fx,
         }
     }
     pub fn fy(&self) -> f64 {
@@ -201,6 +262,9 @@ impl Lens {
             Lens::Kb4(l) => l.fy,
             Lens::Radtan(l) => l.fy,
             Lens::Equirectangular(l) => l.fy,
+            Lens::DoubleSphere(l) => l.fy,
+            Lens::Eucm(l) => l.fy,
+            Lens::Omni(l) => l.fy,
         }
     }
     pub fn principal_point(&self) -> Point2<f64> {
@@ -209,18 +273,24 @@ impl Lens {
             Lens::Kb4(l) => Point2::new(l.cx, l.cy),
             Lens::Radtan(l) => Point2::new(l.cx, l.cy),
             Lens::Equirectangular(l) => Point2::new(l.cx, l.cy),
+            Lens::DoubleSphere(l) => Point2::new(l.cx, l.cy),
+            Lens::Eucm(l) => Point2::new(l.cx, l.cy),
+            Lens::Omni(l) => Point2::new(l.cx, l.cy),
         }
     }
 
     /// Largest angle (rad) between the optical axis and a ray the lens can image, ignoring the
-    /// sensor's borders: π/2 for a pinhole, the model's monotonic domain for KB4 and radtan, π
-    /// for a panorama.
+    /// sensor's borders: π/2 for a pinhole, the model's monotonic domain for KB4 and radtan, its
+    /// one-to-one region for the sphere models, π for a panorama.
     pub fn max_theta(&self) -> f64 {
         match self {
             Lens::Pinhole(_) => std::f64::consts::FRAC_PI_2,
             Lens::Kb4(l) => l.theta_max,
             Lens::Radtan(l) => l.max_theta(),
             Lens::Equirectangular(_) => std::f64::consts::PI,
+            Lens::DoubleSphere(l) => l.max_theta(),
+            Lens::Eucm(l) => l.max_theta(),
+            Lens::Omni(l) => l.max_theta(),
         }
     }
 
@@ -252,6 +322,9 @@ impl Lens {
                 let lat = (p.y / rho).clamp(-1.0, 1.0).asin();
                 Some(Point2::new(l.cx + l.fx * p.x.atan2(p.z), l.cy + l.fy * lat))
             }
+            Lens::DoubleSphere(l) => l.project(p),
+            Lens::Eucm(l) => l.project(p),
+            Lens::Omni(l) => l.project(p),
         }
     }
 
@@ -297,6 +370,9 @@ impl Lens {
                 let (so, co) = lon.sin_cos();
                 Some(Unit::new_normalize(Vector3::new(cl * so, sl, cl * co)))
             }
+            Lens::DoubleSphere(l) => l.unproject(px),
+            Lens::Eucm(l) => l.unproject(px),
+            Lens::Omni(l) => l.unproject(px),
         }
     }
 
@@ -371,6 +447,9 @@ impl Lens {
                     -l.fy * p.y * p.z * a,
                 ))
             }
+            Lens::DoubleSphere(l) => l.project_jacobian(p),
+            Lens::Eucm(l) => l.project_jacobian(p),
+            Lens::Omni(l) => l.project_jacobian(p),
         }
     }
 }
