@@ -171,6 +171,8 @@ fn a_short_replay_writes_a_tum_trajectory_near_the_truth() {
 #[test]
 fn a_hint_with_no_valid_node_is_widened_and_a_run_without_a_pose_says_why() {
     let lab = crate::common::lab_recording(6);
+    // The table beside the model, as `run` caches it (the test above has a run build one).
+    lab.table.save(&lab.rec.join("model.vis")).unwrap();
     let t0 = lab.truth[0].pose.translation.vector;
     let init = format!("{},{},{},0.5", t0.x, t0.y, t0.z + 20.0);
     let (code, stdout, stderr) = omnitrack(&[

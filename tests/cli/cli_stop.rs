@@ -113,6 +113,9 @@ fn poses(path: &Path) -> (usize, bool) {
 #[test]
 fn sigterm_ends_a_realtime_replay_waiting_for_a_distant_frame() {
     let lab = crate::common::lab_recording(6);
+    // The table beside the model, as `run` caches it: the run loads it rather than building it
+    // (5 s of CPU; tests/cli/cli_run.rs has a run build and cache one).
+    lab.table.save(&lab.rec.join("model.vis")).unwrap();
     let index = lab.rec.join("frames.csv");
     let original = std::fs::read_to_string(&index).unwrap();
     let rows: Vec<&str> = original.lines().skip(1).collect();
@@ -172,6 +175,9 @@ fn sigterm_ends_a_realtime_replay_waiting_for_a_distant_frame() {
 #[test]
 fn sigterm_cuts_a_whole_model_search_short_and_writes_no_pose_from_it() {
     let lab = crate::common::lab_recording(6);
+    // The table beside the model, as `run` caches it: the run loads it rather than building it
+    // (5 s of CPU; tests/cli/cli_run.rs has a run build and cache one).
+    lab.table.save(&lab.rec.join("model.vis")).unwrap();
     let index = lab.rec.join("frames.csv");
     let text = std::fs::read_to_string(&index).unwrap();
     let first: String = text
