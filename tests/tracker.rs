@@ -360,10 +360,6 @@ fn tracking_searches_and_relocalisations_allocate_nothing_and_touch_no_new_memor
     );
 }
 
-/// A search frame that shows too little (here: only one of the six sensors' edges) commits
-/// nothing: its candidates explain less than `accept_explained_fraction` of what they predict,
-/// or less than `accept_support_fraction` of the longest edges, or no candidate is a clear
-/// winner over the others. The next whole frames search again and commit to the truth.
 /// A relocalised pose is published only once a later frame's maintenance holds it (module
 /// `tracker::relocalise`, "On probation"). The rig walks, turns back skipping two frames (the
 /// motion prior fails: a relocalisation), and the next frames show nothing: the relocalised pose
@@ -372,11 +368,8 @@ fn tracking_searches_and_relocalisations_allocate_nothing_and_touch_no_new_memor
 #[test]
 fn a_relocalised_pose_no_later_frame_holds_is_withdrawn_unpublished() {
     let f = fixture();
-    let (mut source, rig, cfg, mut frame, mut detector) = replay(f);
-    let mut recorded = Vec::with_capacity(FRAMES);
-    while source.next_frame(&mut frame).unwrap() {
-        recorded.push(detector.detect(&frame).to_vec());
-    }
+    let (_, rig, cfg, _, _) = replay(f);
+    let recorded: Vec<_> = detected_frames(f, FRAMES).into_iter().map(|(_, e)| e).collect();
     let period_ns = f.truth[1].timestamp_ns - f.truth[0].timestamp_ns;
     let last = recorded.len() - 1;
     // The walk; back from its end two frames skipped; four frames that show nothing; back on.
@@ -431,6 +424,10 @@ fn a_relocalised_pose_no_later_frame_holds_is_withdrawn_unpublished() {
     }
 }
 
+/// A search frame that shows too little (here: only one of the six sensors' edges) commits
+/// nothing: its candidates explain less than `accept_explained_fraction` of what they predict,
+/// or less than `accept_support_fraction` of the longest edges, or no candidate is a clear
+/// winner over the others. The next whole frames search again and commit to the truth.
 #[test]
 fn a_frame_that_shows_too_little_commits_nothing_and_the_next_frames_find_the_truth() {
     let f = fixture();
