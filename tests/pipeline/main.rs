@@ -34,7 +34,7 @@ use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
-use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
+use std::sync::{Arc, Condvar, Mutex, MutexGuard, OnceLock};
 use std::time::{Duration, Instant};
 
 // ---- allocation counting -------------------------------------------------------------------
@@ -642,6 +642,51 @@ fn nothing_allocates_on_the_frame_path_or_in_the_relocalisations_over_300_frames
     );
 }
 
+/// The frames capture posts before the tracker may take one in
+/// `the_latest_frame_wins_and_every_drop_is_counted`.
+const AHEAD: u64 = 8;
+/// A pipeline that made capture wait for the tracker never gets `AHEAD` frames ahead: the process
+/// thread stops waiting after this long, and the test fails on nothing dropped (not on a hang).
+const AHEAD_BACKSTOP: Duration = Duration::from_secs(60);
+/// Whether capture has posted [`AHEAD`] frames (the process thread waits for it, [`wait_for_capture`]).
+static AHEAD_GATE: (Mutex<bool>, Condvar) = (Mutex::new(false), Condvar::new());
+
+/// A replay that opens [`AHEAD_GATE`] when it is asked for frame [`AHEAD`]: capture reads a frame,
+/// posts it, then reads the next, so by then frames 0 to `AHEAD - 1` were all posted.
+struct Ahead(ReplaySource, u64);
+
+impl FrameSource for Ahead {
+    fn rig(&self) -> &Rig {
+        self.0.rig()
+    }
+    fn next_frame(&mut self, out: &mut FrameSet) -> Result<bool, SourceError> {
+        if self.1 == AHEAD {
+            *AHEAD_GATE.0.lock().unwrap() = true;
+            AHEAD_GATE.1.notify_all();
+        }
+        self.1 += 1;
+        self.0.next_frame(out)
+    }
+    fn stats(&self) -> &SourceStats {
+        self.0.stats()
+    }
+}
+
+/// The process thread takes no frame before capture is [`AHEAD`] frames ahead.
+fn wait_for_capture(t: PipelineThread) {
+    if t == PipelineThread::Process {
+        let open = AHEAD_GATE.0.lock().unwrap();
+        let _ = AHEAD_GATE
+            .1
+            .wait_timeout_while(open, AHEAD_BACKSTOP, |open| !*open)
+            .unwrap();
+    }
+}
+
+/// Capture outruns the tracker, by construction rather than by the machine's speed (under load
+/// the tracker once kept up with the replay and nothing was dropped): the process thread takes
+/// its first frame only once capture has posted [`AHEAD`] frames into a hand-over of one, so at
+/// least `AHEAD - 1` were replaced, each counted; after that the replay goes as fast as it decodes.
 #[test]
 fn the_latest_frame_wins_and_every_drop_is_counted() {
     let _serial = serial();
@@ -650,29 +695,35 @@ fn the_latest_frame_wins_and_every_drop_is_counted() {
     opts.lossless = false;
     opts.pose_service = None;
     opts.status_service = None;
+    opts.on_thread_start = Some(wait_for_capture);
+    *AHEAD_GATE.0.lock().unwrap() = false;
     let mut sink = Recorder {
         records: Vec::new(),
         tum: None,
         stop_after: None,
     };
-    // As fast as it decodes: capture outruns the tracker (initialising on the first frame).
-    let summary = run_pipeline(
-        replay(&f.rec),
-        &f.model,
-        &f.table,
-        &TrackerConfig::default(),
-        &opts,
-        &mut sink,
-    )
-    .unwrap();
+    let source: Box<dyn FrameSource + Send> =
+        Box::new(Ahead(ReplaySource::open(&f.rec, Pacing::AsFastAsPossible).unwrap(), 0));
+    let summary = run_pipeline(source, &f.model, &f.table, &TrackerConfig::default(), &opts, &mut sink).unwrap();
     eprintln!("{summary}");
     assert_eq!(summary.reason, RunEnd::EndOfStream);
     assert_eq!(summary.frames_captured, RENDERED as u64);
-    assert!(summary.frames_dropped > 0);
+    assert!(
+        summary.frames_dropped >= AHEAD - 1,
+        "{} dropped",
+        summary.frames_dropped
+    );
     assert_eq!(summary.frames_processed + summary.frames_dropped, RENDERED as u64);
     assert_eq!(sink.records.len() as u64, summary.frames_processed);
-    // Sequence numbers are capture order: gaps are the drops.
+    // Sequence numbers are capture order: gaps are the drops. The tracker's first frame is the
+    // newest of those posted while it waited, and the last one posted is never dropped.
     assert!(sink.records.windows(2).all(|w| w[0].sequence < w[1].sequence));
+    assert!(
+        sink.records[0].sequence >= AHEAD - 1,
+        "first processed: {}",
+        sink.records[0].sequence
+    );
+    assert_eq!(sink.records.last().unwrap().sequence, RENDERED as u64 - 1);
     for (k, s) in summary.sensors.iter().enumerate() {
         assert_eq!(s.delivered, summary.frames_processed, "sensor {k}");
         assert_eq!(s.overwritten, summary.frames_dropped, "sensor {k}");
