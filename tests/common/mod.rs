@@ -158,8 +158,10 @@ pub fn shared_render(key: &str, render: impl FnOnce(&std::path::Path) -> std::pa
 /// `target/tmp/<kind>/<fingerprint>/<key>`, made by `make` (which writes into the folder it is
 /// given, ending with a `complete` file, and returns the path of what it made). The fingerprint
 /// hashes the sources of `crates` (those that decide what is made) and `Cargo.lock`. What is made
-/// goes to a private folder first and is moved into place whole: two tests making the same at once
-/// both see a complete one.
+/// goes to a private folder first and is moved into place whole: two processes making the same at
+/// once both see a complete one. Within a test binary the tests asking for the same thing wait for
+/// the one making it: two of the CLI tests, running side by side on a fresh clone, both rendered
+/// the 100-frame lab walk.
 #[cfg(feature = "desk")]
 pub fn shared_made(
     kind: &str,
@@ -167,8 +169,21 @@ pub fn shared_made(
     key: &str,
     make: impl FnOnce(&std::path::Path) -> std::path::PathBuf,
 ) -> std::path::PathBuf {
+    use std::collections::HashMap;
     use std::hash::{Hash, Hasher};
     use std::path::Path;
+    use std::sync::{Arc, Mutex, PoisonError};
+    static MAKING: Mutex<Option<HashMap<String, Arc<Mutex<()>>>>> = Mutex::new(None);
+    let this = Arc::clone(
+        MAKING
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .get_or_insert_with(HashMap::new)
+            .entry(format!("{kind}/{key}"))
+            .or_default(),
+    );
+    // A test that panicked while making leaves nothing in place: the next one makes it again.
+    let _making = this.lock().unwrap_or_else(PoisonError::into_inner);
     fn hash_tree(dir: &Path, h: &mut impl Hasher) {
         let mut entries: Vec<_> = std::fs::read_dir(dir).unwrap().flatten().map(|e| e.path()).collect();
         entries.sort();
