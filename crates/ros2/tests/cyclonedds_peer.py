@@ -11,7 +11,7 @@ its entities exist, and exits after --poses pose samples and --diagnostics diagn
 or after --timeout-s (exit code 3).
 
     python cyclonedds_peer.py --domain D --topic omnitrack/pose [--poses N] [--diagnostics N]
-        [--odom T0_NS] [--transient-local] [--timeout-s S]
+        [--odom T0_NS] [--transient-local] [--depth N] [--settle-s S] [--timeout-s S]
 """
 
 import argparse
@@ -158,12 +158,14 @@ def main():
     p.add_argument("--odom", type=int, metavar="T0_NS")
     p.add_argument("--odom-lead-s", type=float, default=0.5)
     p.add_argument("--transient-local", action="store_true")
+    p.add_argument("--depth", type=int, default=1000, help="the readers' keep-last depth")
+    p.add_argument("--settle-s", type=float, default=0.0, help="wait this long before the first take")
     p.add_argument("--timeout-s", type=float, default=60.0)
     a = p.parse_args()
 
     dp = DomainParticipant(a.domain)
     durability = Policy.Durability.TransientLocal if a.transient_local else Policy.Durability.Volatile
-    reader_qos = Qos(Policy.Reliability.Reliable(duration(seconds=1)), durability, Policy.History.KeepLast(1000))
+    reader_qos = Qos(Policy.Reliability.Reliable(duration(seconds=1)), durability, Policy.History.KeepLast(a.depth))
     pose_reader = DataReader(dp, Topic(dp, "rt/" + a.topic.lstrip("/"), PoseWithCovarianceStamped), qos=reader_qos)
     diag_reader = DataReader(dp, Topic(dp, "rt/diagnostics", DiagnosticArray), qos=reader_qos)
     tf_topic = Topic(dp, "rt/tf", TFMessage)
@@ -177,6 +179,7 @@ def main():
         )
         tf_writer = DataWriter(dp, tf_topic, qos=tf_qos)
     print("ready", flush=True)
+    time.sleep(a.settle_s)
 
     poses = diagnostics = 0
     deadline = time.monotonic() + a.timeout_s

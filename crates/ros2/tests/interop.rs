@@ -275,7 +275,7 @@ fn cyclone_dds_receives_every_field_in_ros_time_and_rep_105_frames() {
         let p = pose(n, (monotonic_ns() - 5_000_000) as u64);
         poses.publish(&p).unwrap();
         sent.insert(n, p);
-        if n % 5 == 0 {
+        if n.is_multiple_of(5) {
             status.sequence = n / 5;
             status.timestamp_ns = monotonic_ns() as u64;
             statuses.publish(&status).unwrap();
@@ -401,4 +401,187 @@ fn cyclone_dds_receives_every_field_in_ros_time_and_rep_105_frames() {
         diagnostics += 1;
     }
     assert!(diagnostics >= DIAGNOSTICS, "{diagnostics} diagnostics");
+}
+
+/// Standard error of a child, line by line as it comes.
+fn error_lines(child: &mut Child) -> mpsc::Receiver<String> {
+    let (tx, rx) = mpsc::channel();
+    let err = child.stderr.take().unwrap();
+    std::thread::spawn(move || {
+        for line in BufReader::new(err).lines().map_while(Result::ok) {
+            if tx.send(line).is_err() {
+                break;
+            }
+        }
+    });
+    rx
+}
+
+/// What the other tests need: a namespace, Cyclone's python, a domain and the two services.
+struct Bench {
+    ns: Netns,
+    python: PathBuf,
+    domain: String,
+    service: String,
+    status_service: String,
+}
+
+impl Bench {
+    fn new(tag: &str) -> Result<Bench, String> {
+        let ns = Netns::new(tag)?;
+        let python = cyclonedds_python()?;
+        let id = std::process::id();
+        Ok(Bench {
+            ns,
+            python,
+            // Another domain than the first test's, which may run at the same time.
+            domain: ((id + tag.len() as u32 * 7) % 200 + 10).to_string(),
+            service: format!("omnitrack-ros2-test/{id}/{tag}/pose"),
+            status_service: format!("omnitrack-ros2-test/{id}/{tag}/status"),
+        })
+    }
+
+    /// `omnitrack-ros2 publish` on the bench's services and domain, with `args`; returns it and
+    /// its standard error once it has said it started (or ended).
+    fn bridge(&self, args: &[&str]) -> (Child, mpsc::Receiver<String>) {
+        let mut all = vec![
+            "publish",
+            "--service",
+            &self.service,
+            "--status-service",
+            &self.status_service,
+            "--domain-id",
+            &self.domain,
+            "--interface",
+            "127.0.0.1",
+        ];
+        all.extend_from_slice(args);
+        let mut child = self.ns.spawn(Path::new(BIN), &all);
+        let err = error_lines(&mut child);
+        (child, err)
+    }
+
+    fn peer(&self, args: &[&str]) -> (Child, mpsc::Receiver<String>) {
+        let mut all = vec![PEER, "--domain", &self.domain];
+        all.extend_from_slice(args);
+        let mut child = self.ns.spawn(&self.python, &all);
+        let out = lines(&mut child);
+        assert_eq!(out.recv_timeout(Duration::from_secs(30)).as_deref(), Ok("ready"));
+        (child, out)
+    }
+}
+
+fn wait_exit(child: &mut Child, within: Duration) -> Option<std::process::ExitStatus> {
+    let start = Instant::now();
+    while start.elapsed() < within {
+        if let Some(status) = child.try_wait().unwrap() {
+            return Some(status);
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let _ = child.kill();
+    None
+}
+
+/// A replay's stamps (its recording's time, here the system clock's of the day it was made) on the default
+/// `--capture-clock monotonic` end the run with one line naming the option; with
+/// `--capture-clock receipt` they are stamped on arrival. And `--durability transient-local
+/// --depth 3`: a subscriber that joins after the poses went out gets the last three.
+#[test]
+fn replay_stamps_are_refused_or_stamped_on_arrival_and_a_late_subscriber_gets_the_last_poses() {
+    let bench = match Bench::new("replay") {
+        Ok(b) => b,
+        Err(why) => return skip_or_fail(&why),
+    };
+    let poses = SamplePublisher::<PoseSample>::create(&bench.service).unwrap();
+    // A recording stamped on the system clock, replayed: far ahead of the monotonic clock.
+    let replay_stamp = || (monotonic_ns() + offset_ns()) as u64;
+    let tracking = |n: u64| PoseSample {
+        status: TrackerState::Tracking as u8,
+        ..pose(n, replay_stamp())
+    };
+
+    let (mut bridge, err) = bench.bridge(&[]);
+    assert!(err.recv_timeout(Duration::from_secs(30)).unwrap().contains("clock: "));
+    poses.publish(&tracking(0)).unwrap();
+    let code = wait_exit(&mut bridge, Duration::from_secs(10));
+    let said: Vec<String> = err.try_iter().collect();
+    assert_eq!(code.and_then(|c| c.code()), Some(1), "{said:?}");
+    assert_eq!(said.len(), 1, "{said:?}");
+    assert!(
+        said[0].starts_with("omnitrack-ros2: pose 0: its stamp is 17"),
+        "{said:?}"
+    );
+    assert!(
+        said[0].ends_with(
+            " s ahead of this host's monotonic clock, not a live capture's: run with --capture-clock receipt"
+        ),
+        "{said:?}"
+    );
+
+    let (mut bridge, err) = bench.bridge(&[
+        "--capture-clock",
+        "receipt",
+        "--durability",
+        "transient-local",
+        "--depth",
+        "3",
+    ]);
+    assert!(err.recv_timeout(Duration::from_secs(30)).unwrap().contains("clock: "));
+    let before = monotonic_ns() + offset_ns();
+    for n in 0..10 {
+        poses.publish(&tracking(n)).unwrap();
+        std::thread::sleep(Duration::from_millis(30));
+    }
+    std::thread::sleep(Duration::from_millis(500));
+    let after = monotonic_ns() + offset_ns();
+    // A subscriber of depth 3 keeps the last three. RustDDS 0.15 trims a writer's history to
+    // its depth only every 6 s (and keeps up to 8,192 samples while no reader matched), so the
+    // late joiner is sent more than three: its own depth keeps the last, as ROS's would.
+    let peer_args = ["--poses", "3", "--transient-local", "--depth", "3", "--settle-s", "1"];
+    let (mut peer, out) = bench.peer(&[&peer_args[..], &["--timeout-s", "30"]].concat());
+    let code = wait_exit(&mut peer, Duration::from_secs(40));
+    let _ = bridge.kill();
+    let _ = bridge.wait();
+    assert_eq!(code.and_then(|c| c.code()), Some(0));
+    let got: Vec<Value> = out.try_iter().map(|l| serde_json::from_str(&l).unwrap()).collect();
+    let xs: Vec<f64> = got.iter().map(|m| f64s(&m["position"])[0]).collect();
+    assert_eq!(
+        xs,
+        [7.0 * 0.125, 8.0 * 0.125, 9.0 * 0.125],
+        "the last three, oldest first"
+    );
+    for m in &got {
+        let stamp = stamp_ns(&m["stamp"]);
+        assert!(
+            before <= stamp && stamp <= after,
+            "stamped {stamp}, published in {before}..{after}"
+        );
+    }
+}
+
+/// `--tf map-base` is for a rig without odometry: as soon as /tf shows `odom → base_link`, it
+/// stops with one line rather than give base_link a second parent.
+#[test]
+fn map_base_is_refused_when_the_robot_publishes_odometry() {
+    let bench = match Bench::new("parent") {
+        Ok(b) => b,
+        Err(why) => return skip_or_fail(&why),
+    };
+    let t0 = (monotonic_ns() + offset_ns()).to_string();
+    let (mut peer, _out) = bench.peer(&["--poses", "1", "--odom", &t0, "--timeout-s", "30"]);
+    let (mut bridge, err) = bench.bridge(&["--tf", "map-base"]);
+    let code = wait_exit(&mut bridge, Duration::from_secs(30));
+    let _ = peer.kill();
+    let _ = peer.wait();
+    let said: Vec<String> = err.try_iter().collect();
+    assert_eq!(code.and_then(|c| c.code()), Some(1), "{said:?}");
+    assert_eq!(
+        said.last().map(String::as_str),
+        Some(
+            "omnitrack-ros2: /tf: base_link already has the parent odom; --tf map-base would give it a second \
+             one (REP-105): use --tf map-odom with --odom-frame odom"
+        ),
+        "{said:?}"
+    );
 }
