@@ -105,3 +105,38 @@ fn bad_input_is_one_line_naming_what_is_wrong() {
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("'abc' is not a ROS domain id"));
 }
+
+/// The long options in `text`, `--help` and `--version` left out.
+fn long_options(text: &str) -> std::collections::BTreeSet<String> {
+    let mut found = std::collections::BTreeSet::new();
+    let mut rest = text;
+    while let Some(at) = rest.find("--") {
+        let name: String = rest[at + 2..]
+            .chars()
+            .take_while(|c| c.is_ascii_lowercase() || *c == '-')
+            .collect();
+        if !name.is_empty() && name != "help" && name != "version" && !name.ends_with('-') {
+            found.insert(name.clone());
+        }
+        rest = &rest[at + 2 + name.len()..];
+    }
+    found
+}
+
+/// docs/interfaces.md's row of `omnitrack-ros2 publish` names every option the command has, and
+/// no other.
+#[test]
+fn the_interface_document_names_every_option_of_publish() {
+    let help = Command::new(BIN).args(["publish", "--help"]).output().unwrap();
+    let help = String::from_utf8_lossy(&help.stdout);
+    let options_lines: String = help.lines().filter(|l| l.trim_start().starts_with('-')).collect();
+    let docs = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../../docs/interfaces.md")).unwrap();
+    let row = docs
+        .lines()
+        .find(|l| l.starts_with("| `omnitrack-ros2 publish "))
+        .expect("a row for omnitrack-ros2 publish");
+    // The first cell, up to its closing code span (its `\|` are not cell borders).
+    let command = row.split("` |").next().unwrap();
+    assert_eq!(long_options(command), long_options(&options_lines), "{command}");
+    assert!(long_options(&options_lines).contains("rig-in-base"));
+}

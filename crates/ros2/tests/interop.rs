@@ -304,6 +304,7 @@ fn cyclone_dds_receives_every_field_in_ros_time_and_rep_105_frames() {
     let parsed: Vec<Value> = got.iter().map(|l| serde_json::from_str(l).unwrap()).collect();
     let of = |topic: &'static str| parsed.iter().filter(move |v| v["topic"] == topic);
     let mut pose_stamps = std::collections::HashMap::new();
+    let mut ages = Vec::new();
     let mut checked = 0;
     for m in of("pose") {
         let position = f64s(&m["position"]);
@@ -339,10 +340,18 @@ fn cyclone_dds_receives_every_field_in_ros_time_and_rep_105_frames() {
         );
         let age = m["received_ns"].as_i64().unwrap() - stamp;
         assert!((0..1_000_000_000).contains(&age), "received {age} ns after its stamp");
+        // From the pose's publication on iceoryx2 (5 ms after its capture) to Cyclone's take.
+        ages.push(age - 5_000_000);
         pose_stamps.insert(stamp, (k, p));
         checked += 1;
     }
     assert!(checked >= POSES, "{checked} poses");
+    ages.sort();
+    eprintln!(
+        "{checked} poses, iceoryx2 → omnitrack-ros2 → Cyclone DDS: p50 {:.2} ms, max {:.2} ms",
+        ages[ages.len() / 2] as f64 / 1e6,
+        ages[ages.len() - 1] as f64 / 1e6
+    );
 
     // map → odom at each pose's stamp: T_map_base · T_odom_base(stamp)⁻¹.
     let t0: i64 = t0.parse().unwrap();
