@@ -353,13 +353,14 @@ fn open_ports(o: &Options) -> Result<Ports, Ros2Error> {
     })
 }
 
-/// A `ros2_client` write: a full reliable window is counted, anything else ends the run.
-fn write<M>(what: &str, r: Result<(), ros2_client::WriteError<M>>, not_delivered: &mut u64) -> Result<(), Ros2Error> {
+/// A `ros2_client` write: `Ok(false)` and counted when a full reliable window refused it,
+/// anything else ends the run.
+fn write<M>(what: &str, r: Result<(), ros2_client::WriteError<M>>, not_delivered: &mut u64) -> Result<bool, Ros2Error> {
     match r {
-        Ok(()) => Ok(()),
+        Ok(()) => Ok(true),
         Err(ros2_client::WriteError::WouldBlock { .. }) => {
             *not_delivered += 1;
-            Ok(())
+            Ok(false)
         }
         Err(e) => Err(dds(&format!("cannot publish on {what}"), e)),
     }
@@ -369,11 +370,12 @@ fn write<M>(what: &str, r: Result<(), ros2_client::WriteError<M>>, not_delivered
 /// another parent.
 fn take_tf(tf_in: &Subscription<msg::TfMessage>, o: &Options, odometry: &mut Odometry) -> Result<(), Ros2Error> {
     let f = &o.frames;
-    loop {
+    // Bounded: what arrived since the last pose (tf2's depth is 100), never an endless drain.
+    for _ in 0..10_000 {
         let message = match tf_in.take() {
             Ok(Some((m, _))) => m,
             Ok(None) => return Ok(()),
-            // A message that is not a TFMessage (another type on /tf): not ours to judge.
+            // A sample that does not decode as a TFMessage: skipped (RustDDS moves past it).
             Err(_) => continue,
         };
         for t in &message.transforms {
@@ -397,6 +399,7 @@ fn take_tf(tf_in: &Subscription<msg::TfMessage>, o: &Options, odometry: &mut Odo
             }
         }
     }
+    Ok(())
 }
 
 /// Checks what can be checked before anything is opened: names, frames, depth.
@@ -534,8 +537,9 @@ pub fn publish(o: &Options, stop: &AtomicBool, on_start: &mut dyn FnMut(&ClockOf
                 covariance: msg::Covariance(covariance),
             },
         };
-        write(&o.topic, ports.pose.publish(message), &mut summary.not_delivered)?;
-        c.published += 1;
+        if write(&o.topic, ports.pose.publish(message), &mut summary.not_delivered)? {
+            c.published += 1;
+        }
 
         let transform = match f.tf {
             TfMode::None => None,
@@ -566,8 +570,9 @@ pub fn publish(o: &Options, stop: &AtomicBool, on_start: &mut dyn FnMut(&ClockOf
                     transform: frames::to_msg_transform(&t),
                 }],
             };
-            write(TF_TOPIC, tf_out.publish(tf), &mut summary.not_delivered)?;
-            c.tf_published += 1;
+            if write(TF_TOPIC, tf_out.publish(tf), &mut summary.not_delivered)? {
+                c.tf_published += 1;
+            }
         }
     }
     summary.offset = Some(offset);
