@@ -159,7 +159,7 @@ def main():
     p.add_argument("--odom-lead-s", type=float, default=0.5)
     p.add_argument("--transient-local", action="store_true")
     p.add_argument("--depth", type=int, default=1000, help="the readers' keep-last depth")
-    p.add_argument("--settle-s", type=float, default=0.0, help="wait this long before the first take")
+    p.add_argument("--settle-s", type=float, default=0.0, help="wait this long, then until the pose cache is still")
     p.add_argument("--timeout-s", type=float, default=60.0)
     a = p.parse_args()
 
@@ -179,7 +179,17 @@ def main():
         )
         tf_writer = DataWriter(dp, tf_topic, qos=tf_qos)
     print("ready", flush=True)
-    time.sleep(a.settle_s)
+    if a.settle_s > 0:
+        # At least --settle-s, then until the pose reader's cache (its last --depth samples) has
+        # stopped changing for half a second: what a late joiner's history holds once the
+        # writer's resend is over.
+        time.sleep(a.settle_s)
+        seen, stable_since, give_up = None, time.monotonic(), time.monotonic() + a.timeout_s
+        while time.monotonic() - stable_since < 0.5 and time.monotonic() < give_up:
+            now = [(m.header.stamp.sec, m.header.stamp.nanosec) for m in pose_reader.read(N=a.depth)]
+            if now != seen or not now:
+                seen, stable_since = now, time.monotonic()
+            time.sleep(0.05)
 
     poses = diagnostics = 0
     deadline = time.monotonic() + a.timeout_s
