@@ -13,8 +13,12 @@
 //! interface (multicast on): DDS discovery multicasts, and here it reaches nothing but the two
 //! processes. Namespaces need root (CI runs as root); the Cyclone DDS wheel is installed once
 //! into a venv in the per-user cache (`$OMNITRACK_CACHE`, else `$XDG_CACHE_HOME/omnitrack`,
-//! else `~/.cache/omnitrack`: `cyclonedds-venv-VERSION`). Where either is not possible the test
-//! says why it did not run, and fails if `CI` is set, so CI can never pass it by skipping.
+//! else `~/.cache/omnitrack`: `ros2-peers-venv-…`). Where either is not possible the test says
+//! why it did not run, and fails if `CI` is set, so CI can never pass it by skipping.
+//!
+//! The IDL types of the peer and the serde structs of `omnitrack_ros2::msg` are both transcribed
+//! from ROS's `.msg` files, so a field out of order in both would pass the wire test: the bytes
+//! the publisher writes are also decoded by rosbags with ROS 2 Jazzy's own definitions.
 
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 use omnitrack_io::publish::{PoseSample, SamplePublisher, StatusSample, TrackerState};
@@ -28,6 +32,8 @@ use std::time::{Duration, Instant};
 const BIN: &str = env!("CARGO_BIN_EXE_omnitrack-ros2");
 /// The Cyclone DDS Python binding, pinned: its wheel bundles the C library, no system package.
 const CYCLONEDDS: &str = "11.0.1";
+/// rosbags, pinned: pure Python, with ROS 2's own message definitions (its Jazzy type store).
+const ROSBAGS: &str = "0.11.9";
 const PEER: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/cyclonedds_peer.py");
 
 fn skip_or_fail(why: &str) {
@@ -53,20 +59,23 @@ fn cache_dir() -> Result<PathBuf, String> {
         .ok_or_else(|| "no per-user cache: neither OMNITRACK_CACHE, XDG_CACHE_HOME nor HOME is set".into())
 }
 
-/// The venv's python with `cyclonedds` importable, made on first use.
+/// The venv's python with `cyclonedds` and `rosbags` importable, made on first use.
 fn cyclonedds_python() -> Result<PathBuf, String> {
-    let venv = cache_dir()?.join(format!("cyclonedds-venv-{CYCLONEDDS}"));
+    let venv = cache_dir()?.join(format!("ros2-peers-venv-cyclonedds-{CYCLONEDDS}-rosbags-{ROSBAGS}"));
     let python = venv.join("bin/python");
     let importable = |p: &Path| {
         Command::new(p)
-            .args(["-c", "import cyclonedds.domain"])
+            .args(["-c", "import cyclonedds.domain, rosbags.typesys"])
             .output()
             .is_ok_and(|o| o.status.success())
     };
     if importable(&python) {
         return Ok(python);
     }
-    eprintln!("installing cyclonedds=={CYCLONEDDS} into {} (once)", venv.display());
+    eprintln!(
+        "installing cyclonedds=={CYCLONEDDS} and rosbags=={ROSBAGS} into {} (once)",
+        venv.display()
+    );
     let started = Instant::now();
     run(Command::new("python3").arg("-m").arg("venv").arg(&venv))?;
     run(Command::new(&python).args([
@@ -76,12 +85,16 @@ fn cyclonedds_python() -> Result<PathBuf, String> {
         "--quiet",
         "--disable-pip-version-check",
         &format!("cyclonedds=={CYCLONEDDS}"),
+        &format!("rosbags=={ROSBAGS}"),
     ]))?;
     eprintln!("installed in {:.1} s", started.elapsed().as_secs_f64());
     if importable(&python) {
         Ok(python)
     } else {
-        Err(format!("{}: cyclonedds installed but not importable", python.display()))
+        Err(format!(
+            "{}: cyclonedds and rosbags installed but not importable",
+            python.display()
+        ))
     }
 }
 
@@ -592,5 +605,157 @@ fn map_base_is_refused_when_the_robot_publishes_odometry() {
              one (REP-105): use --tf map-odom with --odom-frame odom"
         ),
         "{said:?}"
+    );
+}
+
+/// Decodes `TYPE HEX` lines (CDR with its encapsulation header) with ROS 2 Jazzy's own message
+/// definitions (rosbags' type store) and prints each message as JSON, field names as ROS's.
+const ROSBAGS_DECODE: &str = r#"
+import dataclasses, json, sys
+import numpy as np
+from rosbags.typesys import Stores, get_typestore
+store = get_typestore(Stores.ROS2_JAZZY)
+def plain(v):
+    if dataclasses.is_dataclass(v):
+        # The message's fields, as its definition lists them (its constants are not fields).
+        return {name: plain(getattr(v, name)) for name, _ in store.fielddefs[v.__msgtype__][1]}
+    if isinstance(v, (list, tuple, np.ndarray)):
+        return [plain(x) for x in v]
+    if isinstance(v, np.generic):
+        return v.item()
+    return v
+for line in sys.stdin:
+    kind, data = line.split()
+    print(json.dumps(plain(store.deserialize_cdr(bytes.fromhex(data), kind))), flush=True)
+status = store.types["diagnostic_msgs/msg/DiagnosticStatus"]
+print(json.dumps({k: getattr(status, k) for k in ("OK", "WARN", "ERROR", "STALE")}))
+"#;
+
+/// The CDR bytes the publisher writes for `m`: RustDDS's serializer, as its writer uses it, after
+/// the 4-byte encapsulation header (CDR little-endian).
+fn cdr<M: serde::Serialize>(m: &M) -> String {
+    use ros2_client::dds::rustdds::no_key::SerializerAdapter;
+    let body = <ros2_client::dds::rustdds::CDRSerializerAdapter<M> as SerializerAdapter<M>>::to_bytes(m).unwrap();
+    let mut hex = String::from("00010000");
+    for b in body.iter() {
+        hex.push_str(&format!("{b:02x}"));
+    }
+    hex
+}
+
+/// Every message type the publisher writes, serialized as it writes it, decoded by rosbags
+/// with ROS 2's definitions: the same fields with the same values, name for name.
+#[test]
+fn the_bytes_written_decode_with_ros_2s_own_message_definitions() {
+    use omnitrack_ros2::msg::*;
+    let python = match cyclonedds_python() {
+        Ok(p) => p,
+        Err(why) => return skip_or_fail(&why),
+    };
+    let header = |frame: &str| Header {
+        stamp: Time {
+            sec: 1_795_966_335,
+            nanosec: 891_423_007,
+        },
+        frame_id: frame.into(),
+    };
+    let mut covariance = [0.0; 36];
+    for (i, c) in covariance.iter_mut().enumerate() {
+        *c = i as f64 / 64.0 - 0.25;
+    }
+    let pose = PoseWithCovarianceStamped {
+        header: header("map"),
+        pose: PoseWithCovariance {
+            pose: Pose {
+                position: Point {
+                    x: 1.5,
+                    y: -2.25,
+                    z: 0.125,
+                },
+                orientation: Quaternion {
+                    x: 0.1,
+                    y: -0.2,
+                    z: 0.3,
+                    w: 0.9,
+                },
+            },
+            covariance: Covariance(covariance),
+        },
+    };
+    let transform = |child: &str, x: f64| TransformStamped {
+        header: header("map"),
+        child_frame_id: child.into(),
+        transform: Transform {
+            translation: Vector3 { x, y: 2.0, z: -3.0 },
+            rotation: Quaternion {
+                x: 0.0,
+                y: 0.0,
+                z: 0.6,
+                w: 0.8,
+            },
+        },
+    };
+    let tf = TfMessage {
+        transforms: vec![transform("odom", 1.0), transform("base_link", -7.5)],
+    };
+    let diagnostics = DiagnosticArray {
+        header: header(""),
+        status: vec![
+            DiagnosticStatus {
+                level: ERROR,
+                name: "omnitrack: tracker".into(),
+                message: "lost, relocalising".into(),
+                hardware_id: "ladybug2".into(),
+                values: vec![
+                    KeyValue {
+                        key: "state".into(),
+                        value: "lost".into(),
+                    },
+                    KeyValue {
+                        key: "sensor 5 rate (Hz)".into(),
+                        value: "29.9".into(),
+                    },
+                ],
+            },
+            DiagnosticStatus {
+                level: STALE,
+                name: "b".into(),
+                ..DiagnosticStatus::default()
+            },
+        ],
+    };
+    let input = format!(
+        "geometry_msgs/msg/PoseWithCovarianceStamped {}\ntf2_msgs/msg/TFMessage {}\ndiagnostic_msgs/msg/DiagnosticArray {}\n",
+        cdr(&pose),
+        cdr(&tf),
+        cdr(&diagnostics)
+    );
+    let mut child = Command::new(&python)
+        .args(["-c", ROSBAGS_DECODE])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::io::Write::write_all(&mut child.stdin.take().unwrap(), input.as_bytes()).unwrap();
+    let out = child.wait_with_output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let decoded: Vec<Value> = String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let ours = [
+        serde_json::to_value(&pose).unwrap(),
+        serde_json::to_value(&tf).unwrap(),
+        serde_json::to_value(&diagnostics).unwrap(),
+    ];
+    assert_eq!(decoded.len(), 4);
+    for (theirs, ours) in decoded.iter().zip(&ours) {
+        assert_eq!(theirs, ours);
+    }
+    // The levels' values, as ROS defines them.
+    assert_eq!(
+        decoded[3],
+        serde_json::json!({"OK": OK, "WARN": WARN, "ERROR": ERROR, "STALE": STALE})
     );
 }
