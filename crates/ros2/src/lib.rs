@@ -90,7 +90,7 @@ pub enum TfMode {
 pub enum ReliabilityKind {
     /// Lost samples are sent again (ROS's default; every subscriber can match it).
     Reliable,
-    /// No resending (matches only best-effort subscribers' expectations of freshness).
+    /// No resending; only best-effort subscribers match it (a reliable one does not).
     BestEffort,
 }
 
