@@ -501,8 +501,12 @@ pub fn publish(o: &Options, stop: &AtomicBool, on_start: &mut dyn FnMut(&ClockOf
             )?;
         }
 
-        let Some(sample) = poses.wait(Duration::from_millis(20))? else {
-            continue;
+        let sample = match poses.wait(Duration::from_millis(20)) {
+            Ok(Some(sample)) => sample,
+            Ok(None) => continue,
+            // SIGINT/SIGTERM interrupt the wait (iceoryx2 reports it as an error): a stop.
+            Err(_) if stop.load(Ordering::Relaxed) => break,
+            Err(e) => return Err(e.into()),
         };
         c.received += 1;
         let rig = rig_pose_if_tracking(&sample);

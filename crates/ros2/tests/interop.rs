@@ -114,21 +114,46 @@ impl Netns {
         Ok(ns)
     }
 
-    fn spawn(&self, program: &Path, args: &[&str]) -> Child {
-        Command::new("ip")
-            .args(["netns", "exec", &self.0])
-            .arg(program)
-            .args(args)
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("start a process in the namespace")
+    fn spawn(&self, program: &Path, args: &[&str]) -> Proc {
+        Proc(
+            Command::new("ip")
+                .args(["netns", "exec", &self.0])
+                .arg(program)
+                .args(args)
+                .stdout(Stdio::piped())
+                .stderr(Stdio::piped())
+                .spawn()
+                .expect("start a process in the namespace"),
+        )
     }
 }
 
 impl Drop for Netns {
     fn drop(&mut self) {
         let _ = Command::new("ip").args(["netns", "del", &self.0]).output();
+    }
+}
+
+/// A child process, ended when dropped: a failed assertion leaves nothing running.
+struct Proc(Child);
+
+impl std::ops::Deref for Proc {
+    type Target = Child;
+    fn deref(&self) -> &Child {
+        &self.0
+    }
+}
+
+impl std::ops::DerefMut for Proc {
+    fn deref_mut(&mut self) -> &mut Child {
+        &mut self.0
+    }
+}
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
     }
 }
 
@@ -146,12 +171,15 @@ fn lines(child: &mut Child) -> mpsc::Receiver<String> {
     rx
 }
 
-fn stderr_of(mut child: Child) -> String {
+/// Ends a child and returns what it wrote on standard error.
+fn stderr_of(child: &mut Child) -> String {
     let _ = child.kill();
-    child
-        .wait_with_output()
-        .map(|o| String::from_utf8_lossy(&o.stderr).into_owned())
-        .unwrap_or_default()
+    let mut text = String::new();
+    if let Some(mut err) = child.stderr.take() {
+        let _ = std::io::Read::read_to_string(&mut err, &mut text);
+    }
+    let _ = child.wait();
+    text
 }
 
 fn monotonic_ns() -> i64 {
@@ -252,8 +280,8 @@ fn cyclone_dds_receives_every_field_in_ros_time_and_rep_105_frames() {
     );
     let from_peer = lines(&mut peer);
     let ready = from_peer.recv_timeout(Duration::from_secs(30));
-    assert_eq!(ready.as_deref(), Ok("ready"), "peer: {}", stderr_of(peer));
-    let bridge = ns.spawn(
+    assert_eq!(ready.as_deref(), Ok("ready"), "peer: {}", stderr_of(&mut peer));
+    let mut bridge = ns.spawn(
         Path::new(BIN),
         &[
             "publish",
@@ -300,9 +328,13 @@ fn cyclone_dds_receives_every_field_in_ros_time_and_rep_105_frames() {
         }
         match peer.try_wait().unwrap() {
             Some(code) if code.success() => break,
-            Some(code) => panic!("peer exited {code}: {}\nbridge: {}", stderr_of(peer), stderr_of(bridge)),
+            Some(code) => panic!(
+                "peer exited {code}: {}\nbridge: {}",
+                stderr_of(&mut peer),
+                stderr_of(&mut bridge)
+            ),
             None if start.elapsed() > Duration::from_secs(90) => {
-                panic!("peer: {}\nbridge: {}", stderr_of(peer), stderr_of(bridge))
+                panic!("peer: {}\nbridge: {}", stderr_of(&mut peer), stderr_of(&mut bridge))
             }
             None => {}
         }
@@ -311,7 +343,7 @@ fn cyclone_dds_receives_every_field_in_ros_time_and_rep_105_frames() {
         got.push(line);
     }
     let offset_after = offset_ns();
-    let bridge_log = stderr_of(bridge);
+    let bridge_log = stderr_of(&mut bridge);
     assert!(bridge_log.contains("clock: system − monotonic = "), "{bridge_log}");
 
     let parsed: Vec<Value> = got.iter().map(|l| serde_json::from_str(l).unwrap()).collect();
@@ -465,7 +497,7 @@ impl Bench {
 
     /// `omnitrack-ros2 publish` on the bench's services and domain, with `args`; returns it and
     /// its standard error once it has said it started (or ended).
-    fn bridge(&self, args: &[&str]) -> (Child, mpsc::Receiver<String>) {
+    fn bridge(&self, args: &[&str]) -> (Proc, mpsc::Receiver<String>) {
         let mut all = vec![
             "publish",
             "--service",
@@ -483,7 +515,7 @@ impl Bench {
         (child, err)
     }
 
-    fn peer(&self, args: &[&str]) -> (Child, mpsc::Receiver<String>) {
+    fn peer(&self, args: &[&str]) -> (Proc, mpsc::Receiver<String>) {
         let mut all = vec![PEER, "--domain", &self.domain];
         all.extend_from_slice(args);
         let mut child = self.ns.spawn(&self.python, &all);
@@ -580,6 +612,29 @@ fn replay_stamps_are_refused_or_stamped_on_arrival_and_a_late_subscriber_gets_th
             "stamped {stamp}, published in {before}..{after}"
         );
     }
+}
+
+/// SIGTERM (systemd's stop) ends the run with its closing line and exit code 0, within a second.
+#[test]
+fn sigterm_ends_the_run_with_its_summary() {
+    let bench = match Bench::new("term") {
+        Ok(b) => b,
+        Err(why) => return skip_or_fail(&why),
+    };
+    let (mut bridge, err) = bench.bridge(&[]);
+    assert!(err.recv_timeout(Duration::from_secs(30)).unwrap().contains("clock: "));
+    // `ip netns exec` runs the program in its own process: the child is the publisher.
+    assert_eq!(unsafe { libc::kill(bridge.id() as i32, libc::SIGTERM) }, 0);
+    let code = wait_exit(&mut bridge, Duration::from_secs(1));
+    let said: Vec<String> = err.try_iter().collect();
+    assert_eq!(code.and_then(|c| c.code()), Some(0), "{said:?}");
+    assert_eq!(
+        said,
+        [
+            "omnitrack-ros2: 0 poses received, 0 published, 0 not tracking; 0 transforms, 0 poses without \
+          odometry; 0 messages a full reliable window refused"
+        ]
+    );
 }
 
 /// `--tf map-base` is for a rig without odometry: as soon as /tf shows `odom → base_link`, it
