@@ -16,10 +16,11 @@
 //!   ([`diag`]), and a STALE one when the status stops.
 //!
 //! QoS of the pose topic is the caller's ([`PoseQos`]): reliable or best effort, the history
-//! depth, volatile or transient local (a late subscriber then gets the last `depth` poses).
-//! `/tf` and `/diagnostics` use what tf2 and the diagnostic updater use. The node is a ROS 2
-//! node by name (`/omnitrack`, in `ros2 node list`), with neither rosout nor parameter
-//! services. Like `omnitrack-link`, it is not on the device path: it allocates per message and
+//! depth, volatile or transient local (a late subscriber then gets the last `depth` poses; see
+//! docs/interfaces.md for RustDDS's history trim). `/tf` and `/diagnostics` use what tf2 and the
+//! diagnostic updater use. ros2-client announces the node (`/omnitrack`) in ROS's discovery
+//! information (`ros_discovery_info`, what `ros2 node list` reads; not checked here, where no ROS
+//! can be installed), with neither rosout nor parameter services. Like `omnitrack-link`, it is not on the device path: it allocates per message and
 //! runs beside the tracker, which never waits for it.
 
 pub mod clock;
