@@ -814,3 +814,70 @@ fn the_bytes_written_decode_with_ros_2s_own_message_definitions() {
         serde_json::json!({"OK": OK, "WARN": WARN, "ERROR": ERROR, "STALE": STALE})
     );
 }
+
+/// `--rig-in-base` (the rig's pose in base_link, x,y,z,qx,qy,qz,qw): the pose published is
+/// base_link's, `T_map_rig · T_base_rig⁻¹`, and its covariance moves by the lever arm,
+/// `J Σ Jᵀ` with `J = [[I, −[a]×], [0, I]]`, `a = R_map_rig · t_rig_base` (docs/interfaces.md).
+#[test]
+fn the_rigs_mounting_moves_the_pose_and_its_covariance_to_base_link() {
+    use nalgebra::{Matrix3, Matrix6};
+    let bench = match Bench::new("mount") {
+        Ok(b) => b,
+        Err(why) => return skip_or_fail(&why),
+    };
+    let poses = SamplePublisher::<PoseSample>::create(&bench.service).unwrap();
+    // 0.3 m ahead, 1.2 m above the base, pitched 10° down.
+    let half = 5f64.to_radians();
+    let mount = format!("0.3,0,1.2,0,{},0,{}", half.sin(), half.cos());
+    let base_rig = Isometry3::from_parts(
+        Translation3::new(0.3, 0.0, 1.2),
+        UnitQuaternion::from_axis_angle(&Vector3::y_axis(), 2.0 * half),
+    );
+    let (mut peer, out) = bench.peer(&["--topic", "mounted/pose", "--poses", "5", "--timeout-s", "30"]);
+    let (_bridge, err) = bench.bridge(&["--topic", "mounted/pose", "--rig-in-base", &mount]);
+    assert!(err.recv_timeout(Duration::from_secs(30)).unwrap().contains("clock: "));
+    let mut sent = Vec::new();
+    let start = Instant::now();
+    while peer.try_wait().unwrap().is_none() {
+        let mut p = pose(sent.len() as u64, (monotonic_ns() - 5_000_000) as u64);
+        p.status = TrackerState::Tracking as u8;
+        // Uncertain in yaw and in x only.
+        p.covariance = [0.0; 36];
+        p.covariance[0] = 1e-4;
+        p.covariance[35] = 1e-2;
+        poses.publish(&p).unwrap();
+        sent.push(p);
+        std::thread::sleep(Duration::from_millis(20));
+        assert!(start.elapsed() < Duration::from_secs(40), "{}", stderr_of(&mut peer));
+    }
+    assert!(peer.wait().unwrap().success());
+    let got: Vec<Value> = out.try_iter().map(|l| serde_json::from_str(&l).unwrap()).collect();
+    assert!(got.len() >= 5, "{got:?}");
+    for m in &got {
+        // Which pose: the one whose base pose this is.
+        let position = Vector3::from_vec(f64s(&m["position"]));
+        let p = sent
+            .iter()
+            .find(|p| ((p.pose().unwrap() * base_rig.inverse()).translation.vector - position).norm() < 1e-9)
+            .unwrap_or_else(|| panic!("no pose sent has this base position: {m}"));
+        let map_rig = p.pose().unwrap();
+        let want = map_rig * base_rig.inverse();
+        let o = f64s(&m["orientation"]);
+        let got_rotation = UnitQuaternion::from_quaternion(Quaternion::new(o[3], o[0], o[1], o[2]));
+        assert!(got_rotation.angle_to(&want.rotation) < 1e-12, "{m}");
+        let a = map_rig.rotation * base_rig.inverse().translation.vector;
+        let skew = Matrix3::new(0.0, -a.z, a.y, a.z, 0.0, -a.x, -a.y, a.x, 0.0);
+        let mut j = Matrix6::<f64>::identity();
+        j.fixed_view_mut::<3, 3>(0, 3).copy_from(&(-skew));
+        let want_cov = j * Matrix6::from_row_slice(&p.covariance) * j.transpose();
+        let cov = f64s(&m["covariance"]);
+        for (i, c) in cov.iter().enumerate() {
+            assert!(
+                (c - want_cov[(i / 6, i % 6)]).abs() < 1e-15,
+                "covariance[{i}] {c}, expected {want_cov}"
+            );
+        }
+        // The base, away from the rig, moves sideways when the yaw is off: x-y terms appear.
+        assert!(cov[1].abs() > 1e-6 && cov[5].abs() > 1e-6, "{cov:?}");
+    }
+}
