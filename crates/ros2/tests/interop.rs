@@ -98,6 +98,41 @@ fn cyclonedds_python() -> Result<PathBuf, String> {
     }
 }
 
+/// ROS 2 Jazzy's rclpy from PyPI, pinned (manylinux wheels of ROS's own build), with its
+/// default middleware rmw_fastrtps_cpp (eProsima Fast DDS) and the message packages.
+const RCLPY: &[&str] = &[
+    "ros-jazzy-rclpy[fastrtps]==7.1.6",
+    "ros-jazzy-geometry-msgs==5.3.6",
+    "ros-jazzy-diagnostic-msgs==5.3.6",
+];
+
+/// The venv's python with ROS 2 Jazzy's rclpy importable, made on first use.
+fn rclpy_python() -> Result<PathBuf, String> {
+    let venv = cache_dir()?.join("ros2-jazzy-venv-rclpy-7.1.6");
+    let python = venv.join("bin/python");
+    let importable = |p: &Path| {
+        Command::new(p)
+            .args(["-c", "import rclpy, geometry_msgs.msg, diagnostic_msgs.msg"])
+            .output()
+            .is_ok_and(|o| o.status.success())
+    };
+    if importable(&python) {
+        return Ok(python);
+    }
+    eprintln!("installing {} into {} (once)", RCLPY.join(" "), venv.display());
+    let started = Instant::now();
+    run(Command::new("python3").arg("-m").arg("venv").arg(&venv))?;
+    run(Command::new(&python)
+        .args(["-m", "pip", "install", "--quiet", "--disable-pip-version-check"])
+        .args(RCLPY))?;
+    eprintln!("installed in {:.1} s", started.elapsed().as_secs_f64());
+    if importable(&python) {
+        Ok(python)
+    } else {
+        Err(format!("{}: rclpy installed but not importable", python.display()))
+    }
+}
+
 /// A network namespace with only a loopback interface that multicasts; removed on drop.
 struct Netns(String);
 
@@ -240,6 +275,87 @@ fn odom(t_ns: i64, t0_ns: i64) -> Isometry3<f64> {
     )
 }
 
+/// Checks every field of a pose line (from either peer) against the pose sent with that
+/// position; returns its ROS stamp and the pose. `offsets` are system − monotonic as the test read
+/// them before and after.
+fn check_pose<'a>(
+    m: &Value,
+    sent: &'a std::collections::HashMap<u64, PoseSample>,
+    offsets: (i64, i64),
+) -> (i64, &'a PoseSample) {
+    let position = f64s(&m["position"]);
+    // Frame n is at x = n / 8.
+    let k = (position[0] * 8.0).round() as u64;
+    let p = sent.get(&k).unwrap_or_else(|| panic!("a pose never sent: {m}"));
+    assert_eq!(
+        p.pose_status(),
+        Ok(TrackerState::Tracking),
+        "a lost pose was published: {m}"
+    );
+    assert_eq!(position, p.position_m.to_vec(), "{m}");
+    assert_eq!(m["frame_id"], "map");
+    let [w, x, y, z] = p.rotation_wxyz;
+    let o = f64s(&m["orientation"]);
+    for (got, want) in o.iter().zip([x, y, z, w]) {
+        assert!(
+            (got - want).abs() < 1e-15,
+            "orientation x y z w {o:?}, sent w x y z {:?}",
+            p.rotation_wxyz
+        );
+    }
+    // Row-major over x, y, z, rx, ry, rz: ROS's order is omnitrack's, copied exactly.
+    assert_eq!(f64s(&m["covariance"]), p.covariance.to_vec(), "{m}");
+    // ROS time: the capture instant on the system clock.
+    let stamp = stamp_ns(&m["stamp"]);
+    let capture = p.timestamp_ns as i64;
+    let (lo, hi) = (offsets.0.min(offsets.1), offsets.0.max(offsets.1));
+    assert!(
+        stamp >= capture + lo - 1_000_000 && stamp <= capture + hi + 1_000_000,
+        "stamp {stamp} for capture {capture}: offset {} (test: {lo}..{hi})",
+        stamp - capture
+    );
+    let age = m["received_ns"].as_i64().unwrap() - stamp;
+    assert!((0..1_000_000_000).contains(&age), "received {age} ns after its stamp");
+    (stamp, p)
+}
+
+/// Checks a diagnostics line against the status the tests publish (tracking, rig
+/// `interop-rig`, sensor 5 at 30 Hz with 3 drops).
+fn check_diagnostics(d: &Value) {
+    let s = &d["status"][0];
+    assert_eq!(d["status"].as_array().unwrap().len(), 1);
+    assert_eq!(
+        (s["level"].as_u64(), s["name"].as_str()),
+        (Some(0), Some("omnitrack: tracker")),
+        "{d}"
+    );
+    assert_eq!(
+        (s["message"].as_str(), s["hardware_id"].as_str()),
+        (Some("tracking"), Some("interop-rig"))
+    );
+    assert_eq!(s["values"]["sensor 5 rate (Hz)"], "30.0");
+    assert_eq!(s["values"]["sensor 5 frames dropped"], "3");
+    assert_eq!(s["values"]["state"], "tracking");
+    let age = d["received_ns"].as_i64().unwrap() - stamp_ns(&d["stamp"]);
+    assert!(
+        (0..1_000_000_000).contains(&age),
+        "diagnostics received {age} ns after its stamp"
+    );
+}
+
+/// The status the tests publish, every fifth frame.
+fn interop_status() -> StatusSample {
+    let mut status = StatusSample {
+        tracker_state: TrackerState::Tracking as u8,
+        sensor_count: 6,
+        ..StatusSample::default()
+    };
+    status.set_source("interop-rig");
+    status.frame_rate_hz[5] = 30.0;
+    status.frames_dropped[5] = 3;
+    status
+}
+
 /// Poses at 50 Hz (every fifth lost) and a status every 100 ms through the real iceoryx2
 /// services, into `omnitrack-ros2 publish --tf map-odom`, out to Cyclone DDS; every field read
 /// back.
@@ -303,14 +419,7 @@ fn cyclone_dds_receives_every_field_in_ros_time_and_rep_105_frames() {
     let mut got = Vec::new();
     let start = Instant::now();
     let mut n = 0u64;
-    let mut status = StatusSample {
-        tracker_state: TrackerState::Tracking as u8,
-        sensor_count: 6,
-        ..StatusSample::default()
-    };
-    status.set_source("interop-rig");
-    status.frame_rate_hz[5] = 30.0;
-    status.frames_dropped[5] = 3;
+    let mut status = interop_status();
     loop {
         // Captured 5 ms before it is published, as a live camera's frame would be.
         let p = pose(n, (monotonic_ns() - 5_000_000) as u64);
@@ -352,41 +461,11 @@ fn cyclone_dds_receives_every_field_in_ros_time_and_rep_105_frames() {
     let mut ages = Vec::new();
     let mut checked = 0;
     for m in of("pose") {
-        let position = f64s(&m["position"]);
-        // Frame n is at x = n / 8.
-        let k = (position[0] * 8.0).round() as u64;
-        let p = sent.get(&k).unwrap_or_else(|| panic!("a pose never sent: {m}"));
-        assert_eq!(
-            p.pose_status(),
-            Ok(TrackerState::Tracking),
-            "a lost pose was published: {m}"
-        );
-        assert_eq!(position, p.position_m.to_vec(), "{m}");
-        assert_eq!(m["frame_id"], "map");
-        let [w, x, y, z] = p.rotation_wxyz;
-        let o = f64s(&m["orientation"]);
-        for (got, want) in o.iter().zip([x, y, z, w]) {
-            assert!(
-                (got - want).abs() < 1e-15,
-                "orientation x y z w {o:?}, sent w x y z {:?}",
-                p.rotation_wxyz
-            );
-        }
-        // Row-major over x, y, z, rx, ry, rz: ROS's order is omnitrack's, copied exactly.
-        assert_eq!(f64s(&m["covariance"]), p.covariance.to_vec(), "{m}");
-        // ROS time: the capture instant on the system clock.
-        let stamp = stamp_ns(&m["stamp"]);
-        let capture = p.timestamp_ns as i64;
-        let (lo, hi) = (offset_before.min(offset_after), offset_before.max(offset_after));
-        assert!(
-            stamp >= capture + lo - 1_000_000 && stamp <= capture + hi + 1_000_000,
-            "stamp {stamp} for capture {capture}: offset {} (test: {lo}..{hi})",
-            stamp - capture
-        );
+        let (stamp, p) = check_pose(m, &sent, (offset_before, offset_after));
         let age = m["received_ns"].as_i64().unwrap() - stamp;
-        assert!((0..1_000_000_000).contains(&age), "received {age} ns after its stamp");
         // From the pose's publication on iceoryx2 (5 ms after its capture) to Cyclone's take.
         ages.push(age - 5_000_000);
+        let k = p.sequence;
         pose_stamps.insert(stamp, (k, p));
         checked += 1;
     }
@@ -433,25 +512,7 @@ fn cyclone_dds_receives_every_field_in_ros_time_and_rep_105_frames() {
 
     let mut diagnostics = 0;
     for d in of("diagnostics") {
-        let s = &d["status"][0];
-        assert_eq!(d["status"].as_array().unwrap().len(), 1);
-        assert_eq!(
-            (s["level"].as_u64(), s["name"].as_str()),
-            (Some(0), Some("omnitrack: tracker")),
-            "{d}"
-        );
-        assert_eq!(
-            (s["message"].as_str(), s["hardware_id"].as_str()),
-            (Some("tracking"), Some("interop-rig"))
-        );
-        assert_eq!(s["values"]["sensor 5 rate (Hz)"], "30.0");
-        assert_eq!(s["values"]["sensor 5 frames dropped"], "3");
-        assert_eq!(s["values"]["state"], "tracking");
-        let age = d["received_ns"].as_i64().unwrap() - stamp_ns(&d["stamp"]);
-        assert!(
-            (0..1_000_000_000).contains(&age),
-            "diagnostics received {age} ns after its stamp"
-        );
+        check_diagnostics(d);
         diagnostics += 1;
     }
     assert!(diagnostics >= DIAGNOSTICS, "{diagnostics} diagnostics");
@@ -880,4 +941,106 @@ fn the_rigs_mounting_moves_the_pose_and_its_covariance_to_base_link() {
         // The base, away from the rig, moves sideways when the yaw is off: x-y terms appear.
         assert!(cov[1].abs() > 1e-6 && cov[5].abs() > 1e-6, "{cov:?}");
     }
+}
+
+/// A real ROS 2 node: rclpy of ROS 2 Jazzy over Fast DDS (its default middleware) subscribes with
+/// ROS's default QoS and receives every field as the Cyclone peer does; its graph shows the node
+/// `/omnitrack` publishing the pose topic with the QoS asked for (`ros2 node list`, `ros2 topic
+/// info -v`).
+#[test]
+fn a_ros_2_jazzy_node_over_fast_dds_receives_every_field_and_sees_the_publisher() {
+    const POSES: usize = 20;
+    let bench = match Bench::new("rclpy") {
+        Ok(b) => b,
+        Err(why) => return skip_or_fail(&why),
+    };
+    let python = match rclpy_python() {
+        Ok(p) => p,
+        Err(why) => return skip_or_fail(&why),
+    };
+    let poses = SamplePublisher::<PoseSample>::create(&bench.service).unwrap();
+    let statuses = SamplePublisher::<StatusSample>::create(&bench.status_service).unwrap();
+    let script = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/rclpy_peer.py");
+    let domain = format!("ROS_DOMAIN_ID={}", bench.domain);
+    let python = python.to_string_lossy().into_owned();
+    let args = [
+        &domain,
+        &python,
+        script,
+        "--poses",
+        "20",
+        "--diagnostics",
+        "2",
+        "--timeout-s",
+        "60",
+    ];
+    let mut peer = bench.ns.spawn(Path::new("env"), &args);
+    let from_peer = lines(&mut peer);
+    let ready = from_peer.recv_timeout(Duration::from_secs(60));
+    assert_eq!(ready.as_deref(), Ok("ready"), "peer: {}", stderr_of(&mut peer));
+    let (mut bridge, err) = bench.bridge(&["--durability", "transient-local", "--depth", "5"]);
+    assert!(err.recv_timeout(Duration::from_secs(30)).unwrap().contains("clock: "));
+
+    let offset_before = offset_ns();
+    let mut sent = std::collections::HashMap::new();
+    let mut status = interop_status();
+    let start = Instant::now();
+    let mut n = 0u64;
+    loop {
+        let p = pose(n, (monotonic_ns() - 5_000_000) as u64);
+        poses.publish(&p).unwrap();
+        sent.insert(n, p);
+        if n.is_multiple_of(5) {
+            status.sequence = n / 5;
+            status.timestamp_ns = monotonic_ns() as u64;
+            statuses.publish(&status).unwrap();
+        }
+        n += 1;
+        std::thread::sleep(Duration::from_millis(20));
+        match peer.try_wait().unwrap() {
+            Some(code) if code.success() => break,
+            Some(code) => panic!(
+                "peer exited {code}: {}\nbridge: {}",
+                stderr_of(&mut peer),
+                stderr_of(&mut bridge)
+            ),
+            None if start.elapsed() > Duration::from_secs(90) => {
+                panic!("peer: {}\nbridge: {}", stderr_of(&mut peer), stderr_of(&mut bridge))
+            }
+            None => {}
+        }
+    }
+    let offset_after = offset_ns();
+    let got: Vec<Value> = from_peer
+        .try_iter()
+        .map(|l| serde_json::from_str(&l).unwrap())
+        .collect();
+    let of = |topic: &'static str| got.iter().filter(move |v| v["topic"] == topic);
+    let mut checked = 0;
+    for m in of("pose") {
+        check_pose(m, &sent, (offset_before, offset_after));
+        checked += 1;
+    }
+    assert!(checked >= POSES, "{checked} poses");
+    let mut diagnostics = 0;
+    for d in of("diagnostics") {
+        check_diagnostics(d);
+        diagnostics += 1;
+    }
+    assert!(diagnostics >= 2, "{diagnostics} diagnostics");
+    let graph = of("graph").next().expect("the peer's graph line");
+    assert!(
+        graph["nodes"].as_array().unwrap().iter().any(|n| n == "/omnitrack"),
+        "{graph}"
+    );
+    assert_eq!(
+        graph["publishers"],
+        serde_json::json!([{
+            "node": "omnitrack",
+            "namespace": "/",
+            "type": "geometry_msgs/msg/PoseWithCovarianceStamped",
+            "reliability": "RELIABLE",
+            "durability": "TRANSIENT_LOCAL",
+        }])
+    );
 }
