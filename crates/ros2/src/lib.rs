@@ -19,8 +19,8 @@
 //! depth, volatile or transient local (a late subscriber then gets the last `depth` poses; see
 //! docs/interfaces.md for RustDDS's history trim). `/tf` and `/diagnostics` use what tf2 and the
 //! diagnostic updater use. ros2-client announces the node (`/omnitrack`) in ROS's discovery
-//! information (`ros_discovery_info`, what `ros2 node list` reads; not checked here, where no ROS
-//! can be installed), with neither rosout nor parameter services. Like `omnitrack-link`, it is not on the device path: it allocates per message and
+//! information (`ros_discovery_info`, what `ros2 node list` reads: an rclpy node of the interop
+//! test sees it), with neither rosout nor parameter services. Like `omnitrack-link`, it is not on the device path: it allocates per message and
 //! runs beside the tracker, which never waits for it.
 
 pub mod clock;
