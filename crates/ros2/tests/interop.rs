@@ -1,24 +1,29 @@
-//! ROS 2 interoperability against an independent DDS implementation: Eclipse Cyclone DDS (the
-//! default middleware of several ROS 2 releases), through its Python binding from PyPI
-//! (`cyclonedds`), with the ROS 2 messages' IDL types declared by their DDS names in
-//! `tests/cyclonedds_peer.py`. Nothing of omnitrack-ros2's code is on the receiving side.
+//! ROS 2 interoperability, with nothing of omnitrack-ros2's code on the receiving side:
 //!
-//! The test publishes poses and status samples on the tracker's iceoryx2 services (the real
-//! services, as `omnitrack run` publishes them), runs `omnitrack-ros2 publish`, and checks every
-//! field of what Cyclone receives on `rt/omnitrack/pose`, `rt/tf` and `rt/diagnostics`: stamps
+//! - a ROS 2 node: rclpy of ROS 2 Jazzy over its default middleware, rmw_fastrtps_cpp (Fast DDS),
+//!   from PyPI's `ros-jazzy-*` wheels (`tests/rclpy_peer.py`);
+//! - an independent DDS implementation: Eclipse Cyclone DDS (the default middleware of several
+//!   ROS 2 releases) through its Python binding from PyPI (`cyclonedds`), with the ROS 2
+//!   messages' IDL types declared by their DDS names (`tests/cyclonedds_peer.py`).
+//!
+//! The tests publish poses and status samples on the tracker's iceoryx2 services (the real
+//! services, as `omnitrack run` publishes them), run `omnitrack-ros2 publish`, and check every
+//! field of what the peers receive on `rt/omnitrack/pose`, `rt/tf` and `rt/diagnostics`: stamps
 //! in ROS time (the capture instant on the system clock), frame ids, pose, covariance in ROS's
-//! order, `map → odom` against the odometry the peer published, diagnostic levels and values.
+//! order, `map → odom` against the odometry the Cyclone peer published, diagnostic levels and
+//! values, and the ROS graph the rclpy node sees.
 //!
-//! Both DDS participants run in a network namespace the test makes, with only its own loopback
-//! interface (multicast on): DDS discovery multicasts, and here it reaches nothing but the two
-//! processes. Namespaces need root (CI runs as root); the Cyclone DDS wheel is installed once
-//! into a venv in the per-user cache (`$OMNITRACK_CACHE`, else `$XDG_CACHE_HOME/omnitrack`,
-//! else `~/.cache/omnitrack`: `ros2-peers-venv-…`). Where either is not possible the test says
-//! why it did not run, and fails if `CI` is set, so CI can never pass it by skipping.
+//! The DDS participants run in a network namespace the test makes, with only its own loopback
+//! interface (multicast on): DDS discovery multicasts, and here it reaches nothing but the test's
+//! processes. Namespaces need root (CI runs as root); the peers' packages are installed once into
+//! venvs in the per-user cache (`$OMNITRACK_CACHE`, else `$XDG_CACHE_HOME/omnitrack`, else
+//! `~/.cache/omnitrack`: `ros2-peers-venv-…`, `ros2-jazzy-venv-…`). Where either is not possible
+//! the test says why it did not run, and fails if `CI` is set, so CI can never pass it by skipping.
 //!
-//! The IDL types of the peer and the serde structs of `omnitrack_ros2::msg` are both transcribed
-//! from ROS's `.msg` files, so a field out of order in both would pass the wire test: the bytes
-//! the publisher writes are also decoded by rosbags with ROS 2 Jazzy's own definitions.
+//! The IDL types of the Cyclone peer and the serde structs of `omnitrack_ros2::msg` are both
+//! transcribed from ROS's `.msg` files, so a field out of order in both would pass that wire test:
+//! the bytes the publisher writes are also decoded by rosbags with ROS 2 Jazzy's own definitions
+//! (and rclpy decodes them with ROS's generated type support).
 
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 use omnitrack_io::publish::{PoseSample, SamplePublisher, StatusSample, TrackerState};
