@@ -255,8 +255,11 @@ pub fn frame_id(option: &str, s: &str) -> Result<String, Ros2Error> {
     }
 }
 
-/// The `ROS_DOMAIN_ID` as DDS takes it, or why not.
+/// The `ROS_DOMAIN_ID` as DDS takes it, or why not; empty is 0, as ROS reads an empty variable.
 pub fn domain_id(s: &str) -> Result<u16, String> {
+    if s.trim().is_empty() {
+        return Ok(0);
+    }
     match s.trim().parse::<u16>() {
         Ok(d) if d <= MAX_DOMAIN_ID => Ok(d),
         _ => Err(format!("'{s}' is not a ROS domain id (0 to {MAX_DOMAIN_ID})")),
@@ -637,6 +640,7 @@ mod tests {
             "--map-frame '/map' is not a frame id: ROS 2 frame ids have no leading '/'"
         );
         assert_eq!(domain_id("232"), Ok(232));
+        assert_eq!(domain_id(""), Ok(0), "ROS_DOMAIN_ID= is the default domain");
         assert_eq!(domain_id("233").unwrap_err(), "'233' is not a ROS domain id (0 to 232)");
         assert_eq!(domain_id("x").unwrap_err(), "'x' is not a ROS domain id (0 to 232)");
     }

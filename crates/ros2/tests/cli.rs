@@ -104,6 +104,14 @@ fn bad_input_is_one_line_naming_what_is_wrong() {
         .unwrap();
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("'abc' is not a ROS domain id"));
+    // An empty ROS_DOMAIN_ID is domain 0 to ROS: accepted, so the bad topic is what is named.
+    let out = Command::new(BIN)
+        .args(["publish", "--topic", "a//b"])
+        .env("ROS_DOMAIN_ID", "")
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).starts_with("omnitrack-ros2: --topic 'a//b'"));
 }
 
 /// The long options in `text`, `--help` and `--version` left out.
