@@ -266,6 +266,34 @@ pub fn domain_id(s: &str) -> Result<u16, String> {
     }
 }
 
+/// The local addresses DDS may use: those given (`--interface`), else, as ROS 2 reads its
+/// environment, only the loopback for `ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST` (Jazzy) or
+/// `ROS_LOCALHOST_ONLY=1` (before), and every interface otherwise (`SUBNET`, ROS's default).
+/// `OFF` (static peers only) is refused: this publisher finds its peers by discovery.
+pub fn interfaces(
+    given: Vec<IpAddr>,
+    discovery_range: Option<&str>,
+    localhost_only: Option<&str>,
+) -> Result<Vec<IpAddr>, Ros2Error> {
+    if !given.is_empty() {
+        return Ok(given);
+    }
+    let loopback = vec![IpAddr::from([127, 0, 0, 1])];
+    match discovery_range.map(str::trim) {
+        Some("LOCALHOST") => Ok(loopback),
+        Some("OFF") => Err(Ros2Error::Usage(
+            "ROS_AUTOMATIC_DISCOVERY_RANGE=OFF (static peers only) is not supported: unset it, or \
+             set LOCALHOST or SUBNET"
+                .into(),
+        )),
+        Some("SUBNET" | "SYSTEM_DEFAULT" | "") | None if localhost_only.map(str::trim) == Some("1") => Ok(loopback),
+        Some("SUBNET" | "SYSTEM_DEFAULT" | "") | None => Ok(Vec::new()),
+        Some(other) => Err(Ros2Error::Usage(format!(
+            "ROS_AUTOMATIC_DISCOVERY_RANGE='{other}' is none of LOCALHOST, SUBNET, OFF, SYSTEM_DEFAULT"
+        ))),
+    }
+}
+
 /// What `publish` did.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Summary {
@@ -639,6 +667,22 @@ mod tests {
             frame_id("--map-frame", "/map").unwrap_err().to_string(),
             "--map-frame '/map' is not a frame id: ROS 2 frame ids have no leading '/'"
         );
+        let lo = vec![IpAddr::from([127, 0, 0, 1])];
+        let eth = vec![IpAddr::from([192, 168, 10, 5])];
+        assert_eq!(
+            interfaces(eth.clone(), Some("LOCALHOST"), None).unwrap(),
+            eth,
+            "--interface wins"
+        );
+        assert_eq!(interfaces(vec![], Some("LOCALHOST"), None).unwrap(), lo);
+        assert_eq!(interfaces(vec![], None, Some("1")).unwrap(), lo);
+        assert!(interfaces(vec![], Some("SUBNET"), None).unwrap().is_empty());
+        assert!(interfaces(vec![], None, None).unwrap().is_empty());
+        assert_eq!(
+            interfaces(vec![], Some("OFF"), None).unwrap_err().to_string(),
+            "ROS_AUTOMATIC_DISCOVERY_RANGE=OFF (static peers only) is not supported: unset it, or set LOCALHOST or SUBNET"
+        );
+        assert!(interfaces(vec![], Some("LAN"), None).is_err());
         assert_eq!(domain_id("232"), Ok(232));
         assert_eq!(domain_id(""), Ok(0), "ROS_DOMAIN_ID= is the default domain");
         assert_eq!(domain_id("233").unwrap_err(), "'233' is not a ROS domain id (0 to 232)");

@@ -71,7 +71,8 @@ enum Command {
         /// The DDS domain (ROS_DOMAIN_ID), 0 to 232.
         #[arg(long, env = "ROS_DOMAIN_ID", default_value = "0", value_parser = domain_id)]
         domain_id: u16,
-        /// A local address DDS may use (repeatable); every interface when none is given.
+        /// A local address DDS may use (repeatable); when none is given, the loopback only for
+        /// ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST or ROS_LOCALHOST_ONLY=1, else every interface.
         #[arg(long = "interface", value_name = "ADDR")]
         interfaces: Vec<IpAddr>,
         /// What goes on /tf: none; map-odom, computed from the robot's odom → base_link
@@ -166,7 +167,11 @@ fn run(cli: Cli) -> Result<(), Ros2Error> {
                 },
                 capture_clock,
                 domain_id,
-                interfaces,
+                interfaces: omnitrack_ros2::interfaces(
+                    interfaces,
+                    std::env::var("ROS_AUTOMATIC_DISCOVERY_RANGE").ok().as_deref(),
+                    std::env::var("ROS_LOCALHOST_ONLY").ok().as_deref(),
+                )?,
                 node_name,
                 count,
             };

@@ -87,6 +87,8 @@ fn bad_input_is_one_line_naming_what_is_wrong() {
             .arg("publish")
             .args(*args)
             .env_remove("ROS_DOMAIN_ID")
+            .env_remove("ROS_AUTOMATIC_DISCOVERY_RANGE")
+            .env_remove("ROS_LOCALHOST_ONLY")
             .output()
             .unwrap();
         let err = String::from_utf8_lossy(&out.stderr);
@@ -104,6 +106,18 @@ fn bad_input_is_one_line_naming_what_is_wrong() {
         .unwrap();
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("'abc' is not a ROS domain id"));
+    // ROS 2's discovery range: OFF (static peers only) cannot be honoured, and is said so.
+    let out = Command::new(BIN)
+        .arg("publish")
+        .env("ROS_AUTOMATIC_DISCOVERY_RANGE", "OFF")
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    assert_eq!(
+        String::from_utf8_lossy(&out.stderr),
+        "omnitrack-ros2: ROS_AUTOMATIC_DISCOVERY_RANGE=OFF (static peers only) is not supported: unset it, or \
+         set LOCALHOST or SUBNET\n"
+    );
     // An empty ROS_DOMAIN_ID is domain 0 to ROS: accepted, so the bad topic is what is named.
     let out = Command::new(BIN)
         .args(["publish", "--topic", "a//b"])

@@ -7,11 +7,11 @@ and prints every sample it takes as one JSON line, each field as Cyclone decoded
 system time of its arrival. With --odom it is the robot too: it publishes `odom -> base_link` on
 `rt/tf` at 100 Hz, the odometry a known function of the stamp (odom(), below), stamped
 --odom-lead-s ahead so that every pose's stamp lies between two samples. It prints `ready` once
-its entities exist, and exits after --poses pose samples and --diagnostics diagnostic samples,
-or after --timeout-s (exit code 3).
+its entities exist, and exits after --poses pose samples, --diagnostics diagnostic samples and
+--transforms transforms other than its own, or after --timeout-s (exit code 3).
 
     python cyclonedds_peer.py --domain D --topic omnitrack/pose [--poses N] [--diagnostics N]
-        [--odom T0_NS] [--transient-local] [--depth N] [--settle-s S] [--timeout-s S]
+        [--transforms N] [--odom T0_NS] [--transient-local] [--depth N] [--settle-s S] [--timeout-s S]
 """
 
 import argparse
@@ -155,6 +155,7 @@ def main():
     p.add_argument("--topic", default="omnitrack/pose")
     p.add_argument("--poses", type=int, default=0)
     p.add_argument("--diagnostics", type=int, default=0)
+    p.add_argument("--transforms", type=int, default=0, help="map -> odom transforms to wait for")
     p.add_argument("--odom", type=int, metavar="T0_NS")
     p.add_argument("--odom-lead-s", type=float, default=0.5)
     p.add_argument("--transient-local", action="store_true")
@@ -191,12 +192,12 @@ def main():
                 seen, stable_since = now, time.monotonic()
             time.sleep(0.05)
 
-    poses = diagnostics = 0
+    poses = diagnostics = transforms = 0
     deadline = time.monotonic() + a.timeout_s
     next_odom = time.monotonic()
-    while poses < a.poses or diagnostics < a.diagnostics:
+    while poses < a.poses or diagnostics < a.diagnostics or transforms < a.transforms:
         if time.monotonic() > deadline:
-            print(f"timeout: {poses} poses, {diagnostics} diagnostics", file=sys.stderr, flush=True)
+            print(f"timeout: {poses} poses, {diagnostics} diagnostics, {transforms} transforms", file=sys.stderr, flush=True)
             sys.exit(3)
         if tf_writer is not None and time.monotonic() >= next_odom:
             next_odom += 0.01
@@ -261,6 +262,7 @@ def main():
                     "rotation": [r.x, r.y, r.z, r.w],
                 }
                 print(json.dumps(line), flush=True)
+                transforms += 1
         time.sleep(0.002)
 
 
