@@ -156,6 +156,10 @@ pub struct Frames {
     pub tf: TfMode,
     /// How far past the newest odometry a pose's stamp may be and still use it.
     pub odom_tolerance: Duration,
+    /// How much later than its pose a transform on /tf is stamped (AMCL's `transform_tolerance`):
+    /// a lookup at the current time then finds it instead of extrapolating. The transform is the
+    /// one at the pose's stamp either way.
+    pub transform_tolerance: Duration,
 }
 
 impl Default for Frames {
@@ -167,6 +171,7 @@ impl Default for Frames {
             base_rig: Iso::identity(),
             tf: TfMode::None,
             odom_tolerance: Duration::from_millis(100),
+            transform_tolerance: Duration::ZERO,
         }
     }
 }
@@ -599,9 +604,13 @@ pub fn publish(o: &Options, stop: &AtomicBool, on_start: &mut dyn FnMut(&ClockOf
             },
         };
         if let (Some((child, t)), Some(tf_out)) = (transform, &ports.tf_out) {
+            let tf_stamp = stamp_ns.saturating_add(f.transform_tolerance.as_nanos() as i64);
             let tf = msg::TfMessage {
                 transforms: vec![msg::TransformStamped {
-                    header,
+                    header: msg::Header {
+                        stamp: msg::Time::from_ns(tf_stamp).unwrap_or(header.stamp),
+                        ..header
+                    },
                     child_frame_id: child,
                     transform: frames::to_msg_transform(&t),
                 }],

@@ -5,7 +5,7 @@
 //! omnitrack-ros2 publish [--service omnitrack/pose] [--status-service omnitrack/status]
 //!     [--topic omnitrack/pose] [--diagnostics-topic /diagnostics] [--domain-id N] [--interface ADDR]...
 //!     [--tf none|map-odom|map-base] [--map-frame map] [--odom-frame odom] [--base-frame base_link]
-//!     [--rig-in-base X,Y,Z,QX,QY,QZ,QW] [--odom-tolerance-s S]
+//!     [--rig-in-base X,Y,Z,QX,QY,QZ,QW] [--odom-tolerance-s S] [--transform-tolerance-s S]
 //!     [--reliability reliable|best-effort] [--durability volatile|transient-local] [--depth N]
 //!     [--capture-clock monotonic|receipt] [--node-name omnitrack] [--count N]
 //! omnitrack-ros2 completions SHELL
@@ -95,6 +95,10 @@ enum Command {
         /// How far past the newest odometry a pose may be and still use it (--tf map-odom).
         #[arg(long = "odom-tolerance-s", value_name = "S", default_value = "0.1", value_parser = positive_seconds, allow_hyphen_values = true)]
         odom_tolerance: Duration,
+        /// Stamp the transforms on /tf this much later than their pose (AMCL's
+        /// transform_tolerance), for stacks that look transforms up at the current time.
+        #[arg(long = "transform-tolerance-s", value_name = "S", default_value = "0", value_parser = positive_seconds, allow_hyphen_values = true)]
+        transform_tolerance: Duration,
         /// Delivery of the pose topic.
         #[arg(long, value_enum, default_value = "reliable")]
         reliability: ReliabilityKind,
@@ -140,6 +144,7 @@ fn run(cli: Cli) -> Result<(), Ros2Error> {
             base_frame,
             rig_in_base,
             odom_tolerance,
+            transform_tolerance,
             reliability,
             durability,
             depth,
@@ -159,6 +164,7 @@ fn run(cli: Cli) -> Result<(), Ros2Error> {
                     base_rig: rig_in_base.unwrap_or_else(Iso::identity),
                     tf,
                     odom_tolerance,
+                    transform_tolerance,
                 },
                 qos: PoseQos {
                     reliability,

@@ -427,6 +427,8 @@ fn cyclone_dds_receives_every_field_in_ros_time_and_rep_105_frames() {
             "127.0.0.1",
             "--tf",
             "map-odom",
+            "--transform-tolerance-s",
+            "0.25",
         ],
     );
 
@@ -502,7 +504,8 @@ fn cyclone_dds_receives_every_field_in_ros_time_and_rep_105_frames() {
             (Some("map"), Some("odom")),
             "{t}"
         );
-        let stamp = stamp_ns(&t["stamp"]);
+        // Stamped 0.25 s after its pose (--transform-tolerance-s), the transform at the pose's stamp.
+        let stamp = stamp_ns(&t["stamp"]) - 250_000_000;
         let Some((_, p)) = pose_stamps.get(&stamp) else {
             continue; // a transform of a pose sent before the peer's reader matched
         };
