@@ -8,7 +8,15 @@
 use nalgebra::{Matrix6, Translation3, UnitQuaternion, Vector3};
 use omnitrack::geometry::Pose;
 use omnitrack::publish::{PosePublisher, TrackerState, POSE_SERVICE};
-use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+use std::time::{Duration, Instant};
+
+/// This host's `CLOCK_MONOTONIC`, nanoseconds: the clock of V4L2 and USB3 Vision frame stamps.
+fn monotonic_ns() -> u64 {
+    let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+    // SAFETY: `ts` is a valid timespec to write; CLOCK_MONOTONIC always exists on Linux.
+    unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts) };
+    ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
+}
 
 fn main() {
     let seconds: f64 = match std::env::args().nth(1) {
@@ -35,9 +43,9 @@ fn main() {
             Translation3::new(2.0 * angle.cos(), 2.0 * angle.sin(), 1.5),
             UnitQuaternion::from_axis_angle(&Vector3::z_axis(), angle + std::f64::consts::FRAC_PI_2),
         );
-        let now_ns = SystemTime::now()
-            .duration_since(UNIX_EPOCH)
-            .map_or(0, |d| d.as_nanos() as u64);
+        // Stamped as a live camera stamps its frames: this host's monotonic clock
+        // (docs/interfaces.md, "Pose service"; omnitrack-ros2 turns it into ROS time).
+        let now_ns = monotonic_ns();
         match publisher.publish_pose(now_ns, sequence, TrackerState::Tracking, &pose, &covariance, 60, 1e-5) {
             Ok(reached) if sequence % 30 == 0 => println!("seq {sequence}: {reached} subscriber(s)"),
             Ok(_) => {}

@@ -1,5 +1,5 @@
-//! Manual pages and shell completions of omnitrack's three binaries (`omnitrack`,
-//! `omnitrack-desk`, `omnitrack-link`), generated from their clap command lines.
+//! Manual pages and shell completions of omnitrack's binaries (`omnitrack`, `omnitrack-desk`,
+//! `omnitrack-link`, `omnitrack-ros2`), generated from their clap command lines.
 //!
 //! In: a binary's clap [`Command`](clap::Command). Out: roff manual pages, one for the binary and
 //! one for each of its commands (`omnitrack.1`, `omnitrack-run.1`, `omnitrack-visibility.1`,
