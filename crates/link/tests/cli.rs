@@ -117,6 +117,35 @@ fn latency_report(tag: &str, stamp: impl Fn() -> u64) -> String {
     String::from_utf8_lossy(&listened.stderr).into_owned()
 }
 
+/// SIGTERM (systemd's stop) ends `send` with its summary and exit 0: the signal interrupting
+/// the wait on the local service was reported as an error, exit 1, on every try.
+#[test]
+fn send_stops_cleanly_on_sigterm() {
+    let service = format!("omnitrack-link-cli-test/{}/sigterm/pose", std::process::id());
+    let _publisher = SamplePublisher::<PoseSample>::create(&service).unwrap();
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let sender = Command::new(BIN)
+        .args(["send", "--service", &service, "--listen", &endpoint])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Long enough to be waiting on the service, where the signal lands.
+    std::thread::sleep(Duration::from_millis(1500));
+    let killed = Command::new("kill")
+        .args(["-TERM", &sender.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(killed.success());
+    let out = sender.wait_with_output().unwrap();
+    assert!(
+        out.status.success(),
+        "{:?}: {}",
+        out.status,
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
 /// A replay stamps its recording's time: `listen --latency` printed 1,340 s as its latency. It
 /// says the clocks are not comparable instead; poses of a live source on this host get an age.
 #[test]

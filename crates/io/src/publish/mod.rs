@@ -45,7 +45,7 @@ use std::fmt::Debug;
 use std::sync::Once;
 use std::time::{Duration, Instant};
 
-use iceoryx2::port::listener::Listener;
+use iceoryx2::port::listener::{Listener, ListenerWaitError};
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
@@ -379,7 +379,7 @@ impl<T: Message> SampleSubscriber<T> {
     }
 
     /// Waits at most `timeout` for a sample, sleeping on the event service between checks;
-    /// `None` when none came in time.
+    /// `None` when none came in time, or when a signal interrupted the sleep.
     pub fn wait(&self, timeout: Duration) -> Result<Option<T>, PublishError> {
         let deadline = Instant::now() + timeout;
         loop {
@@ -394,9 +394,14 @@ impl<T: Message> SampleSubscriber<T> {
             // sample may arrive from a publisher that does not notify): never sleep longer than
             // a short slice, so the wait stays bounded and still sees such samples.
             let slice = (deadline - now).min(Duration::from_millis(50));
-            self.listener
-                .timed_wait(|_| {}, slice)
-                .map_err(|e| PublishError::new("wait on event", &self.service, e))?;
+            match self.listener.timed_wait(|_| {}, slice) {
+                Ok(_) => {}
+                // A signal (SIGINT, SIGTERM) cut the sleep short: that is no fault of the
+                // service, and the caller's stop flag says whether to go on. As an error it
+                // ended `omnitrack-link send` with exit 1 on every SIGTERM.
+                Err(ListenerWaitError::InterruptSignal) => return Ok(None),
+                Err(e) => return Err(PublishError::new("wait on event", &self.service, e)),
+            }
         }
     }
 
