@@ -311,7 +311,7 @@ pub(crate) fn detailed(a: &Args, rig: &Rig, label: &str, options: &RecordingOpti
 /// truth as the search's scores see it, and the search's candidates with their distances from
 /// it and their scores.
 #[allow(clippy::too_many_arguments)]
-fn diagnose(
+pub(crate) fn diagnose(
     rig: &Rig,
     model: &Model,
     table: &omnitrack::visibility::VisibilityTable,

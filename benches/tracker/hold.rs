@@ -99,6 +99,11 @@ pub(crate) fn hold(
         let mut tracker = Tracker::new(rig, model, table, cfg, None, 1 + k as u64);
         // Each frame's pose by its time; late answers fill in the frames they belong to.
         let mut poses: Vec<(u64, Option<omnitrack::geometry::Pose>)> = Vec::with_capacity(HOLD_FRAMES);
+        // With --verbose: each frame's edges, for taking apart a search that found nothing, and
+        // the last pose a frame had (where the searches after a loss are centred).
+        let mut kept_edges: Vec<Vec<omnitrack::edges::Edge>> = Vec::new();
+        let mut last_pose = truth[start].pose;
+        let mut diagnosed = 0;
         for i in 0..HOLD_FRAMES {
             if !source.next_frame(&mut frame).unwrap() {
                 break;
@@ -111,6 +116,9 @@ pub(crate) fn hold(
                 tracker.process(edges, ts)
             };
             poses.push((ts, r.pose));
+            if verbose {
+                kept_edges.push(edges.to_vec());
+            }
             for (lt, late) in tracker.late() {
                 if let Some(slot) = poses.iter_mut().find(|(t, _)| t == lt) {
                     slot.1 = slot.1.or(late.pose);
@@ -133,6 +141,31 @@ pub(crate) fn hold(
                             Some(TrackerEvent::Relocalised) => " relocalised",
                             Some(TrackerEvent::Committed { .. }) => " committed",
                             Some(TrackerEvent::Searched(ref s)) => {
+                                // The first searches after a loss, taken apart: the truth as
+                                // their scores see it, and their candidates.
+                                if diagnosed < 3 {
+                                    if let Some(g) = truth_at(*lt) {
+                                        diagnosed += 1;
+                                        let j = poses.iter().position(|(t, _)| t == lt).unwrap_or(0);
+                                        let volume = omnitrack::tracker::SearchVolume {
+                                            centre: nalgebra::Point3::from(last_pose.translation.vector),
+                                            diameter_m: s.diameter_m,
+                                        };
+                                        eprintln!(
+                                            "{}",
+                                            crate::detailed::diagnose(
+                                                rig,
+                                                model,
+                                                table,
+                                                cfg,
+                                                &kept_edges[j],
+                                                Some(volume),
+                                                &g,
+                                                1
+                                            )
+                                        );
+                                    }
+                                }
                                 eprint!(
                                     " [searched: {} rotations, plan cells {} of {}, triplet cells {} of {}, diameter {:?}, work {}{}]",
                                     s.rotations,
@@ -150,6 +183,9 @@ pub(crate) fn hold(
                         }
                     );
                 }
+            }
+            if let Some(p) = r.pose {
+                last_pose = p;
             }
             if verbose {
                 let err = r.pose.zip(truth_at(ts)).map(|(p, g)| {

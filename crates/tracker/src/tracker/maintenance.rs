@@ -70,6 +70,15 @@ fn largest_position_sigma(cov: &Matrix6<f64>) -> f64 {
         .sqrt()
 }
 
+/// Whether the motion filter takes a frame of fewer than `min_inliers` lines whose fit is
+/// within the jump limits (`Tracker::maintain`, step 5): not while relocalised frames are on
+/// probation, only while the prediction's largest position σ is within `max_jump_m`, and only
+/// inside the filter's gate (`gate_d2`, the fit's squared Mahalanobis distance from the
+/// prediction; `None` when it cannot be formed).
+fn filter_takes_few_lines(on_probation: bool, predicted_sigma_m: f64, max_jump_m: f64, gate_d2: Option<f64>) -> bool {
+    !on_probation && predicted_sigma_m <= max_jump_m && gate_d2.is_some_and(|d2| d2 <= GATE_CHI2_6)
+}
+
 /// The pose and S_t the next frame will be predicted from.
 fn constant_velocity(previous: &Pose, previous_t: u64, current: &Pose, current_t: u64, next_t: u64) -> Pose {
     let dt_prev = current_t.saturating_sub(previous_t) as f64;
@@ -400,14 +409,18 @@ impl Tracker<'_> {
         // Fewer lines than `min_inliers` fix the pose in some directions and hardly in others;
         // with the motion filter such a frame is fused where its lines are informative
         // (their covariance says where), provided it continues the motion (inside the filter's
-        // gate) and the prediction is still sharp enough to tell a slide from the motion: its
-        // position σ within a third of the jump limit.
+        // gate) and the prediction is sharper than the jump limit it is judged by (its position
+        // σ within `max_jump_m`; a third of it refused most of a narrow rig's frames, whose
+        // few-line fits leave the filter at σ 0.2–0.4 m: docs/decisions.md). Not while
+        // relocalised frames are on probation: the prediction is then the unconfirmed
+        // relocalised pose itself, and a few lines agreeing with it are no evidence for it
+        // (module `relocalise`).
+        let on_probation = !self.probation.links.is_empty();
         if let (false, Some((_, predicted_cov))) = (good, &forecast) {
             if let Some(p) = pose.filter(|p| self.set.len() >= SMALLEST_SAMPLE && within_jump(p)) {
-                let sharp = largest_position_sigma(predicted_cov) <= mcfg.max_jump_m / 3.0;
                 let cov = self.measured_covariance(&p);
-                let continues = distance2(&predicted, predicted_cov, &p, &cov).is_some_and(|d2| d2 <= GATE_CHI2_6);
-                if sharp && continues {
+                let d2 = distance2(&predicted, predicted_cov, &p, &cov);
+                if filter_takes_few_lines(on_probation, largest_position_sigma(predicted_cov), mcfg.max_jump_m, d2) {
                     good = true;
                     self.stats.filtered_few_lines += 1;
                 }
@@ -554,5 +567,24 @@ impl Tracker<'_> {
                 (*measured, *cov)
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_frame_of_few_lines_is_taken_only_off_probation_with_a_sharp_prediction_inside_the_gate() {
+        let inside = Some(0.5 * GATE_CHI2_6);
+        // A narrow rig's prediction (σ 0.2–0.4 m) within the 0.5 m jump limit: taken.
+        assert!(filter_takes_few_lines(false, 0.3, 0.5, inside));
+        // The same frame right after a relocalisation: the prediction is the relocalised pose
+        // itself, and the frame is no evidence for it.
+        assert!(!filter_takes_few_lines(true, 0.3, 0.5, inside));
+        // A prediction vaguer than the jump limit, a fit outside the gate, no gate at all.
+        assert!(!filter_takes_few_lines(false, 0.6, 0.5, inside));
+        assert!(!filter_takes_few_lines(false, 0.3, 0.5, Some(2.0 * GATE_CHI2_6)));
+        assert!(!filter_takes_few_lines(false, 0.3, 0.5, None));
     }
 }
