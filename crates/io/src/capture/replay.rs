@@ -447,7 +447,9 @@ fn load_window(
 }
 
 /// An image file read into memory, its header parsed: the formats a recording may hold
-/// (docs/interfaces.md, "Recording").
+/// (docs/interfaces.md, "Recording"). It lives on the stack for one image: boxing the PNG
+/// decoder to even the variants out would cost an allocation per image instead.
+#[allow(clippy::large_enum_variant)]
 enum Encoded<'a> {
     Png(PngDecoder<Cursor<&'a [u8]>>),
     /// QOI (the Quite OK Image format): its header, and the whole file for the decoder.

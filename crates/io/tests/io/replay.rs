@@ -885,8 +885,7 @@ fn qoi_and_ppm_replays_allocate_only_the_resolved_path() {
         assert!(more);
         assert_eq!(frame.valid_count(), 6);
         assert_eq!(allocations, 6, "frame {}: one per image", frame.sequence);
-        for sensor in 0..6 {
-            let (w, h) = sizes[sensor];
+        for (sensor, &(w, h)) in sizes.iter().enumerate() {
             for (u, v) in [(0, 0), (w / 2, h / 3), (w - 1, h - 1)] {
                 assert_eq!(
                     frame.sensor(sensor).rgb(u, v),
