@@ -646,3 +646,77 @@ fn detect_reports_the_cpu_time_of_every_thread() {
         }
     }
 }
+
+/// Issue 51: the hue strips read only for the edges kept give every edge exactly what reading
+/// every candidate piece's strips gave (the same sums in the same order), on a busy image: many
+/// coloured cells, noise that breaks lines into pieces, thin bars that cut them (merges across
+/// the gaps), and far more candidates than edges kept.
+#[test]
+fn hue_read_only_for_kept_edges_is_the_same_to_the_bit() {
+    let _g = serial();
+    let rig = rig();
+    let normals: Vec<Vector3<f64>> = (0..14)
+        .map(|k| {
+            let a = k as f64 * 0.45;
+            Vector3::new(a.cos(), a.sin(), 0.25 * (k as f64 - 6.5) / 6.5).normalize()
+        })
+        .collect();
+    let mut frame = FrameSet::for_rig(&rig);
+    for k in 0..2 {
+        let img = render(&rig, k, &normals, |r| {
+            // The cell: which side of each plane; its hue and value from that.
+            let cell = normals
+                .iter()
+                .enumerate()
+                .fold(0u32, |acc, (i, n)| acc | (u32::from(n.dot(r) > 0.0) << i));
+            let hue = (cell.wrapping_mul(2654435761) >> 8) as f64 / (1u64 << 24) as f64;
+            let hsv = hsv(hue);
+            let value = 90.0 + (cell % 5) as f64 * 30.0;
+            // Noise from the ray itself (deterministic), ±14 grey levels.
+            let bits = (r.x * 1e6) as i64 ^ ((r.y * 1e6) as i64).rotate_left(21) ^ ((r.z * 1e6) as i64).rotate_left(42);
+            let noise = (bits.wrapping_mul(0x9E3779B97F4A7C15u64 as i64) >> 59) as f64 * 1.75;
+            // Bars across the lines: thin dark strips every 0.2 rad of azimuth.
+            let bar = (r.y.atan2(r.x) / 0.2).fract().abs() < 0.06;
+            let v = if bar { 0.25 * value } else { value };
+            [
+                hsv[0] / 200.0 * v + noise,
+                hsv[1] / 200.0 * v + noise,
+                hsv[2] / 200.0 * v + noise,
+            ]
+        });
+        frame.sensor_mut(k).pixels_mut().copy_from_slice(img.pixels());
+        frame.sensor_mut(k).set_valid(1);
+    }
+    for k in 2..rig.sensors.len() {
+        frame
+            .sensor_mut(k)
+            .set_invalid(omnitrack_core::frame::ImageFault::Dropped, 1);
+    }
+    let detect = |hue_for_kept_only: bool| {
+        let params = EdgeParams {
+            hue_for_kept_only,
+            ..EdgeParams::default()
+        };
+        let mut det = EdgeDetector::with_params(&rig, &EdgeConfig::default(), params);
+        let edges = det.detect(&frame).to_vec();
+        let stats: Vec<_> = (0..2).map(|k| det.sensor_stats(k)).collect();
+        (edges, stats)
+    };
+    let (late, stats) = detect(true);
+    let (eager, _) = detect(false);
+    let candidates: u32 = stats.iter().map(|s| s.candidates).sum();
+    let merged: u32 = stats.iter().map(|s| s.merged).sum();
+    eprintln!("{candidates} candidates, {merged} merges, {} edges kept", late.len());
+    assert!(merged > 20, "merges: {merged}");
+    assert!(
+        candidates as usize > 2 * late.len(),
+        "{candidates} candidates for {} edges: the test should leave most unread",
+        late.len()
+    );
+    assert!(late.iter().any(|e| e.hue.left_kept > 0.0 && e.hue.right_kept > 0.0));
+    assert_eq!(late.len(), eager.len());
+    for (a, b) in late.iter().zip(&eager) {
+        // Bit for bit, the hue's NaN (no pixel kept) included.
+        assert_eq!(format!("{a:?}"), format!("{b:?}"));
+    }
+}
