@@ -280,8 +280,6 @@ mod bench {
     /// over `frames` (each detected `passes` times after a warm-up pass).
     struct Ours {
         cpu_ms: Vec<f64>,
-        /// The same with every candidate piece's hue strips read (as before issue 51).
-        eager_cpu_ms: Vec<f64>,
         /// Pixel pass, chains (link, fit, hue), merge, select: mean ms per frame.
         phases: [f64; 4],
         edges_per_frame: f64,
@@ -293,23 +291,14 @@ mod bench {
             ..EdgeParams::default()
         };
         let mut det = EdgeDetector::with_params(rig, &cfg.edges, params);
-        let eager = EdgeParams {
-            hue_for_kept_only: false,
-            ..params
-        };
-        let mut eager = EdgeDetector::with_params(rig, &cfg.edges, eager);
         for f in frames {
             det.detect(f);
-            eager.detect(f);
         }
         let mut cpu_ms = Vec::new();
-        let mut eager_cpu_ms = Vec::new();
         let mut phases = [0.0; 4];
         let mut edges = 0;
         for _ in 0..passes {
             for f in frames {
-                eager.detect(f);
-                eager_cpu_ms.push(eager.last_cpu().as_secs_f64() * 1e3);
                 edges += det.detect(f).len();
                 cpu_ms.push(det.last_cpu().as_secs_f64() * 1e3);
                 for k in 0..rig.sensors.len() {
@@ -325,10 +314,8 @@ mod bench {
         }
         let n = cpu_ms.len().max(1) as f64;
         cpu_ms.sort_by(f64::total_cmp);
-        eager_cpu_ms.sort_by(f64::total_cmp);
         Ours {
             cpu_ms,
-            eager_cpu_ms,
             phases: phases.map(|p| p / n),
             edges_per_frame: edges as f64 / n,
         }
@@ -790,15 +777,6 @@ mod bench {
             percentile(&ours.cpu_ms, 0.99),
             ours_p50 / rig.sensors.len() as f64,
             ours.edges_per_frame
-        );
-        let _ = writeln!(
-            out,
-            "| omnitrack EdgeDetector, hue strips of every candidate piece (before issue 51; the same edges) | {:.2} / {:.2} | {:.2} | {:.1} | {:.2} |",
-            percentile(&ours.eager_cpu_ms, 0.5),
-            percentile(&ours.eager_cpu_ms, 0.99),
-            percentile(&ours.eager_cpu_ms, 0.5) / rig.sensors.len() as f64,
-            ours.edges_per_frame,
-            percentile(&ours.eager_cpu_ms, 0.5) / ours_p50
         );
         match &peers {
             None => {

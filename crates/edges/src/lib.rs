@@ -16,8 +16,8 @@
 //! a great circle or where two planes fit a piece far better than one (two lines a pixel or two
 //! apart, end to end or side by side), and neighbouring collinear pieces merged, also across
 //! chains (short pieces' normals are loose, so candidates within 5° are tried; the merged fit
-//! decides, under the same two-line test) → hue strips on both sides (read only for the edges
-//! kept, issue 51). Fisheye curvature costs nothing: rays, not pixels, are fitted.
+//! decides, under the same two-line test) → hue strips on both sides. Fisheye curvature costs
+//! nothing: rays, not pixels, are fitted.
 //!
 //! Memory is fixed: every buffer is sized in [`EdgeDetector::new`] from the rig (resolution) and
 //! the [`EdgeConfig`](omnitrack_config::EdgeConfig) (edges per sensor) and written through there

@@ -63,10 +63,6 @@ pub struct EdgeParams {
     /// With `piece_nfa`, trim each piece to its first and last pixel whose gradient is across
     /// the line before the test (which only lowers its number of false alarms).
     pub piece_trim: bool,
-    /// Read the hue strips only of the edges kept (the same sums, to the bit, as reading every
-    /// candidate piece's: [`sensor::strips`](crate::sensor)); off, every piece's strips are read
-    /// as it is found, as before issue 51 (the reference the tests compare with).
-    pub hue_for_kept_only: bool,
 }
 
 impl Default for EdgeParams {
@@ -86,7 +82,6 @@ impl Default for EdgeParams {
             two_line_excess: 0.3,
             piece_nfa: true,
             piece_trim: true,
-            hue_for_kept_only: true,
         }
     }
 }

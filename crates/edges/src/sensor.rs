@@ -8,9 +8,8 @@
 //! Each step is a file of its own, all working on the one [`Workspace`]: [`chain`] (pixel pass →
 //! chains of sub-pixel rays), [`fit`] (chains → candidate pieces), [`merge`] (collinear pieces
 //! of different chains joined), [`select`] (the strongest candidates → [`Edge`]s, with
-//! [`nfa`]'s a-contrario test of the pieces shown), [`strips`] (the hue strips, read only for the
-//! edges kept) and [`plane`] (the moments of rays and the planes fitted to them, which they all
-//! share).
+//! [`nfa`]'s a-contrario test of the pieces shown) and [`plane`] (the moments of rays and the
+//! planes fitted to them, which they all share).
 
 mod chain;
 mod fit;
@@ -18,7 +17,6 @@ mod merge;
 mod nfa;
 mod plane;
 mod select;
-mod strips;
 
 use super::contrario::Contrario;
 use super::edge::{Edge, MAX_GAPS};
@@ -52,11 +50,8 @@ struct Candidate {
     support: f64,
     /// Net count of edgels brighter on the left (> 0: left is the bright side).
     bright_left: i32,
-    /// Hue sums of its strips, when `hue_node` is [`strips::NO_NODE`]; else its node says how
-    /// to make them (`strips`: read only if the candidate is kept).
     left: HueAcc,
     right: HueAcc,
-    hue_node: u32,
     /// The widest gaps merging bridged, as the end rays of the pieces on either side.
     gaps: [[Vector3<f64>; 2]; MAX_GAPS],
     n_gaps: u8,
@@ -107,15 +102,6 @@ pub(crate) struct Workspace {
     normals: [Vec<f32>; 3],
     /// The a-contrario test of the pieces shown (LSD's), its table built here.
     contrario: Contrario,
-    /// Hue strips read late (`strips`): one piece's samples as they are picked, every piece's
-    /// kept for later, how each candidate's sums are made, and the scratch of making them.
-    strip_scratch: Vec<strips::StripSample>,
-    hue_samples: Vec<strips::StripSample>,
-    hue_nodes: Vec<strips::HueNode>,
-    node_sums: Vec<(HueAcc, HueAcc)>,
-    node_marks: Vec<u32>,
-    node_stamp: u32,
-    node_stack: Vec<u32>,
     pub edges: Vec<Edge>,
     /// Counters of the last run (for benchmarks and diagnostics).
     pub stats: ExtractionStats,
@@ -193,15 +179,6 @@ impl Workspace {
             // Pieces are sampled once a pixel: none is longer than a few image perimeters.
             // Trying both polarities doubles LSD's count of tests.
             contrario: Contrario::new(w, h, 2 * (w + h), 2.0),
-            // Room for every candidate's samples and about three nodes each (a piece, and the
-            // merges it takes part in); past that the strips are read at once.
-            strip_scratch: resident(Vec::with_capacity(params.hue_samples_per_edge.clamp(1, 2 * MAX_CHAIN))),
-            hue_samples: resident(Vec::with_capacity(cand_cap * params.hue_samples_per_edge.clamp(1, 64))),
-            hue_nodes: resident(Vec::with_capacity(4 * cand_cap)),
-            node_sums: resident(vec![(HueAcc::default(), HueAcc::default()); 4 * cand_cap]),
-            node_marks: resident(vec![0; 4 * cand_cap]),
-            node_stamp: 0,
-            node_stack: resident(Vec::with_capacity(4 * cand_cap)),
             edges: resident(Vec::with_capacity(max_edges)),
             stats: ExtractionStats::default(),
         }
@@ -212,8 +189,6 @@ impl Workspace {
     pub fn run(&mut self, img: &SensorImage) {
         self.edges.clear();
         self.cands.clear();
-        self.hue_samples.clear();
-        self.hue_nodes.clear();
         self.stats = ExtractionStats::default();
         if !img.valid || img.width() as usize != self.w || img.height() as usize != self.h || self.w < 3 || self.h < 3 {
             return;
@@ -236,9 +211,9 @@ impl Workspace {
         let t1 = thread_cpu_time();
         self.link(img.pixels());
         let t2 = thread_cpu_time();
-        self.merge_across_chains(img.pixels());
+        self.merge_across_chains();
         let t3 = thread_cpu_time();
-        self.select(img.pixels());
+        self.select();
         let t4 = thread_cpu_time();
         let ns = |d: std::time::Duration| d.as_nanos().min(u32::MAX as u128) as u32;
         self.stats.pixel_ns = ns(t1 - t0);

@@ -5,12 +5,13 @@
 //!
 //! In: the chain loaded by [`chain`](super::chain) (rays, positions, gradients, moment prefix
 //! sums) and the image (for the hue strips). Out: [`Candidate`]s in the [`Workspace`], each with
-//! its moments, plane, end rays, strength, polarity count and hue strip samples (read later, if
-//! it is kept: [`strips`](super::strips)); when the buffer is full, the weakest gives way.
+//! its moments, plane, end rays, strength, polarity count and hue sums; when the buffer is full,
+//! the weakest gives way.
 
 use super::plane::{edgel_weight, plane_normal, plane_residual, two_lines_apart, weighted_outer, Moments};
 use super::{Candidate, Workspace};
 use crate::edge::MAX_GAPS;
+use crate::hue::HueAcc;
 use nalgebra::Vector3;
 
 impl Workspace {
@@ -195,11 +196,12 @@ impl Workspace {
         // Hue strips and polarity; left of the walk from edgel a to edgel b.
         let (pa, pb) = (self.pos[a], self.pos[b]);
         let left = [pb[1] - pa[1], -(pb[0] - pa[0])];
+        let mut lacc = HueAcc::default();
+        let mut racc = HueAcc::default();
         let mut bright_left = 0i32;
         let mut strength = 0.0f32;
         let count = b + 1 - a;
         let step = count.div_ceil(self.params.hue_samples_per_edge.max(1)).max(1);
-        self.strip_scratch.clear();
         for k in a..=b {
             strength += self.emag[k];
             let g = self.grad[k];
@@ -215,11 +217,20 @@ impl Workspace {
             let s = if side >= 0.0 { 1.0 } else { -1.0 } / gn;
             let (dx, dy) = (g[0] * s, g[1] * s); // unit, pointing to the left side
             let p = self.pos[k];
-            // At most `hue_samples_per_edge` samples (the step above), which the scratch holds.
-            self.strip_scratch.push([p[0], p[1], dx, dy]);
+            for t in 0..self.strip_px {
+                let d = self.params.hue_strip_offset_px + t as f32;
+                for (sign, acc) in [(1.0f32, &mut lacc), (-1.0, &mut racc)] {
+                    // +1 keeps the value positive, so truncation rounds.
+                    let x = (p[0] + sign * d * dx + 1.5) as usize;
+                    let y = (p[1] + sign * d * dy + 1.5) as usize;
+                    if x < 1 || y < 1 || x > self.w || y > self.h {
+                        continue;
+                    }
+                    let i = ((y - 1) * self.w + x - 1) * 3;
+                    self.hue.accumulate(acc, [rgb[i], rgb[i + 1], rgb[i + 2]]);
+                }
+            }
         }
-        // The strips are read now, or only if the candidate is kept (`strips`).
-        let (hue_node, lacc, racc) = self.defer_strips(rgb, self.strip_scratch.len());
         let cand = Candidate {
             m,
             count: fitted,
@@ -231,7 +242,6 @@ impl Workspace {
             bright_left,
             left: lacc,
             right: racc,
-            hue_node,
             gaps: [[Vector3::zeros(); 2]; MAX_GAPS],
             n_gaps: 0,
             alive: true,

@@ -6,7 +6,6 @@
 //! `merge_gap_evidence`, a merge happens only where the image shows the line across the gap.
 
 use super::plane::{angle_in_plane, plane_normal, plane_residual, two_lines_apart, Moments};
-use super::strips::NO_NODE;
 use super::{Candidate, Workspace};
 use crate::edge::MAX_GAPS;
 use nalgebra::{Point2, Vector2, Vector3};
@@ -21,7 +20,7 @@ impl Workspace {
     /// an occluder, a gap in the edgels or a junction). Polarity is not compared: an edge seen
     /// against a background that turns from darker to brighter flips it halfway (docs/decisions.md).
     #[inline(never)]
-    pub(super) fn merge_across_chains(&mut self, rgb: &[u8]) {
+    pub(super) fn merge_across_chains(&mut self) {
         let cos_max = self.params.merge_angle_rad.cos();
         let gap_max = self.params.merge_gap_rad;
         let tol = self.params.split_tolerance_rad.sin();
@@ -69,18 +68,10 @@ impl Workspace {
                         if dot.abs() < cos_max {
                             continue;
                         }
-                        if let Some(mut m) = try_merge(ci, cj, gap_max, tol, two_line, min_support) {
+                        if let Some(m) = try_merge(ci, cj, gap_max, tol, two_line, min_support) {
                             if min_evidence > 0.0 && self.gap_evidence(&m, ci, cj, min_evidence) < min_evidence {
                                 self.stats.merges_refused += 1;
                                 continue;
-                            }
-                            // `try_merge` added the hue sums of two candidates that have them;
-                            // of a candidate whose strips are not read yet, the sums are made as
-                            // it would have (j oriented like i) when the edge is kept (`strips`).
-                            if ci.hue_node != NO_NODE || cj.hue_node != NO_NODE {
-                                let swap = (ci.r2 - ci.r1).dot(&(cj.r2 - cj.r1)) < 0.0;
-                                let (a, b) = ((ci.hue_node, ci.left, ci.right), (cj.hue_node, cj.left, cj.right));
-                                (m.hue_node, m.left, m.right) = self.merge_strips(rgb, a, b, swap);
                             }
                             self.cands[i] = m;
                             self.cands[jj].alive = false;
@@ -308,7 +299,6 @@ fn try_merge(
         bright_left: ci.bright_left + jb,
         left,
         right,
-        hue_node: NO_NODE,
         gaps,
         n_gaps: n_gaps as u8,
         alive: true,

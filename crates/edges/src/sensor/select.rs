@@ -16,7 +16,7 @@ use omnitrack_core::geometry::EdgePlane;
 impl Workspace {
     /// Keeps the strongest `max_edges` candidates and turns them into edges (rig frame).
     #[inline(never)]
-    pub(super) fn select(&mut self, rgb: &[u8]) {
+    pub(super) fn select(&mut self) {
         let min_cos = self.min_len_rad.cos();
         self.cands.retain(|c| c.r1.dot(&c.r2) <= min_cos);
         let k = self.max_edges;
@@ -32,14 +32,11 @@ impl Workspace {
         }
         self.cands.sort_unstable_by(|a, b| b.strength.total_cmp(&a.strength));
         let rot = self.rotation;
-        for k in 0..self.cands.len() {
-            let c = self.cands[k];
+        for c in &self.cands {
             let (Some(p1), Some(p2)) = (self.lens.project(&c.r1), self.lens.project(&c.r2)) else {
                 continue;
             };
-            // Only now, for the edges kept, are the strips read (`strips`).
-            let (left, right) = self.sums(rgb, (c.hue_node, c.left, c.right));
-            let (left, right) = (left.stats(), right.stats());
+            let (left, right) = (c.left.stats(), c.right.stats());
             let n_rig = rot * c.n;
             let plane = EdgePlane {
                 normal: Unit::new_normalize(n_rig),
