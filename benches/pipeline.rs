@@ -24,7 +24,9 @@
 //! recording with its images in that format: the rendered PNGs re-recorded once with
 //! `omnitrack_runtime::record`, cached beside them; default png), `--no-opencv` (skip the peers),
 //! `--peer-frames N` (frames the edge detectors are compared on, default 20), `--no-results`
-//! (print only). Recordings are cached in `target/omnitrack-cache/` (or `$OMNITRACK_CACHE`), as
+//! (print only), `--appearance SPEC` (render with `Appearance::from_spec(SPEC)`, e.g.
+//! `realistic`, the preset of docs/real-photos.md; the recording and the results file are named
+//! after it). Recordings are cached in `target/omnitrack-cache/` (or `$OMNITRACK_CACHE`), as
 //! for `benches/tracker/`.
 //!
 //! CPU (issue 51): besides wall-clock times, every run reports CPU time from the threads' own
@@ -457,6 +459,7 @@ mod bench {
         let mut opencv = true;
         let mut peer_frames = 20usize;
         let mut results = true;
+        let mut appearance: Option<String> = None;
         let mut it = std::env::args().skip(1);
         while let Some(x) = it.next() {
             match x.as_str() {
@@ -466,6 +469,7 @@ mod bench {
                 "--no-realtime" => realtime = false,
                 "--no-opencv" => opencv = false,
                 "--no-results" => results = false,
+                "--appearance" => appearance = Some(it.next().expect("--appearance SPEC")),
                 "--peer-frames" => peer_frames = it.next().and_then(|s| s.parse().ok()).expect("--peer-frames N"),
                 "--format" => {
                     format = it
@@ -487,6 +491,15 @@ mod bench {
             }
         }
         let rig = Rig::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("firmware_config/ladybug2.toml")).unwrap();
+        let mut options = RecordingOptions::default();
+        let mut label = "30hz".to_string();
+        if let Some(spec) = &appearance {
+            options.appearance = omnitrack::desk::render::Appearance::from_spec(spec).unwrap_or_else(|e| {
+                eprintln!("--appearance {e}");
+                std::process::exit(2);
+            });
+            label = format!("30hz-{spec}");
+        }
         let (rec, made, title) = match building {
             // A building nobody here drew (issue 11), walked at a camera's 30 Hz.
             Some(b) => {
@@ -494,15 +507,9 @@ mod bench {
                 b.frame_rate_hz = 30.0;
                 let title = b.name();
                 eprintln!("{title}: {b}");
-                let (rec, made) = cached_building(
-                    &cache_root(),
-                    &b,
-                    frames,
-                    "30hz",
-                    &rig,
-                    &RecordingOptions::default(),
-                    |d, t| eprint!("\rrendering {title}: {d}/{t}"),
-                )
+                let (rec, made) = cached_building(&cache_root(), &b, frames, &label, &rig, &options, |d, t| {
+                    eprint!("\rrendering {title}: {d}/{t}")
+                })
                 .unwrap();
                 (rec, made, title)
             }
@@ -514,13 +521,17 @@ mod bench {
                     &scenario,
                     frames,
                     seed,
-                    "30hz",
+                    &label,
                     &rig,
-                    &RecordingOptions::default(),
+                    &options,
                     |d, t| eprint!("\rrendering {}: {d}/{t}", name.as_str()),
                 )
                 .unwrap();
-                (rec, made, name.as_str().to_string())
+                let title = match &appearance {
+                    Some(spec) => format!("{}-{spec}", name.as_str()),
+                    None => name.as_str().to_string(),
+                };
+                (rec, made, title)
             }
         };
         if made {
@@ -847,6 +858,9 @@ mod bench {
             }
             if format != ImageFormat::Png {
                 command.push_str(&format!(" --format {}", format.extension()));
+            }
+            if let Some(spec) = &appearance {
+                command.push_str(&format!(" --appearance {spec}"));
             }
             if hogs > 0 {
                 command.push_str(&format!(" --hogs {hogs}"));
