@@ -445,12 +445,12 @@ mod bench {
                     let st = det.sensor_stats(k);
                     phase_ns[0] += st.pixel_ns as u64;
                     phase_ns[1] += st.chain_ns as u64;
-                    phase_ns[2] += st.merge_ns as u64;
+                    phase_ns[2] += (st.merge_ns + st.select_ns) as u64;
                 }
             }
             let per_image = |ns: u64| ns as f64 / (passes * rig.sensors.len()) as f64 / 1e3;
             phases.push(format!(
-                "{} thread(s), mean µs per sensor image: pixel pass {:.0}, chains (link, fit, hue) {:.0}, merge and select {:.0}",
+                "{} thread(s), mean µs of CPU per sensor image: pixel pass {:.0}, chains (link, fit, hue) {:.0}, merge and select {:.0}",
                 det.threads(),
                 per_image(phase_ns[0]),
                 per_image(phase_ns[1]),

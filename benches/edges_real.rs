@@ -212,7 +212,7 @@ intrinsics = [{fx:?}, {fy:?}, {cx:?}, {cy:?}]\nrotation_wxyz = [1.0, 0.0, 0.0, 0
                 let st = det.sensor_stats(0);
                 phase[0] += st.pixel_ns as f64;
                 phase[1] += st.chain_ns as f64;
-                phase[2] += st.merge_ns as f64;
+                phase[2] += (st.merge_ns + st.select_ns) as f64;
                 for (c, v) in counts.iter_mut().zip([
                     st.edgels,
                     st.chains,

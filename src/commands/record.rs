@@ -3,7 +3,7 @@
 use super::CommandResult;
 use omnitrack::capture::{open_source_with, Pacing, SourceOptions, SourceSpec};
 use omnitrack::runtime::pipeline::stop_on_signals;
-use omnitrack::runtime::record::{record, RecordOptions};
+use omnitrack::runtime::record::{record, ImageFormat, RecordOptions};
 use omnitrack::Rig;
 use std::path::PathBuf;
 
@@ -22,6 +22,14 @@ pub struct Args {
     /// Stop after N frames (default: until the source ends, or Ctrl-C).
     #[arg(long)]
     frames: Option<u64>,
+    /// The images' file format, all lossless: ppm (raw, the default: the least CPU to write and to
+    /// replay, twice PNG's disk), png (what any tool opens) or qoi.
+    #[arg(long, value_name = "ppm|png|qoi", default_value = "ppm", value_parser = parse_format)]
+    format: ImageFormat,
+}
+
+fn parse_format(s: &str) -> Result<ImageFormat, String> {
+    ImageFormat::parse(s).ok_or_else(|| format!("'{s}': ppm, png or qoi"))
 }
 
 pub fn run(a: Args) -> CommandResult {
@@ -41,6 +49,7 @@ pub fn run(a: Args) -> CommandResult {
     let opts = RecordOptions {
         max_frames: a.frames,
         lossless: replay,
+        format: a.format,
         ..RecordOptions::default()
     };
     let _signals = stop_on_signals(&opts.stop)?;

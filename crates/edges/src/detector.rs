@@ -7,6 +7,7 @@
 //! [`EdgeDetector::new`]; [`EdgeDetector::detect`] allocates nothing. Sensors are taken off a
 //! shared counter by the workers and the calling thread, fed through bounded crossbeam channels.
 
+use crate::cpu::thread_cpu_time;
 use crate::edge::Edge;
 use crate::hue::HueTable;
 use crate::params::EdgeParams;
@@ -15,9 +16,10 @@ use crossbeam::channel::{bounded, Receiver, Sender};
 use omnitrack_config::EdgeConfig;
 use omnitrack_core::frame::{FrameSet, SensorImage};
 use omnitrack_core::rig::Rig;
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
+use std::time::Duration;
 
 /// Unit ray (sensor frame) of every pixel of a lens, shared by the sensors that use the lens.
 type RayTable = Arc<[[f32; 3]]>;
@@ -37,6 +39,9 @@ unsafe impl Send for Job {}
 struct Shared {
     workspaces: Box<[Mutex<Workspace>]>,
     next: AtomicUsize,
+    /// CPU time (ns) the workers spent on the current frame, added by each before it reports
+    /// that it is done (the channel orders the add before the caller's read).
+    worker_cpu_ns: AtomicU64,
 }
 
 impl Shared {
@@ -88,6 +93,8 @@ pub struct EdgeDetector {
     /// all[offsets[k]..offsets[k + 1]] are sensor k's edges.
     offsets: Vec<usize>,
     stats: Vec<ExtractionStats>,
+    /// CPU time of the last [`EdgeDetector::detect`], every thread's.
+    last_cpu: Duration,
 }
 
 impl EdgeDetector {
@@ -130,6 +137,7 @@ impl EdgeDetector {
         let shared = Arc::new(Shared {
             workspaces,
             next: AtomicUsize::new(0),
+            worker_cpu_ns: AtomicU64::new(0),
         });
         let threads = if params.threads == 0 {
             std::thread::available_parallelism().map_or(1, |p| p.get()).min(2)
@@ -149,7 +157,10 @@ impl EdgeDetector {
                         warm_up_blocking(&rx);
                         let _ = done_tx.send(());
                         while let Ok(job) = rx.recv() {
+                            let started = thread_cpu_time();
                             shared.work(job);
+                            let spent = (thread_cpu_time() - started).as_nanos() as u64;
+                            shared.worker_cpu_ns.fetch_add(spent, Ordering::Relaxed);
                             if done_tx.send(()).is_err() {
                                 break;
                             }
@@ -174,6 +185,7 @@ impl EdgeDetector {
             all: omnitrack_core::memory::resident(Vec::with_capacity(n * max_edges)),
             offsets: vec![0; n + 1],
             stats: vec![ExtractionStats::default(); n],
+            last_cpu: Duration::ZERO,
         }
     }
 
@@ -188,6 +200,8 @@ impl EdgeDetector {
     /// built the detector: on another thread crossbeam sets up its per-thread context, once, at
     /// the first blocking wait).
     pub fn detect(&mut self, frame: &FrameSet) -> &[Edge] {
+        let started = thread_cpu_time();
+        self.shared.worker_cpu_ns.store(0, Ordering::Relaxed);
         let images = frame.sensors();
         let job = Job {
             images: images.as_ptr(),
@@ -211,7 +225,16 @@ impl EdgeDetector {
             }
         }
         self.collect();
+        let workers = Duration::from_nanos(self.shared.worker_cpu_ns.load(Ordering::Relaxed));
+        self.last_cpu = thread_cpu_time().saturating_sub(started) + workers;
         &self.all
+    }
+
+    /// CPU time (thread clocks) the last [`EdgeDetector::detect`] cost: the calling thread's
+    /// over the whole call (its share of the sensors, handing out the frame, gathering the
+    /// edges) plus each worker's on that frame. Zero before the first.
+    pub fn last_cpu(&self) -> Duration {
+        self.last_cpu
     }
 
     /// Detects the edges of one sensor image on the calling thread.

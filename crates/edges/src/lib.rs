@@ -29,7 +29,8 @@
 //! Files, each importing only those before it: `hue.rs` (hue signatures), `params.rs`
 //! ([`EdgeParams`]), `edge.rs` (the [`Edge`] handed on), `gradient.rs` and `contrario.rs` (the
 //! pixel pass and the a-contrario test), `sensor.rs` with `sensor/` (one sensor's extraction),
-//! `detector.rs` (the [`EdgeDetector`] and its workers) and `csv.rs` (the `omnitrack edges` CSV).
+//! `detector.rs` (the [`EdgeDetector`] and its workers), `csv.rs` (the `omnitrack edges` CSV) and
+//! `cpu.rs` (the thread CPU clock the phases and [`EdgeDetector::last_cpu`] are timed with).
 //!
 //! A bright square on a dark image from one 50° pinhole gives its four sides:
 //!
@@ -62,6 +63,7 @@
 //! ```
 
 mod contrario;
+mod cpu;
 mod csv;
 mod detector;
 mod edge;
@@ -70,6 +72,7 @@ mod hue;
 mod params;
 mod sensor;
 
+pub use cpu::thread_cpu_time;
 pub use csv::{edges_csv, edges_csv_for_image, EdgesCsvError, EDGES_CSV_HEADER};
 pub use detector::EdgeDetector;
 pub use edge::{Edge, MAX_GAPS};

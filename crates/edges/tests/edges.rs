@@ -532,16 +532,11 @@ fn a_line_broken_by_an_occluder_is_one_edge_with_its_gap() {
         .ends_with(','));
 }
 
-/// Six images with content (polygons in every sensor), two different frames alternating: after
-/// warm-up, `detect` performs no heap allocation at all (worker threads included).
-#[test]
-fn zero_allocations_per_frame_after_warm_up() {
-    let _g = serial();
-    let rig = rig();
-    let config = EdgeConfig::default();
-    let mut frames: Vec<FrameSet> = (0..2)
+/// Two frames of six images with content (polygons in every sensor).
+fn polygon_frames(rig: &Rig) -> Vec<FrameSet> {
+    (0..2)
         .map(|f| {
-            let mut fs = FrameSet::for_rig(&rig);
+            let mut fs = FrameSet::for_rig(rig);
             for k in 0..rig.sensors.len() {
                 let t = 0.1 * (k + 3 * f) as f64;
                 let normals: Vec<Vector3<f64>> = [
@@ -553,7 +548,7 @@ fn zero_allocations_per_frame_after_warm_up() {
                 .iter()
                 .map(|n| n.normalize())
                 .collect();
-                let img = render(&rig, k, &normals, |r| {
+                let img = render(rig, k, &normals, |r| {
                     let inside = normals.iter().all(|n| n.dot(r) > 0.0);
                     match (inside, r.y > 0.3) {
                         (true, _) => [210.0, 80.0, 60.0],
@@ -566,7 +561,17 @@ fn zero_allocations_per_frame_after_warm_up() {
             }
             fs
         })
-        .collect();
+        .collect()
+}
+
+/// Six images with content (polygons in every sensor), two different frames alternating: after
+/// warm-up, `detect` performs no heap allocation at all (worker threads included).
+#[test]
+fn zero_allocations_per_frame_after_warm_up() {
+    let _g = serial();
+    let rig = rig();
+    let config = EdgeConfig::default();
+    let mut frames = polygon_frames(&rig);
     // One sensor missing from a frame: still no allocation.
     frames[1]
         .sensor_mut(3)
@@ -598,5 +603,46 @@ fn zero_allocations_per_frame_after_warm_up() {
             OTHER_THREAD.load(Ordering::SeqCst),
             LAST_SIZE.load(Ordering::SeqCst)
         );
+    }
+}
+
+/// `last_cpu` charges every thread's work on the frame: at least the CPU time of every sensor's
+/// phases (timed on whichever thread ran it), and at least what the calling thread spent.
+#[test]
+fn detect_reports_the_cpu_time_of_every_thread() {
+    let _g = serial();
+    let rig = rig();
+    let frames = polygon_frames(&rig);
+    for threads in [1, 2] {
+        let params = EdgeParams {
+            threads,
+            ..EdgeParams::default()
+        };
+        let mut det = EdgeDetector::with_params(&rig, &EdgeConfig::default(), params);
+        assert_eq!(det.last_cpu(), std::time::Duration::ZERO);
+        for fs in frames.iter().cycle().take(6) {
+            let before = omnitrack_edges::thread_cpu_time();
+            det.detect(fs);
+            let caller = omnitrack_edges::thread_cpu_time() - before;
+            let phases: u64 = (0..rig.sensors.len())
+                .map(|k| {
+                    let s = det.sensor_stats(k);
+                    [s.pixel_ns, s.chain_ns, s.merge_ns, s.select_ns]
+                        .map(u64::from)
+                        .iter()
+                        .sum::<u64>()
+                })
+                .sum();
+            let cpu = det.last_cpu();
+            assert!(phases > 0, "{threads} threads: no phase time");
+            assert!(
+                cpu.as_nanos() as u64 >= phases,
+                "{threads} threads: detect charged {cpu:?}, its sensors' phases took {phases} ns"
+            );
+            assert!(
+                cpu >= caller.saturating_sub(std::time::Duration::from_micros(50)),
+                "{threads} threads: {cpu:?} < {caller:?}"
+            );
+        }
     }
 }

@@ -105,7 +105,7 @@ pub use priority::{upstream_priority, Realtime, ThreadPolicy};
 pub use publishing::inside_publish;
 pub use signals::{stop_on_signals, SignalGuard};
 pub use sink::{FrameSink, TrajectoryFileError, TumSink, PROGRESS_AFTER, PROGRESS_EVERY};
-pub use stats::{stage_budget, Histogram, SensorSummary, StageClock, StageSummary};
+pub use stats::{stage_budget, CpuSummary, Histogram, SensorSummary, StageClock, StageSummary};
 pub use summary::{PipelineSummary, RunEnd};
 
 use super::{FrameRecord, RunError};
@@ -213,7 +213,12 @@ pub fn run_pipeline(
             .expect("spawn the process thread");
 
         // The sink, on this thread, until the process thread closes the channel.
+        let sink_cpu = omnitrack_edges::thread_cpu_time();
         let sink_error = sink::drain(sink, &records_rx, shared);
+        shared.add_cpu(
+            stats::ThreadRole::Sink,
+            omnitrack_edges::thread_cpu_time().saturating_sub(sink_cpu),
+        );
         let joined = process.join();
         // Whatever ended the process thread ends capture too (also after a panic, so that the
         // scope can join).

@@ -2,9 +2,17 @@
 //! replays (docs/interfaces.md, "Recording"), for replay, tuning and bug reports.
 //!
 //! In: a [`FrameSource`] (live cameras or a replay), an output directory that does not exist or
-//! is empty, [`RecordOptions`]. Out: `DIR/rig.toml` (the source's rig), `DIR/sensorK/NNNNNN.png`
-//! (8-bit RGB, lossless), `DIR/frames.csv` (`frame,sensor,timestamp_ns,path`, one row per valid
-//! image: a sensor's dropped image has no row, as the format allows), and a [`RecordSummary`].
+//! is empty, [`RecordOptions`]. Out: `DIR/rig.toml` (the source's rig), `DIR/sensorK/NNNNNN.EXT`
+//! (8-bit RGB, lossless, in the [`ImageFormat`] asked: raw PPM by default, or PNG, or QOI),
+//! `DIR/frames.csv` (`frame,sensor,timestamp_ns,path`, one row per valid image: a sensor's
+//! dropped image has no row, as the format allows), and a [`RecordSummary`].
+//!
+//! Why raw PPM by default: on the rig a recording must not take the tracker's CPU. Per six-sensor
+//! 512×384 frame of `lab` (`cargo bench --bench pipeline -- --format ppm`, 2026-11-29, one
+//! thread's CPU clock, a shared machine at load 8–10): writing PPM costs 0.34 ms against 6.6 ms
+//! for PNG (at its fastest setting) and 7.1 ms for QOI, and reading back 0.44 ms against 7.3 and
+//! 5.4; PPM takes 3.5 MB a frame (106 MB/s at 30 Hz) against PNG's 1.75 and QOI's 2.4. Where the
+//! disk cannot take that, `--format png` halves it for 20 % of a core at 30 Hz.
 //!
 //! Capture never waits for the disk: the caller's thread pulls frames into a preallocated pool
 //! and hands them to a writer thread through a bounded queue; when the queue is full the frame
@@ -26,6 +34,60 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
+/// The file format of the images a recording writes (each file's first bytes say which it is;
+/// the replay reads all three).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum ImageFormat {
+    /// QOI, lossless: reads back a quarter cheaper than PNG, but is no cheaper to write and a
+    /// third larger here (module doc).
+    Qoi,
+    /// PNG at its fastest compression, lossless: half the disk of raw, what any tool opens.
+    Png,
+    /// Binary PPM (`P6`), raw 8-bit RGB: no compression, the least CPU; the default (module doc).
+    #[default]
+    Ppm,
+}
+
+impl ImageFormat {
+    /// The file name extension.
+    pub fn extension(self) -> &'static str {
+        match self {
+            ImageFormat::Qoi => "qoi",
+            ImageFormat::Png => "png",
+            ImageFormat::Ppm => "ppm",
+        }
+    }
+
+    /// `qoi`, `png` or `ppm`.
+    pub fn parse(s: &str) -> Option<ImageFormat> {
+        [ImageFormat::Qoi, ImageFormat::Png, ImageFormat::Ppm]
+            .into_iter()
+            .find(|f| f.extension() == s)
+    }
+
+    /// Encodes one RGB8 image of `width` × `height` into `out` (cleared first).
+    pub fn encode(self, pixels: &[u8], width: u32, height: u32, out: &mut Vec<u8>) -> Result<(), String> {
+        out.clear();
+        match self {
+            ImageFormat::Png => PngEncoder::new_with_quality(&mut *out, CompressionType::Fast, FilterType::Adaptive)
+                .write_image(pixels, width, height, ExtendedColorType::Rgb8)
+                .map_err(|e| e.to_string()),
+            ImageFormat::Qoi => {
+                let encoder = qoi::Encoder::new(pixels, width, height).map_err(|e| e.to_string())?;
+                out.resize(encoder.required_buf_len(), 0);
+                let n = encoder.encode_to_buf(&mut out[..]).map_err(|e| e.to_string())?;
+                out.truncate(n);
+                Ok(())
+            }
+            ImageFormat::Ppm => {
+                let _ = write!(out, "P6\n{width} {height}\n255\n");
+                out.extend_from_slice(pixels);
+                Ok(())
+            }
+        }
+    }
+}
+
 /// How to record.
 #[derive(Debug, Clone)]
 pub struct RecordOptions {
@@ -35,6 +97,8 @@ pub struct RecordOptions {
     pub queue: usize,
     /// Wait for the writer instead of dropping (replays; live cameras would stall).
     pub lossless: bool,
+    /// The images' file format.
+    pub format: ImageFormat,
     /// Set from anywhere (a signal handler) to stop after the frame in hand; a source waiting
     /// for its next frame (a real-time replay's gap, a camera being reopened) stops waiting.
     pub stop: Arc<AtomicBool>,
@@ -46,6 +110,7 @@ impl Default for RecordOptions {
             max_frames: None,
             queue: 8,
             lossless: false,
+            format: ImageFormat::default(),
             stop: Arc::new(AtomicBool::new(false)),
         }
     }
@@ -82,7 +147,7 @@ pub enum RecordError {
     NotEmpty(PathBuf),
     #[error("{}: {source}", .path.display())]
     Write { path: PathBuf, source: std::io::Error },
-    #[error("{}: cannot encode PNG: {message}", .path.display())]
+    #[error("{}: cannot encode the image: {message}", .path.display())]
     Encode { path: PathBuf, message: String },
     #[error("{0}")]
     Source(#[from] SourceError),
@@ -127,7 +192,8 @@ pub fn record(source: &mut dyn FrameSource, out: &Path, opts: &RecordOptions) ->
     let returns = free_tx.clone();
     let mut summary = RecordSummary::default();
     let written = std::thread::scope(|scope| {
-        let writer = scope.spawn(move || write_frames(full_rx, free_tx, out, csv, csv_path));
+        let format = opts.format;
+        let writer = scope.spawn(move || write_frames(full_rx, free_tx, out, format, csv, csv_path));
         let captured = capture(source, opts, &full_tx, &free_rx, &returns, &mut summary);
         drop(full_tx);
         let written = writer.join().unwrap_or_else(|_| {
@@ -181,12 +247,13 @@ fn capture(
     Ok(())
 }
 
-/// The writer thread: PNGs and rows, `frames.csv` flushed per frame. Returns frames and images
+/// The writer thread: images and rows, `frames.csv` flushed per frame. Returns frames and images
 /// written.
 fn write_frames(
     full: Receiver<FrameSet>,
     free: Sender<FrameSet>,
     out: &Path,
+    format: ImageFormat,
     mut csv: BufWriter<File>,
     csv_path: PathBuf,
 ) -> Result<(u64, u64), RecordError> {
@@ -194,14 +261,13 @@ fn write_frames(
     let mut bytes = Vec::new();
     for frame in full {
         for s in frame.sensors().iter().filter(|s| s.valid) {
-            let relative = format!("sensor{}/{:06}.png", s.sensor(), frame.sequence);
+            let relative = format!("sensor{}/{:06}.{}", s.sensor(), frame.sequence, format.extension());
             let path = out.join(&relative);
-            bytes.clear();
-            PngEncoder::new_with_quality(&mut bytes, CompressionType::Fast, FilterType::Adaptive)
-                .write_image(s.pixels(), s.width(), s.height(), ExtendedColorType::Rgb8)
-                .map_err(|e| RecordError::Encode {
+            format
+                .encode(s.pixels(), s.width(), s.height(), &mut bytes)
+                .map_err(|message| RecordError::Encode {
                     path: path.clone(),
-                    message: e.to_string(),
+                    message,
                 })?;
             std::fs::write(&path, &bytes).map_err(|source| RecordError::Write { path, source })?;
             writeln!(csv, "{},{},{},{relative}", frame.sequence, s.sensor(), s.timestamp_ns).map_err(|source| {
@@ -305,6 +371,77 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("exists and is not empty"), "{e}");
+    }
+
+    /// Every format writes what the replay reads back pixel for pixel (lossless), under its
+    /// own extension; QOI is smaller than raw.
+    #[test]
+    fn every_format_replays_to_the_pixels_recorded() {
+        use omnitrack_io::capture::{Pacing, ReplaySource};
+        let dir = tempfile::tempdir().unwrap();
+        let mut sizes = Vec::new();
+        for format in [ImageFormat::Qoi, ImageFormat::Png, ImageFormat::Ppm] {
+            let out = dir.path().join(format.extension());
+            let opts = RecordOptions {
+                lossless: true,
+                format,
+                ..RecordOptions::default()
+            };
+            // Patterned pixels (a flood's are flat): frame f, byte i holds (i * 7 + i / 320 + f).
+            struct Pattern(Flood);
+            impl FrameSource for Pattern {
+                fn rig(&self) -> &Rig {
+                    self.0.rig()
+                }
+                fn next_frame(&mut self, out: &mut FrameSet) -> Result<bool, SourceError> {
+                    let more = self.0.next_frame(out)?;
+                    let f = out.sequence;
+                    for s in out.sensors_mut() {
+                        for (i, p) in s.pixels_mut().iter_mut().enumerate() {
+                            *p = (i as u64 * 7 + i as u64 / 320 + f) as u8;
+                        }
+                    }
+                    Ok(more)
+                }
+                fn stats(&self) -> &SourceStats {
+                    self.0.stats()
+                }
+            }
+            let s = record(&mut Pattern(flood(3)), &out, &opts).unwrap();
+            assert_eq!((s.frames_written, s.images_written), (3, 3), "{format:?}");
+            let csv = std::fs::read_to_string(out.join("frames.csv")).unwrap();
+            assert!(
+                csv.lines()
+                    .skip(1)
+                    .all(|l| l.ends_with(&format!(".{}", format.extension()))),
+                "{csv}"
+            );
+            let mut replay = ReplaySource::open(&out, Pacing::AsFastAsPossible).unwrap();
+            let mut frame = FrameSet::for_rig(replay.rig());
+            let mut frames = 0;
+            while replay.next_frame(&mut frame).unwrap() {
+                let f = frame.sequence;
+                let img = frame.sensor(0);
+                assert!(img.valid, "{format:?}");
+                let wrong = img
+                    .pixels()
+                    .iter()
+                    .enumerate()
+                    .filter(|&(i, &p)| p != (i as u64 * 7 + i as u64 / 320 + f) as u8)
+                    .count();
+                assert_eq!(wrong, 0, "{format:?} frame {f}");
+                frames += 1;
+            }
+            assert_eq!(frames, 3);
+            let bytes: u64 = std::fs::read_dir(out.join("sensor0"))
+                .unwrap()
+                .map(|e| e.unwrap().metadata().unwrap().len())
+                .sum();
+            sizes.push(bytes);
+        }
+        assert!(sizes[0] < sizes[2], "QOI {} bytes, raw {}", sizes[0], sizes[2]);
+        assert_eq!(ImageFormat::parse("ppm"), Some(ImageFormat::Ppm));
+        assert_eq!(ImageFormat::parse("jpeg"), None);
     }
 
     /// Issue 50: recording a real-time replay that waits 40 s for its next frame stops within

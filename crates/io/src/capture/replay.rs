@@ -5,7 +5,7 @@
 //! ```text
 //! REC/rig.toml             the rig the recording was made with (required)
 //! REC/frames.csv           header `frame,sensor,timestamp_ns,path`; path relative to REC/ (required)
-//! REC/sensorK/NNNNNN.png   8-bit RGB PNG per sensor per frame
+//! REC/sensorK/NNNNNN.png   8-bit RGB PNG per sensor per frame (or PPM, or QOI: below)
 //! REC/groundtruth.tum      optional T_world_rig per frame
 //! REC/model.obj            optional model the recording was made in
 //! ```
@@ -23,11 +23,13 @@
 //! replayed, so a day-long index costs megabytes, not gigabytes (see `index`). A missing rig file,
 //! index file or malformed index header is an `Err` naming the file.
 //!
-//! Per frame, each sensor's PNG is read into a scratch byte buffer sized at open and decoded
-//! straight into the frame set's preallocated RGB8 buffer (grey, grey+alpha and RGBA PNGs are
-//! converted to RGB in place or through a second scratch buffer sized at open). A missing file or
-//! directory, a corrupt PNG, a PNG of the wrong size or of 16-bit depth makes that sensor invalid
-//! for that frame, counted and warned (the first few per kind); the stream goes on.
+//! Per frame, each sensor's image file is read into a scratch byte buffer sized at open and
+//! decoded straight into the frame set's preallocated RGB8 buffer. An image is a PNG, a binary
+//! PPM/PGM (`P6`/`P5`, 8-bit: raw pixels, nothing to decode; `record`'s default) or a QOI (the
+//! Quite OK Image format, lossless), told apart by its first bytes, whatever its name (grey, grey+alpha and RGBA images are converted to RGB in place or
+//! through a second scratch buffer sized at open). A missing file or directory, a corrupt image,
+//! an image of the wrong size or of 16-bit depth makes that sensor invalid for that frame,
+//! counted and warned (the first few per kind); the stream goes on.
 //!
 //! A sensor with `crop` (several sensors cropped from one device's frame, e.g. a dual-fisheye
 //! camera) takes either its own image, of its size, or the device's whole frame, whose window it
@@ -36,10 +38,12 @@
 //! four times the smallest frame holding every crop). A frame that does not hold the window is a
 //! wrong-size image, counted and warned.
 //!
-//! Allocation: this module allocates nothing per frame of its own. The `image` crate's PNG decoder
-//! (`png` underneath) does allocate internally each time a decoder is created — its inflate state
-//! and row buffers — and offers no way to reuse them across images; the count is a small constant
-//! per image (`tests/io/replay.rs` measures it). Removing it needs a reusable decoder (a later issue).
+//! Allocation: per image, this module allocates the file's resolved path (the check that it
+//! lies inside the recording) and nothing else of its own; the QOI and PPM/PGM decoders allocate
+//! nothing. The `image` crate's PNG decoder (`png` underneath) does allocate internally each time
+//! a decoder is created — its inflate state and row buffers — and offers no way to reuse them
+//! across images: seven allocations per PNG image against one per QOI or PPM image
+//! (`tests/io/replay.rs` counts both).
 
 mod index;
 
@@ -258,7 +262,7 @@ impl FrameSource for ReplaySource {
         for row in &self.rows[..used] {
             let img = out.sensor_mut(row.sensor);
             let loaded = match self.rig.sensors[row.sensor].crop {
-                None => load_png(&row.path, &self.root, &mut self.file_buf, &mut self.rgba_buf, img),
+                None => load_image(&row.path, &self.root, &mut self.file_buf, &mut self.rgba_buf, img),
                 Some(crop) => load_window(
                     &row.path,
                     &self.root,
@@ -312,9 +316,14 @@ enum Problem {
     Outside,
     /// A FIFO, a device or a directory.
     NotAFile,
-    /// Larger than any PNG of the sensor's size can be (bytes).
+    /// Larger than any image of the sensor's size can be (bytes).
     TooLarge(u64),
+    /// Neither a PNG, a QOI nor a binary PPM/PGM (by its first bytes).
+    UnknownFormat,
     Decode(ImageError),
+    Qoi(qoi::Error),
+    /// A PPM or PGM header that cannot be read, or data shorter than it says.
+    Pnm(&'static str),
     Size {
         found: (u32, u32),
         expected: (u32, u32),
@@ -334,8 +343,11 @@ impl fmt::Display for Problem {
             Problem::Io(e) => write!(f, "cannot read: {e}"),
             Problem::Outside => f.write_str("a path that leads outside the recording through a link, not followed"),
             Problem::NotAFile => f.write_str("not a regular file"),
-            Problem::TooLarge(n) => write!(f, "{n} bytes, more than a PNG of the sensor's size can be"),
+            Problem::TooLarge(n) => write!(f, "{n} bytes, more than an image of the sensor's size can be"),
+            Problem::UnknownFormat => f.write_str("not a PNG, QOI or binary PPM/PGM image (by its first bytes)"),
             Problem::Decode(e) => write!(f, "not a valid PNG: {e}"),
+            Problem::Qoi(e) => write!(f, "not a valid QOI image: {e}"),
+            Problem::Pnm(e) => write!(f, "not a valid binary PPM/PGM image: {e}"),
             Problem::Size { found, expected } => {
                 write!(
                     f,
@@ -356,25 +368,26 @@ impl fmt::Display for Problem {
     }
 }
 
-/// Reads the PNG at `path` into `img`'s buffer as RGB8. `file_buf` and `rgba` are scratch space
-/// sized at open. Leaves `img`'s flags alone (the caller sets them).
-fn load_png(
+/// Reads the image at `path` (PNG, QOI or binary PPM/PGM, told apart by its first bytes) into
+/// `img`'s buffer as RGB8. `file_buf` and `rgba` are scratch space sized at open. Leaves `img`'s
+/// flags alone (the caller sets them).
+fn load_image(
     path: &Path,
     root: &Path,
     file_buf: &mut Vec<u8>,
     rgba: &mut [u8],
     img: &mut SensorImage,
 ) -> Result<(), (ImageFault, Problem)> {
-    // A PNG is never much larger than its raw pixels: past this it is not the sensor's image.
+    // An image file is never much larger than its raw pixels: past this it is not the sensor's.
     let most = 4 * u64::from(img.width()) * u64::from(img.height()) + (1 << 20);
     read_file(path, root, file_buf, most)?;
-    let decoder = png_decoder(file_buf)?;
-    let found = decoder.dimensions();
+    let encoded = Encoded::open(file_buf)?;
+    let found = encoded.dimensions();
     let expected = (img.width(), img.height());
     if found != expected {
         return Err((ImageFault::WrongSize, Problem::Size { found, expected }));
     }
-    decode_rgb(decoder, rgba, img)
+    encoded.decode_rgb(rgba, img)
 }
 
 /// The image of a sensor with `crop` at `path`: either its own image (of the sensor's size,
@@ -409,36 +422,184 @@ fn load_window(
         return Ok(());
     }
     read_file(path, root, file_buf, 4 * device.max_pixels + (1 << 20))?;
-    let decoder = png_decoder(file_buf)?;
-    let found = decoder.dimensions();
+    let encoded = Encoded::open(file_buf)?;
+    let found = encoded.dimensions();
     if found == (img.width(), img.height()) {
-        return decode_rgb(decoder, rgba, img);
+        return encoded.decode_rgb(rgba, img);
     }
     let pixels = u64::from(found.0) * u64::from(found.1);
     if !fits(found.0, found.1) || pixels > device.max_pixels {
         return Err((ImageFault::WrongSize, Problem::Window { found, crop }));
     }
-    let channels = match decoder.color_type() {
-        ColorType::L8 => 1,
-        ColorType::La8 => 2,
-        ColorType::Rgb8 => 3,
-        ColorType::Rgba8 => 4,
-        other => return Err((ImageFault::WrongFormat, Problem::Format(other))),
-    };
+    let channels = encoded.channels()?;
     let bytes = pixels as usize * channels;
     if device.pixels.len() < bytes {
         // Once, at the first device frame (then kept): its size is not known before.
         device.pixels.resize(bytes, 0);
     }
-    decoder
-        .read_image(&mut device.pixels[..bytes])
-        .map_err(|e| (ImageFault::Corrupt, Problem::Decode(e)))?;
+    encoded.read_native(&mut device.pixels[..bytes])?;
     device.path.clear();
     device.path.push(path);
     (device.width, device.height, device.channels) = (found.0, found.1, channels);
     device.valid = true;
     crop_into(&device.pixels, device.width, channels, &window, img);
     Ok(())
+}
+
+/// An image file read into memory, its header parsed: the formats a recording may hold
+/// (docs/interfaces.md, "Recording"). It lives on the stack for one image: boxing the PNG
+/// decoder to even the variants out would cost an allocation per image instead.
+#[allow(clippy::large_enum_variant)]
+enum Encoded<'a> {
+    Png(PngDecoder<Cursor<&'a [u8]>>),
+    /// QOI (the Quite OK Image format): its header, and the whole file for the decoder.
+    Qoi(qoi::Header, &'a [u8]),
+    /// Binary PPM (`P6`, RGB) or PGM (`P5`, grey) of maximum value 255: raw 8-bit pixels.
+    Pnm {
+        width: u32,
+        height: u32,
+        channels: usize,
+        data: &'a [u8],
+    },
+}
+
+impl<'a> Encoded<'a> {
+    /// The image in `bytes`, its format told by its first bytes.
+    fn open(bytes: &'a [u8]) -> Result<Encoded<'a>, (ImageFault, Problem)> {
+        let corrupt = |p| (ImageFault::Corrupt, p);
+        if bytes.starts_with(b"\x89PNG") {
+            let mut limits = Limits::default();
+            limits.max_alloc = Some(DECODER_MAX_ALLOC);
+            return PngDecoder::with_limits(Cursor::new(bytes), limits)
+                .map(Encoded::Png)
+                .map_err(|e| corrupt(Problem::Decode(e)));
+        }
+        if bytes.starts_with(b"qoif") {
+            let header = qoi::decode_header(bytes).map_err(|e| corrupt(Problem::Qoi(e)))?;
+            return Ok(Encoded::Qoi(header, bytes));
+        }
+        if bytes.starts_with(b"P6") || bytes.starts_with(b"P5") {
+            let channels = if bytes[1] == b'6' { 3 } else { 1 };
+            let (width, height, data) = pnm_header(bytes).map_err(|e| corrupt(Problem::Pnm(e)))?;
+            let need = width as usize * height as usize * channels;
+            if data.len() < need {
+                return Err(corrupt(Problem::Pnm("fewer pixels than its header says")));
+            }
+            return Ok(Encoded::Pnm {
+                width,
+                height,
+                channels,
+                data: &data[..need],
+            });
+        }
+        Err(corrupt(Problem::UnknownFormat))
+    }
+
+    fn dimensions(&self) -> (u32, u32) {
+        match self {
+            Encoded::Png(d) => d.dimensions(),
+            Encoded::Qoi(h, _) => (h.width, h.height),
+            Encoded::Pnm { width, height, .. } => (*width, *height),
+        }
+    }
+
+    /// Bytes per pixel as stored (1 grey, 2 grey + alpha, 3 RGB, 4 RGBA).
+    fn channels(&self) -> Result<usize, (ImageFault, Problem)> {
+        match self {
+            Encoded::Png(d) => match d.color_type() {
+                ColorType::L8 => Ok(1),
+                ColorType::La8 => Ok(2),
+                ColorType::Rgb8 => Ok(3),
+                ColorType::Rgba8 => Ok(4),
+                other => Err((ImageFault::WrongFormat, Problem::Format(other))),
+            },
+            Encoded::Qoi(h, _) => Ok(h.channels.as_u8() as usize),
+            Encoded::Pnm { channels, .. } => Ok(*channels),
+        }
+    }
+
+    /// Decodes the pixels as stored into `out` (exactly width × height × channels bytes).
+    fn read_native(self, out: &mut [u8]) -> Result<(), (ImageFault, Problem)> {
+        match self {
+            Encoded::Png(d) => d.read_image(out).map_err(|e| (ImageFault::Corrupt, Problem::Decode(e))),
+            Encoded::Qoi(_, bytes) => qoi::Decoder::new(bytes)
+                .and_then(|mut d| d.decode_to_buf(out))
+                .map(|_| ())
+                .map_err(|e| (ImageFault::Corrupt, Problem::Qoi(e))),
+            Encoded::Pnm { data, .. } => {
+                out.copy_from_slice(data);
+                Ok(())
+            }
+        }
+    }
+
+    /// Decodes an image of `img`'s size into its buffer as RGB8 (`rgba`: scratch space for a
+    /// four-channel PNG).
+    fn decode_rgb(self, rgba: &mut [u8], img: &mut SensorImage) -> Result<(), (ImageFault, Problem)> {
+        let n = img.width() as usize * img.height() as usize;
+        let pixels = img.pixels_mut();
+        match self {
+            Encoded::Png(d) => decode_png_rgb(d, rgba, pixels, n),
+            // QOI's decoder writes RGB whatever the file holds (alpha dropped).
+            Encoded::Qoi(_, bytes) => qoi::Decoder::new(bytes)
+                .map(|d| d.with_channels(qoi::Channels::Rgb))
+                .and_then(|mut d| d.decode_to_buf(pixels))
+                .map(|_| ())
+                .map_err(|e| (ImageFault::Corrupt, Problem::Qoi(e))),
+            Encoded::Pnm { channels: 3, data, .. } => {
+                pixels.copy_from_slice(data);
+                Ok(())
+            }
+            Encoded::Pnm { data, .. } => {
+                for (dst, &g) in pixels.chunks_exact_mut(3).zip(data) {
+                    dst.fill(g);
+                }
+                Ok(())
+            }
+        }
+    }
+}
+
+/// The width, height and pixel data of a binary PPM/PGM (`P6`/`P5`, netpbm's layout: the magic,
+/// then width, height and maximum value as decimal numbers separated by white space, comments
+/// from `#` to the end of a line allowed between them, then one white-space byte and the
+/// pixels). Only 8-bit files (maximum value 255) are taken.
+fn pnm_header(bytes: &[u8]) -> Result<(u32, u32, &[u8]), &'static str> {
+    let mut at = 2;
+    let mut field = || -> Result<u32, &'static str> {
+        loop {
+            match bytes.get(at) {
+                Some(b' ' | b'\t' | b'\n' | b'\r' | 0x0b | 0x0c) => at += 1,
+                Some(b'#') => {
+                    while bytes.get(at).is_some_and(|&b| b != b'\n') {
+                        at += 1;
+                    }
+                }
+                Some(b'0'..=b'9') => break,
+                _ => return Err("header ends before width, height and maximum value"),
+            }
+        }
+        let mut v: u32 = 0;
+        while let Some(&b @ b'0'..=b'9') = bytes.get(at) {
+            v = v
+                .checked_mul(10)
+                .and_then(|v| v.checked_add(u32::from(b - b'0')))
+                .ok_or("a header number too large")?;
+            at += 1;
+        }
+        Ok(v)
+    };
+    let (width, height, max) = (field()?, field()?, field()?);
+    if width == 0 || height == 0 {
+        return Err("zero width or height");
+    }
+    if max != 255 {
+        return Err("not 8-bit (maximum value other than 255)");
+    }
+    match bytes.get(at) {
+        Some(b' ' | b'\t' | b'\n' | b'\r') => Ok((width, height, &bytes[at + 1..])),
+        _ => Err("no white space between the header and the pixels"),
+    }
 }
 
 /// The device frame shared by the cropped sensors of one recorded frame.
@@ -507,22 +668,14 @@ fn read_file(path: &Path, root: &Path, file_buf: &mut Vec<u8>, most: u64) -> Res
     Ok(())
 }
 
-/// A PNG decoder over the bytes read, its header parsed.
-fn png_decoder(file_buf: &[u8]) -> Result<PngDecoder<Cursor<&[u8]>>, (ImageFault, Problem)> {
-    let mut limits = Limits::default();
-    limits.max_alloc = Some(DECODER_MAX_ALLOC);
-    PngDecoder::with_limits(Cursor::new(file_buf), limits).map_err(|e| (ImageFault::Corrupt, Problem::Decode(e)))
-}
-
-/// Decodes a PNG of `img`'s size into its buffer as RGB8.
-fn decode_rgb(
+/// Decodes a PNG of `n` pixels into `pixels` as RGB8 (grey, grey + alpha and RGBA converted).
+fn decode_png_rgb(
     decoder: PngDecoder<Cursor<&[u8]>>,
     rgba: &mut [u8],
-    img: &mut SensorImage,
+    pixels: &mut [u8],
+    n: usize,
 ) -> Result<(), (ImageFault, Problem)> {
     let corrupt = |e: ImageError| (ImageFault::Corrupt, Problem::Decode(e));
-    let n = img.width() as usize * img.height() as usize;
-    let pixels = img.pixels_mut();
     match decoder.color_type() {
         ColorType::Rgb8 => decoder.read_image(pixels).map_err(corrupt),
         ColorType::L8 => {

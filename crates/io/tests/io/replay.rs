@@ -758,6 +758,144 @@ fn steady_state_allocations_per_frame_are_constant_and_only_the_decoders() {
     );
 }
 
+// ---------------------------------------------------------------------------------------------
+// The faster formats: QOI and raw PPM/PGM.
+
+/// Rewrites `sensor`'s image of `frame` in `dir` (written as a PNG by `recording`) as `ext`
+/// (qoi, ppm or pgm; pgm keeps the green channel), under a name of that extension, and points its
+/// index row at it.
+fn convert(dir: &Path, frame: u64, sensor: usize, ext: &str) {
+    let png = dir.join(image_path(frame, sensor));
+    let rgb = image::open(&png).unwrap().to_rgb8();
+    let (w, h) = rgb.dimensions();
+    let bytes = match ext {
+        "qoi" => qoi::encode_to_vec(rgb.as_raw(), w, h).unwrap(),
+        "ppm" => [
+            format!("P6\n# made by a test\n{w} {h}\n255\n").into_bytes(),
+            rgb.into_raw(),
+        ]
+        .concat(),
+        "pgm" => [
+            format!("P5 {w}\n{h} 255\n").into_bytes(),
+            rgb.pixels().map(|p| p.0[1]).collect::<Vec<u8>>(),
+        ]
+        .concat(),
+        _ => unreachable!(),
+    };
+    let name = image_path(frame, sensor).replace(".png", &format!(".{ext}"));
+    std::fs::write(dir.join(&name), bytes).unwrap();
+    std::fs::remove_file(&png).unwrap();
+    let index = std::fs::read_to_string(dir.join("frames.csv")).unwrap();
+    std::fs::write(dir.join("frames.csv"), index.replace(&image_path(frame, sensor), &name)).unwrap();
+}
+
+/// A recording whose images are QOI, PPM and PGM files, mixed with PNGs (each file's first bytes
+/// say what it is): the same pixels come back (a PGM's grey in all three channels).
+#[test]
+fn qoi_and_ppm_images_replay_to_the_same_pixels_as_png() {
+    let dir = recording(&SMALL, 4);
+    let formats = ["qoi", "ppm", "png", "qoi"];
+    for (frame, ext) in formats.iter().enumerate() {
+        for sensor in 0..2 {
+            if *ext != "png" {
+                convert(dir.path(), frame as u64, sensor, ext);
+            }
+        }
+    }
+    convert(dir.path(), 2, 1, "pgm");
+    let (mut source, mut frame) = open(&dir);
+    let mut frames = 0;
+    while source.next_frame(&mut frame).unwrap() {
+        assert_eq!(frame.valid_count(), 2, "frame {}", frame.sequence);
+        for sensor in 0..2 {
+            if (frame.sequence, sensor) == (2, 1) {
+                let img = frame.sensor(1);
+                for (u, v) in [(0, 0), (5, 3), (19, 9)] {
+                    let g = expected_rgb(2, 1, u, v)[1];
+                    assert_eq!(img.rgb(u, v), [g; 3], "PGM pixel ({u}, {v})");
+                }
+            } else {
+                assert_pixels(&frame, sensor);
+            }
+        }
+        frames += 1;
+    }
+    assert_eq!(frames, 4);
+    assert_eq!(source.stats().images_delivered(), 8);
+}
+
+/// A damaged QOI or PPM, or a file of no known format, makes that sensor's image corrupt for
+/// that frame (counted, one warning line), and the replay goes on.
+#[test]
+fn corrupt_qoi_and_ppm_images_are_counted_and_skipped() {
+    let dir = recording(&SMALL, 5);
+    for frame in 0..5 {
+        convert(dir.path(), frame, 0, if frame % 2 == 0 { "qoi" } else { "ppm" });
+    }
+    let qoi0 = dir.path().join("sensor0/000000.qoi");
+    let good = std::fs::read(&qoi0).unwrap();
+    std::fs::write(&qoi0, &good[..good.len() / 2]).unwrap();
+    let ppm1 = dir.path().join("sensor0/000001.ppm");
+    let good = std::fs::read(&ppm1).unwrap();
+    std::fs::write(&ppm1, &good[..good.len() - 7]).unwrap();
+    std::fs::write(dir.path().join("sensor0/000003.ppm"), b"P6\n20 12\n65535\n\x00\x00").unwrap();
+    std::fs::write(dir.path().join("sensor0/000004.qoi"), b"GIF89a and then some").unwrap();
+    let (mut source, mut frame) = open(&dir);
+    let mut faults = Vec::new();
+    while source.next_frame(&mut frame).unwrap() {
+        for img in frame.sensors() {
+            match img.fault {
+                Some(fault) => faults.push((frame.sequence, img.sensor(), fault)),
+                None => assert_pixels(&frame, img.sensor()),
+            }
+        }
+    }
+    assert_eq!(
+        faults,
+        [0, 1, 3, 4].map(|f| (f, 0, ImageFault::Corrupt)),
+        "frame 2's QOI is whole"
+    );
+    assert_eq!(source.stats().frames_delivered, 5);
+}
+
+/// Replaying QOI or PPM images allocates one thing per image, the file's resolved path (the
+/// check that it lies inside the recording), and none of the PNG decoder's state (seven per
+/// image in the test above).
+#[test]
+fn qoi_and_ppm_replays_allocate_only_the_resolved_path() {
+    let rig_text = std::fs::read_to_string(omnitrack_testkit::SHIPPED_RIG).unwrap();
+    let rig = omnitrack_testkit::shipped_rig();
+    let sizes: Vec<(u32, u32)> = rig.sensors.iter().map(|s| (s.width, s.height)).collect();
+    let dir = recording_with_rig(&rig_text, &sizes, 5);
+    for frame in 0..5 {
+        for sensor in 0..sizes.len() {
+            convert(
+                dir.path(),
+                frame,
+                sensor,
+                if (frame + sensor as u64) % 2 == 0 { "qoi" } else { "ppm" },
+            );
+        }
+    }
+    let mut source = ReplaySource::open(dir.path(), Pacing::AsFastAsPossible).unwrap();
+    let mut frame = FrameSet::for_rig(source.rig());
+    assert!(source.next_frame(&mut frame).unwrap(), "warm-up frame");
+    for _ in 1..5 {
+        let (more, allocations) = omnitrack_testkit::allocations_in(|| source.next_frame(&mut frame).unwrap());
+        assert!(more);
+        assert_eq!(frame.valid_count(), 6);
+        assert_eq!(allocations, 6, "frame {}: one per image", frame.sequence);
+        for (sensor, &(w, h)) in sizes.iter().enumerate() {
+            for (u, v) in [(0, 0), (w / 2, h / 3), (w - 1, h - 1)] {
+                assert_eq!(
+                    frame.sensor(sensor).rgb(u, v),
+                    expected_rgb(frame.sequence, sensor, u, v)
+                );
+            }
+        }
+    }
+}
+
 /// A recording reads only regular files inside its folder: paths with `..` or absolute ones are
 /// bad rows; a link out of the folder (the file itself, or a folder on its path), a FIFO (which would block the read forever) and a device
 /// (which never ends) are skipped images, counted and warned about, and the run goes on.

@@ -14,10 +14,12 @@ use super::options::SensorCapture;
 use super::pool::{Handover, Pool};
 use super::shared::Shared;
 use super::stats::SensorCounters;
+use super::stats::ThreadRole;
 use super::{PipelineSource, PipelineThread};
 use crossbeam::channel::{bounded, Sender};
 use omnitrack_config::BudgetConfig;
 use omnitrack_core::frame::SensorImage;
+use omnitrack_edges::thread_cpu_time;
 use omnitrack_io::capture::device::MAX_WINDOWS_PER_DEVICE;
 use omnitrack_io::capture::{FrameSource, SourceStats};
 use std::thread::{Scope, ScopedJoinHandle};
@@ -35,9 +37,10 @@ fn capture_rig(source: &mut dyn FrameSource, shared: &Shared, pool: &Pool, hando
         };
         let mut slot = pool.slot(h);
         let started = Instant::now();
+        let cpu = thread_cpu_time();
         // A source's own wait (a real-time replay's gap, a reopening) ends at a stop.
         let got = source.next_frame_or_stop(&mut slot.frame, &|| shared.stopping());
-        shared.record_capture(started.elapsed());
+        shared.record_capture(started.elapsed(), thread_cpu_time().saturating_sub(cpu));
         match got {
             Ok(true) => {
                 for (img, c) in slot.frame.sensors().iter().zip(shared.sensors.iter()) {
@@ -104,12 +107,13 @@ fn capture_device(
         let mut guards: heapless::Vec<_, MAX_WINDOWS_PER_DEVICE> =
             images.iter().zip(&taken).map(|(s, &i)| s.image(i)).collect();
         let started = Instant::now();
+        let cpu = thread_cpu_time();
         let got = {
             let mut imgs: heapless::Vec<&mut SensorImage, MAX_WINDOWS_PER_DEVICE> =
                 guards.iter_mut().map(|g| &mut **g).collect();
             capture.capture(&mut imgs, &|| shared.stopping())
         };
-        shared.record_capture(started.elapsed());
+        shared.record_capture(started.elapsed(), thread_cpu_time().saturating_sub(cpu));
         match got {
             Ok(true) => {
                 for (g, &k) in guards.iter().zip(&sensors) {
@@ -176,7 +180,11 @@ pub(super) fn spawn_capture<'scope>(
             capture_handles.push(
                 std::thread::Builder::new()
                     .name("omnitrack-capture".into())
-                    .spawn_scoped(scope, move || Some(capture_rig(src, shared, pool, handover)))
+                    .spawn_scoped(scope, move || {
+                        let stats = capture_rig(src, shared, pool, handover);
+                        shared.add_thread_cpu(ThreadRole::Capture);
+                        Some(stats)
+                    })
                     .expect("spawn the capture thread"),
             );
         }
@@ -205,6 +213,7 @@ pub(super) fn spawn_capture<'scope>(
                         .name(name)
                         .spawn_scoped(scope, move || {
                             capture_device(capture, shared, &images, tx);
+                            shared.add_thread_cpu(ThreadRole::Capture);
                             None
                         })
                         .expect("spawn a capture thread"),
@@ -221,6 +230,7 @@ pub(super) fn spawn_capture<'scope>(
                         shared.thread_started(PipelineThread::Assembly);
                         let mut a = assembly::Assembler::new(shared, pool, images, handover, tolerance, wait);
                         a.run(arrivals_rx);
+                        shared.add_thread_cpu(ThreadRole::Capture);
                         None
                     })
                     .expect("spawn the assembly thread"),

@@ -11,7 +11,7 @@
 use super::pool::Pool;
 use super::publishing::{create_publisher, publishing};
 use super::shared::{lock, Shared};
-use super::stats::SensorCounters;
+use super::stats::{Histogram, SensorCounters, ThreadRole};
 use super::summary::{ProcessOutcome, RunEnd};
 use super::{stage_budget, PipelineOptions, PipelineThread, Stage, StageClock, TICK};
 use crate::FrameRecord;
@@ -21,7 +21,7 @@ use omnitrack_config::{MotionConfig, TrackerConfig};
 use omnitrack_core::geometry::Pose;
 use omnitrack_core::model::Model;
 use omnitrack_core::rig::Rig;
-use omnitrack_edges::EdgeDetector;
+use omnitrack_edges::{thread_cpu_time, EdgeDetector};
 use omnitrack_io::publish::{
     PosePublisher, PoseSample, SearchState, StatusPublisher, StatusSample, TrackerState, STATUS_MAX_SENSORS,
 };
@@ -99,6 +99,16 @@ fn grown_covariance(last: &Matrix6<f64>, elapsed_ns: u64, motion: &MotionConfig)
     c
 }
 
+/// CPU time per processed frame (thread clocks), and the edge workers' share over the run.
+#[derive(Default)]
+pub(super) struct CpuClocks {
+    pub(super) edges: Histogram,
+    pub(super) track: Histogram,
+    pub(super) frame: Histogram,
+    /// The edge workers' CPU time on frames (the process thread's share apart).
+    pub(super) edge_workers: Duration,
+}
+
 /// The process thread: edges, tracker, publishers.
 struct Processor<'a, 'o, 'm> {
     shared: &'a Shared<'o>,
@@ -110,6 +120,8 @@ struct Processor<'a, 'o, 'm> {
     poses: Option<PosePublisher>,
     status: Option<StatusPublisher>,
     clocks: Vec<StageClock>,
+    /// CPU time per frame: edges (every thread's), tracker, the whole frame path.
+    cpu: CpuClocks,
     budgets: omnitrack_config::BudgetConfig,
     max_frames: Option<u64>,
     processed: u64,
@@ -138,6 +150,8 @@ struct Processor<'a, 'o, 'm> {
     search_widened_to_m: f32,
     /// Who publishes (rig name, process id): every status sample starts from it.
     status_source: StatusSample,
+    /// The CPU time of the current frame's edges and tracker (publishing is added to it).
+    frame_cpu: Duration,
 }
 
 impl Processor<'_, '_, '_> {
@@ -187,6 +201,7 @@ impl Processor<'_, '_, '_> {
         ProcessOutcome {
             reason,
             clocks: std::mem::take(&mut self.clocks),
+            cpu: std::mem::take(&mut self.cpu),
             tracker: *self.tracker.stats(),
             frames_processed: self.processed,
             first_frame: self.first_frame,
@@ -204,11 +219,19 @@ impl Processor<'_, '_, '_> {
             let frame = &slot.frame;
             let timestamp_ns = frame.timestamp_ns().unwrap_or(self.last_ts + 1);
             let started = Instant::now();
+            let cpu0 = thread_cpu_time();
             let edges = self.detector.detect(frame);
             let edge_time = started.elapsed();
+            let cpu1 = thread_cpu_time();
             let edge_count = edges.len();
             let result = self.tracker.process(edges, timestamp_ns);
             let frame_time = started.elapsed();
+            let track_cpu = thread_cpu_time().saturating_sub(cpu1);
+            let edge_cpu = self.detector.last_cpu();
+            self.cpu.edge_workers += edge_cpu.saturating_sub(cpu1.saturating_sub(cpu0));
+            self.cpu.edges.record(edge_cpu);
+            self.cpu.track.record(track_cpu);
+            self.frame_cpu = edge_cpu + track_cpu;
             for (img, c) in frame.sensors().iter().zip(self.shared.sensors.iter()) {
                 if img.valid {
                     SensorCounters::add(&c.delivered, 1);
@@ -248,7 +271,10 @@ impl Processor<'_, '_, '_> {
         fold_good(&mut self.last_good, record.timestamp_ns, r);
         let (state, pose, covariance) = pose_sample(r, record.timestamp_ns, self.last_good.as_ref(), &self.motion);
         self.last_state = state;
+        let publish_cpu = thread_cpu_time();
         let publish_time = self.publish_pose(&record, &pose, &covariance);
+        let publish_cpu = thread_cpu_time().saturating_sub(publish_cpu);
+        self.cpu.frame.record(self.frame_cpu + publish_cpu);
         let done = Instant::now();
         self.first_frame.get_or_insert(done);
         self.last_frame = Some(done);
@@ -429,6 +455,8 @@ pub(super) fn run_process(
         poses,
         status,
         clocks,
+        cpu: CpuClocks::default(),
+        frame_cpu: Duration::ZERO,
         budgets: cfg.budgets.clone(),
         max_frames: opts.run.max_frames,
         processed: 0,
@@ -467,6 +495,7 @@ pub(super) fn run_process(
             .spawn_scoped(scope, move || {
                 shared.thread_started(PipelineThread::Search);
                 worker.run();
+                shared.add_thread_cpu(ThreadRole::Search);
             });
         // Without the thread the searches run on the frame path (and the link is dropped:
         // nothing would ever answer it).
@@ -483,6 +512,8 @@ pub(super) fn run_process(
         processor.run()
     });
     outcome.publisher_error = publisher_error;
+    shared.add_cpu(ThreadRole::EdgeWorkers, outcome.cpu.edge_workers);
+    shared.add_thread_cpu(ThreadRole::Process);
     outcome
 }
 

@@ -7,6 +7,7 @@
 use super::pool::Pool;
 use super::priority::{self, Realtime};
 use super::stats::SensorCounters;
+use super::stats::{Histogram, ThreadRole};
 use super::{stage_budget, PipelineOptions, PipelineThread, Stage, StageClock};
 use omnitrack_config::BudgetConfig;
 use omnitrack_io::capture::SourceError;
@@ -28,6 +29,11 @@ pub(super) struct Shared<'o> {
     /// `frames_left`).
     pub(super) frames_left: AtomicU64,
     pub(super) capture: Mutex<StageClock>,
+    /// CPU time (thread clock) of each read of the source by a capture thread.
+    pub(super) capture_cpu: Mutex<Histogram>,
+    /// CPU time (ns) each kind of pipeline thread used over the run, added as each ends
+    /// ([`ThreadRole`]).
+    pub(super) thread_cpu_ns: [AtomicU64; ThreadRole::COUNT],
     pub(super) source_error: Mutex<Option<SourceError>>,
     pub(super) lossless: bool,
     /// A lossless run reads no more frames than it will process (`max_frames`): a whole-rig
@@ -53,6 +59,8 @@ impl<'o> Shared<'o> {
             frames_dropped: AtomicU64::new(0),
             frames_left: AtomicU64::new(0),
             capture: Mutex::new(StageClock::new(stage_budget(Stage::Capture, budgets))),
+            capture_cpu: Mutex::new(Histogram::new()),
+            thread_cpu_ns: std::array::from_fn(|_| AtomicU64::new(0)),
             source_error: Mutex::new(None),
             lossless: opts.lossless,
             capture_limit: opts.run.max_frames.filter(|_| opts.lossless),
@@ -125,8 +133,22 @@ impl Shared<'_> {
         pool.release(h);
     }
 
-    pub(super) fn record_capture(&self, d: Duration) {
+    /// One read of the source: `d` of wall time, `cpu` of the capture thread's CPU time.
+    pub(super) fn record_capture(&self, d: Duration, cpu: Duration) {
         lock(&self.capture).record(d);
+        lock(&self.capture_cpu).record(cpu);
+    }
+
+    /// Adds the CPU time the calling thread has used since it started to `role`'s total: called
+    /// by each pipeline thread as it ends.
+    pub(super) fn add_thread_cpu(&self, role: ThreadRole) {
+        let ns = u64::try_from(omnitrack_edges::thread_cpu_time().as_nanos()).unwrap_or(u64::MAX);
+        self.add_cpu(role, Duration::from_nanos(ns));
+    }
+
+    pub(super) fn add_cpu(&self, role: ThreadRole, d: Duration) {
+        let ns = u64::try_from(d.as_nanos()).unwrap_or(u64::MAX);
+        self.thread_cpu_ns[role as usize].fetch_add(ns, Ordering::Relaxed);
     }
 
     pub(super) fn fail(&self, e: SourceError) {

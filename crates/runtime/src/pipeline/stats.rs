@@ -1,5 +1,6 @@
 //! Stage timings: fixed-size log-linear histograms (no allocation after construction), the
-//! pipeline's stages with their budgets, and per-sensor counters shared between threads.
+//! pipeline's stages with their budgets, the CPU time per frame and per thread (thread CPU
+//! clocks, [`CpuSummary`]), and per-sensor counters shared between threads.
 
 use omnitrack_config::BudgetConfig;
 use omnitrack_io::publish::Stage;
@@ -179,6 +180,67 @@ pub struct StageSummary {
     pub mean: Duration,
     pub budget: Option<Duration>,
     pub overruns: u64,
+}
+
+/// The kinds of pipeline thread whose CPU time a run adds up ([`CpuSummary`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum ThreadRole {
+    /// Capture threads and the assembly thread: reading and decoding the source.
+    Capture = 0,
+    /// The process thread: its share of the edges, the tracker, publishing; start-up included.
+    Process,
+    /// The edge detector's worker threads, on frames.
+    EdgeWorkers,
+    /// The tracker's search thread.
+    Search,
+    /// The caller's thread while it runs the sink.
+    Sink,
+}
+
+impl ThreadRole {
+    pub(crate) const COUNT: usize = 5;
+}
+
+/// CPU time (thread CPU clocks: time a thread ran, not time it waited for a core, so other work
+/// on the machine disturbs it far less than the wall-clock stage times).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct CpuSummary {
+    /// Per processed frame: the edge stage, every thread's share
+    /// ([`EdgeDetector::last_cpu`](omnitrack_edges::EdgeDetector::last_cpu)).
+    pub edges: StageSummary,
+    /// Per processed frame: the tracker on the process thread (a search's own thread apart).
+    pub track: StageSummary,
+    /// Per processed frame: edges + tracker + publishing the pose, the frame path's cost.
+    pub frame: StageSummary,
+    /// Per read of the source by a capture thread (a whole-rig source: per frame, decoding
+    /// included).
+    pub capture: StageSummary,
+    /// Over the whole run, per kind of thread (start-up included where the thread does it).
+    pub capture_total: Duration,
+    pub process_total: Duration,
+    pub edge_workers_total: Duration,
+    pub search_total: Duration,
+    pub sink_total: Duration,
+}
+
+impl CpuSummary {
+    /// Every pipeline thread's CPU time over the run.
+    pub fn total(&self) -> Duration {
+        self.capture_total + self.process_total + self.edge_workers_total + self.search_total + self.sink_total
+    }
+}
+
+/// The summary of a histogram with no budget.
+pub(crate) fn summary_of(h: &Histogram) -> StageSummary {
+    StageSummary {
+        count: h.count(),
+        p50: h.quantile(0.5),
+        p99: h.quantile(0.99),
+        max: h.max(),
+        mean: h.mean(),
+        budget: None,
+        overruns: 0,
+    }
 }
 
 /// What happened to one sensor's images, counted by the thread that decided it. Every image a

@@ -7,7 +7,7 @@
 //! returns.
 
 use super::shared::{lock, Shared};
-use super::stats::SensorCounters;
+use super::stats::{summary_of, CpuSummary, SensorCounters, ThreadRole};
 use super::{Realtime, SensorSummary, Stage, StageClock, StageSummary};
 use omnitrack_io::capture::SourceStats;
 use omnitrack_tracker::TrackerStats;
@@ -31,6 +31,7 @@ pub enum RunEnd {
 pub(super) struct ProcessOutcome {
     pub(super) reason: RunEnd,
     pub(super) clocks: Vec<StageClock>,
+    pub(super) cpu: super::process::CpuClocks,
     pub(super) tracker: TrackerStats,
     pub(super) frames_processed: u64,
     pub(super) first_frame: Option<Instant>,
@@ -62,6 +63,8 @@ pub struct PipelineSummary {
     pub sensors: Vec<SensorSummary>,
     /// Indexed by [`Stage::index`].
     pub stages: [StageSummary; Stage::COUNT],
+    /// CPU time per frame and per thread (thread CPU clocks).
+    pub cpu: CpuSummary,
     pub tracker: TrackerStats,
     /// The whole-rig source's own counters (per-sensor sources: `None`).
     pub source: Option<SourceStats>,
@@ -141,7 +144,20 @@ pub(super) fn summarize(
         }
         _ => Duration::ZERO,
     };
+    let thread = |r: ThreadRole| Duration::from_nanos(shared.thread_cpu_ns[r as usize].load(Ordering::Relaxed));
+    let cpu = CpuSummary {
+        edges: summary_of(&outcome.cpu.edges),
+        track: summary_of(&outcome.cpu.track),
+        frame: summary_of(&outcome.cpu.frame),
+        capture: summary_of(&lock(&shared.capture_cpu)),
+        capture_total: thread(ThreadRole::Capture),
+        process_total: thread(ThreadRole::Process),
+        edge_workers_total: thread(ThreadRole::EdgeWorkers),
+        search_total: thread(ThreadRole::Search),
+        sink_total: thread(ThreadRole::Sink),
+    };
     PipelineSummary {
+        cpu,
         reason: outcome.reason,
         elapsed,
         frames_captured: shared.frames_captured.load(Ordering::Relaxed),
