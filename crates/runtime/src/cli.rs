@@ -248,8 +248,13 @@ pub fn readme_mismatches(command: &clap::Command, program: &str, readme: &str) -
         if !cargo.trim_start().starts_with("cargo run") || cargo.contains("--example") {
             continue;
         }
-        let runs_desk = cargo.contains("--bin omnitrack-desk");
-        if runs_desk != (program == "omnitrack-desk") || (cargo.contains("--bin") && !runs_desk) {
+        // The binary the line runs: `--bin B`, else the package's own (`-p P`: the network
+        // crates' binaries are named as their packages), else the front door's. Only
+        // `program`'s lines are checked here; the other binaries have their own tests.
+        let words: Vec<&str> = cargo.split_whitespace().collect();
+        let after = |flags: &[&str]| words.windows(2).find(|w| flags.contains(&w[0])).map(|w| w[1]);
+        let runs = after(&["--bin"]).or(after(&["-p", "--package"])).unwrap_or("omnitrack");
+        if runs != program {
             continue;
         }
         let args: Vec<&str> = args.split_whitespace().collect();
@@ -372,5 +377,23 @@ mod tests {
                 "the contract names `prog table drop`, which the command line does not have",
             ]
         );
+    }
+
+    /// Only `program`'s lines of a README are checked: another package's binary (`-p P`) or
+    /// another binary (`--bin B`) takes other commands.
+    #[test]
+    fn readme_lines_of_other_binaries_are_not_checked() {
+        let readme = "```\n\
+            cargo run --release -- table query --bogus\n\
+            cargo run --release -p omnitrack-ros2 -- publish --capture-clock receipt\n\
+            cargo run -p omnitrack-tools --bin omnitrack-desk -- model from-ifc x.ifc\n\
+            ```\n";
+        let command = <Cli as clap::CommandFactory>::command();
+        let problems = readme_mismatches(&command, "omnitrack", readme);
+        assert_eq!(problems.len(), 1, "{problems:?}");
+        assert!(problems[0].contains("--bogus"), "{problems:?}");
+        assert!(readme_mismatches(&command, "omnitrack-desk", readme)
+            .iter()
+            .all(|p| p.contains("model")));
     }
 }
