@@ -48,404 +48,34 @@
 
 #[cfg(feature = "desk")]
 mod bench {
+    use crate::costs::{format_costs, run_peers, time_ours};
+    use crate::runs::{converted, load_average, run};
     use nalgebra::Point3;
-    use omnitrack::capture::{FrameSource, Pacing, ReplaySource, SourceError, SourceStats};
+    use omnitrack::capture::{FrameSource, Pacing, ReplaySource};
     use omnitrack::config::TrackerConfig;
     use omnitrack::desk::recording::{cached_building, cached_scenario, RecordingOptions};
+    use omnitrack::desk::results::percentile;
     use omnitrack::desk::scenario::random::RandomBuilding;
     use omnitrack::desk::scenario::{Scenario, ScenarioName};
-    use omnitrack::edges::{thread_cpu_time, EdgeDetector, EdgeParams};
+
     use omnitrack::frame::FrameSet;
-    use omnitrack::publish::{PoseSubscriber, TrackerState};
-    use omnitrack::runtime::pipeline::{run_pipeline, PipelineOptions, PipelineSummary, Stage};
-    use omnitrack::runtime::record::{record, ImageFormat, RecordOptions};
-    use omnitrack::runtime::{load_or_build_table, FrameRecord, RunOptions};
+
+    use omnitrack::runtime::load_or_build_table;
+    use omnitrack::runtime::pipeline::Stage;
+    use omnitrack::runtime::record::ImageFormat;
     use omnitrack::tracker::SearchVolume;
-    use omnitrack::visibility::VisibilityTable;
+
     use omnitrack::{Model, Rig};
     use std::fmt::Write as _;
     use std::path::{Path, PathBuf};
-    use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-    use std::sync::{Arc, OnceLock};
-    use std::time::{Duration, Instant};
+    use std::sync::atomic::{AtomicBool, Ordering};
+    use std::sync::Arc;
+    use std::time::Duration;
 
     fn cache_root() -> PathBuf {
         std::env::var_os("OMNITRACK_CACHE")
             .map(PathBuf::from)
             .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("target/omnitrack-cache"))
-    }
-
-    /// Nanoseconds since the bench started (one clock for capture and subscriber threads).
-    fn now_ns() -> u64 {
-        static EPOCH: OnceLock<Instant> = OnceLock::new();
-        EPOCH.get_or_init(Instant::now).elapsed().as_nanos() as u64
-    }
-
-    /// Frames the standing-still run holds frame 0 at most (10 s at 30 Hz) before walking anyway.
-    const MAX_HOLD: usize = 300;
-
-    /// The replay, optionally paced at a wall-clock rate, noting when each frame was handed over.
-    /// With `hold`, the rig stands still (frame 0 again and again) until the flag is set (by the
-    /// sink, once tracking), then walks; frames are re-stamped `n × period` by delivery.
-    struct Timed {
-        inner: ReplaySource,
-        pace: Option<Duration>,
-        start: Option<Instant>,
-        handed: Arc<Vec<AtomicU64>>,
-        n: usize,
-        hold: Option<Arc<AtomicBool>>,
-        period_ns: u64,
-    }
-
-    impl FrameSource for Timed {
-        fn rig(&self) -> &Rig {
-            self.inner.rig()
-        }
-        fn next_frame(&mut self, out: &mut FrameSet) -> Result<bool, SourceError> {
-            if let Some(pace) = self.pace {
-                let start = *self.start.get_or_insert_with(Instant::now);
-                let due = start + pace * self.n as u32;
-                if let Some(wait) = due.checked_duration_since(Instant::now()) {
-                    std::thread::sleep(wait);
-                }
-            }
-            // At most `MAX_HOLD` frames: a place the tracker cannot commit at from its first
-            // frame alone (a corridor's doorways) would otherwise hold the run forever.
-            let holding = self.hold.as_ref().is_some_and(|h| !h.load(Ordering::Relaxed)) && self.n < MAX_HOLD;
-            if holding {
-                self.inner.rewind();
-            }
-            let more = self.inner.next_frame(out)?;
-            if more && self.hold.is_some() {
-                let ts = self.n as u64 * self.period_ns;
-                for img in out.sensors_mut().iter_mut().filter(|i| i.valid) {
-                    img.set_valid(ts);
-                }
-            }
-            if more {
-                if let Some(slot) = self.handed.get(self.n) {
-                    slot.store(now_ns(), Ordering::Relaxed);
-                }
-                self.n += 1;
-            }
-            Ok(more)
-        }
-        fn stats(&self) -> &SourceStats {
-            self.inner.stats()
-        }
-    }
-
-    use omnitrack::desk::results::percentile;
-
-    struct Run {
-        name: &'static str,
-        summary: PipelineSummary,
-        /// Capture → pose received, ms, tracking frames.
-        latency: Vec<f64>,
-        /// Capture → pose received of the first frame (initialisation search), ms.
-        init_ms: f64,
-        received: usize,
-    }
-
-    #[allow(clippy::too_many_arguments)]
-    fn run(
-        name: &'static str,
-        rec: &Path,
-        model: &Model,
-        table: &VisibilityTable,
-        cfg: &TrackerConfig,
-        hint: SearchVolume,
-        frames: usize,
-        pace: Option<Duration>,
-        lossless: bool,
-        stand_still_to_start: bool,
-    ) -> Run {
-        let nanos = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .unwrap()
-            .as_nanos();
-        let service = format!("omnitrack-bench/pipeline/{}/{nanos}", std::process::id());
-        let handed: Arc<Vec<AtomicU64>> = Arc::new((0..frames + 1000).map(|_| AtomicU64::new(0)).collect());
-        let tracking = Arc::new(AtomicBool::new(false));
-        let inner = ReplaySource::open(rec, Pacing::AsFastAsPossible).unwrap();
-        let truth = inner.ground_truth().unwrap();
-        let period_ns = truth[1].timestamp_ns - truth[0].timestamp_ns;
-        let source = Timed {
-            inner,
-            pace,
-            start: None,
-            handed: Arc::clone(&handed),
-            n: 0,
-            hold: stand_still_to_start.then(|| Arc::clone(&tracking)),
-            period_ns,
-        };
-        let subscriber = PoseSubscriber::create(&service).unwrap();
-        let done = Arc::new(AtomicBool::new(false));
-        let done2 = Arc::clone(&done);
-        // (sequence, tracking, received ns) per sample.
-        let receiver = std::thread::spawn(move || {
-            let mut got = Vec::with_capacity(frames + 8);
-            let mut quiet = Instant::now();
-            loop {
-                match subscriber.wait(Duration::from_millis(50)).unwrap() {
-                    Some(s) => {
-                        got.push((s.sequence, s.pose_status() == Ok(TrackerState::Tracking), now_ns()));
-                        quiet = Instant::now();
-                    }
-                    None if done2.load(Ordering::Relaxed) && quiet.elapsed() > Duration::from_millis(300) => {
-                        return got
-                    }
-                    None => {}
-                }
-            }
-        });
-        let opts = PipelineOptions {
-            run: RunOptions {
-                hint: Some(hint),
-                seed: 1,
-                max_frames: None,
-            },
-            pose_service: Some(service.clone()),
-            status_service: Some(format!("{service}/status")),
-            lossless,
-            ..PipelineOptions::default()
-        };
-        let mut sink = |r: &FrameRecord| {
-            if r.result.pose.is_some() {
-                tracking.store(true, Ordering::Relaxed);
-            }
-            Ok(())
-        };
-        let source: Box<dyn FrameSource + Send> = Box::new(source);
-        let summary = run_pipeline(source, model, table, cfg, &opts, &mut sink).unwrap();
-        done.store(true, Ordering::Relaxed);
-        let got = receiver.join().unwrap();
-        let mut latency = Vec::new();
-        let mut init_ms = f64::NAN;
-        let mut tracking_started = false;
-        for &(seq, tracking, received) in &got {
-            let Some(h) = handed.get(seq as usize).map(|a| a.load(Ordering::Relaxed)) else {
-                continue;
-            };
-            let ms = received.saturating_sub(h) as f64 / 1e6;
-            if init_ms.is_nan() {
-                // The first frame processed: the initialisation search.
-                init_ms = ms;
-                continue;
-            }
-            tracking_started |= tracking;
-            if tracking_started {
-                latency.push(ms);
-            }
-        }
-        latency.sort_by(f64::total_cmp);
-        Run {
-            name,
-            summary,
-            latency,
-            init_ms,
-            received: got.len(),
-        }
-    }
-
-    /// The recording `rec` with its images re-recorded as `format`, made once beside it (through a
-    /// scratch directory renamed when complete) with the ground truth copied.
-    fn converted(rec: &Path, format: ImageFormat) -> PathBuf {
-        let mut name = rec.file_name().unwrap().to_os_string();
-        name.push(format!(".{}", format.extension()));
-        let out = rec.with_file_name(name);
-        if out.join("frames.csv").is_file() {
-            return out;
-        }
-        let scratch = out.with_extension("partial");
-        let _ = std::fs::remove_dir_all(&scratch);
-        let mut source = ReplaySource::open(rec, Pacing::AsFastAsPossible).unwrap();
-        let opts = RecordOptions {
-            lossless: true,
-            format,
-            ..RecordOptions::default()
-        };
-        let summary = record(&mut source, &scratch, &opts).unwrap();
-        eprintln!("re-recorded {} as {}: {summary}", rec.display(), format.extension());
-        std::fs::copy(rec.join("groundtruth.tum"), scratch.join("groundtruth.tum")).unwrap();
-        std::fs::rename(&scratch, &out).unwrap();
-        out
-    }
-
-    /// `/proc/loadavg`'s three averages.
-    fn load_average() -> String {
-        let load = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
-        load.split_whitespace().take(3).collect::<Vec<_>>().join(" ")
-    }
-
-    /// Our detector's CPU per six-sensor frame on one thread, and its phases (CPU, per frame),
-    /// over `frames` (each detected `passes` times after a warm-up pass).
-    struct Ours {
-        cpu_ms: Vec<f64>,
-        /// Pixel pass, chains (link, fit, hue), merge, select: mean ms per frame.
-        phases: [f64; 4],
-        edges_per_frame: f64,
-    }
-
-    fn time_ours(rig: &Rig, cfg: &TrackerConfig, frames: &[FrameSet], passes: usize) -> Ours {
-        let params = EdgeParams {
-            threads: 1,
-            ..EdgeParams::default()
-        };
-        let mut det = EdgeDetector::with_params(rig, &cfg.edges, params);
-        for f in frames {
-            det.detect(f);
-        }
-        let mut cpu_ms = Vec::new();
-        let mut phases = [0.0; 4];
-        let mut edges = 0;
-        for _ in 0..passes {
-            for f in frames {
-                edges += det.detect(f).len();
-                cpu_ms.push(det.last_cpu().as_secs_f64() * 1e3);
-                for k in 0..rig.sensors.len() {
-                    let st = det.sensor_stats(k);
-                    for (p, ns) in phases
-                        .iter_mut()
-                        .zip([st.pixel_ns, st.chain_ns, st.merge_ns, st.select_ns])
-                    {
-                        *p += ns as f64 / 1e6;
-                    }
-                }
-            }
-        }
-        let n = cpu_ms.len().max(1) as f64;
-        cpu_ms.sort_by(f64::total_cmp);
-        Ours {
-            cpu_ms,
-            phases: phases.map(|p| p / n),
-            edges_per_frame: edges as f64 / n,
-        }
-    }
-
-    /// One OpenCV detector's figures from `tools/bench_edges.py`.
-    struct Peer {
-        name: String,
-        cpu_p50_ms: f64,
-        cpu_p99_ms: f64,
-        wall_p50_ms: f64,
-        lines_per_frame: f64,
-    }
-
-    /// OpenCV's LSD and FastLineDetector on the PNGs of `frames` frames of `rec`, one thread.
-    fn run_peers(rec: &Path, frames: usize) -> Result<Vec<Peer>, String> {
-        let dir = std::env::temp_dir().join(format!("omnitrack-pipeline-peers-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
-        let index = std::fs::read_to_string(rec.join("frames.csv")).map_err(|e| e.to_string())?;
-        for line in index.lines().skip(1) {
-            let f: Vec<&str> = line.split(',').collect();
-            let (Some(Ok(frame)), Some(sensor), Some(path)) =
-                (f.first().map(|x| x.parse::<usize>()), f.get(1), f.get(3))
-            else {
-                continue;
-            };
-            if frame < frames {
-                std::os::unix::fs::symlink(rec.join(path), dir.join(format!("frame{frame:03}_s{sensor}.png")))
-                    .map_err(|e| e.to_string())?;
-            }
-        }
-        let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tools/bench_edges.py");
-        let out = std::process::Command::new("python3")
-            .arg(&script)
-            .arg(&dir)
-            .args(["--repeats", "3", "--threads", "1"])
-            .output()
-            .map_err(|e| e.to_string())?;
-        let _ = std::fs::remove_dir_all(&dir);
-        if !out.status.success() {
-            return Err(String::from_utf8_lossy(&out.stderr).trim().to_string());
-        }
-        let mut peers = Vec::new();
-        for line in String::from_utf8_lossy(&out.stdout).lines() {
-            let Ok(v) = serde_json::from_str::<serde_json::Value>(line) else {
-                continue;
-            };
-            let f = |k: &str| v[k].as_f64().unwrap_or(f64::NAN);
-            peers.push(Peer {
-                name: match v["detector"].as_str() {
-                    Some("lsd") => "OpenCV LSD".into(),
-                    Some("fld") => "OpenCV FastLineDetector".into(),
-                    other => format!("OpenCV {other:?}"),
-                },
-                cpu_p50_ms: f("cpu_p50_ms"),
-                cpu_p99_ms: f("cpu_p99_ms"),
-                wall_p50_ms: f("p50_ms"),
-                lines_per_frame: f("lines_per_frame"),
-            });
-        }
-        Ok(peers)
-    }
-
-    /// One image format of a recording: CPU to encode and to read back (file read and decode,
-    /// `ReplaySource::next_frame`), and bytes, per six-sensor frame.
-    struct FormatCost {
-        format: ImageFormat,
-        encode_ms: f64,
-        decode_ms: f64,
-        bytes: f64,
-    }
-
-    /// `frames` written in each format to a scratch recording (encoding timed on this thread's CPU
-    /// clock), then replayed three times from the page cache (the first pass untimed).
-    fn format_costs(rec: &Path, frames: &[FrameSet]) -> Vec<FormatCost> {
-        let mut costs = Vec::new();
-        for format in [ImageFormat::Png, ImageFormat::Qoi, ImageFormat::Ppm] {
-            let dir = std::env::temp_dir().join(format!(
-                "omnitrack-pipeline-formats-{}-{}",
-                std::process::id(),
-                format.extension()
-            ));
-            let _ = std::fs::remove_dir_all(&dir);
-            std::fs::create_dir_all(&dir).unwrap();
-            std::fs::copy(rec.join("rig.toml"), dir.join("rig.toml")).unwrap();
-            let mut csv = String::from("frame,sensor,timestamp_ns,path\n");
-            let (mut encode, mut bytes, mut buf) = (Duration::ZERO, 0usize, Vec::new());
-            for f in frames {
-                for img in f.sensors().iter().filter(|i| i.valid) {
-                    let name = format!("s{}_{:06}.{}", img.sensor(), f.sequence, format.extension());
-                    let t = thread_cpu_time();
-                    format
-                        .encode(img.pixels(), img.width(), img.height(), &mut buf)
-                        .unwrap();
-                    encode += thread_cpu_time() - t;
-                    bytes += buf.len();
-                    std::fs::write(dir.join(&name), &buf).unwrap();
-                    csv.push_str(&format!(
-                        "{},{},{},{name}\n",
-                        f.sequence,
-                        img.sensor(),
-                        img.timestamp_ns
-                    ));
-                }
-            }
-            std::fs::write(dir.join("frames.csv"), csv).unwrap();
-            let mut replay = ReplaySource::open(&dir, Pacing::AsFastAsPossible).unwrap();
-            let mut frame = FrameSet::for_rig(replay.rig());
-            let mut decode = Duration::ZERO;
-            for pass in 0..3 {
-                replay.rewind();
-                let t = thread_cpu_time();
-                while replay.next_frame(&mut frame).unwrap() {}
-                if pass > 0 {
-                    decode += thread_cpu_time() - t;
-                }
-            }
-            let _ = std::fs::remove_dir_all(&dir);
-            let n = frames.len().max(1) as f64;
-            costs.push(FormatCost {
-                format,
-                encode_ms: encode.as_secs_f64() * 1e3 / n,
-                decode_ms: decode.as_secs_f64() * 1e3 / (2.0 * n),
-                bytes: bytes as f64 / n,
-            });
-        }
-        costs
     }
 
     pub fn main() {
@@ -881,6 +511,11 @@ mod bench {
         }
     }
 }
+
+#[cfg(feature = "desk")]
+mod costs;
+#[cfg(feature = "desk")]
+mod runs;
 
 fn main() {
     #[cfg(feature = "desk")]

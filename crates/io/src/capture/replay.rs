@@ -23,7 +23,7 @@
 //! replayed, so a day-long index costs megabytes, not gigabytes (see `index`). A missing rig file,
 //! index file or malformed index header is an `Err` naming the file.
 //!
-//! Per frame, each sensor's image file is read into a scratch byte buffer sized at open and
+//! Per frame, each sensor's image file is read (module `image_file`) into a scratch byte buffer sized at open and
 //! decoded straight into the frame set's preallocated RGB8 buffer. An image is a PNG, a binary
 //! PPM/PGM (`P6`/`P5`, 8-bit: raw pixels, nothing to decode; `record`'s default) or a QOI (the
 //! Quite OK Image format, lossless), told apart by its first bytes, whatever its name (grey, grey+alpha and RGBA images are converted to RGB in place or
@@ -45,19 +45,18 @@
 //! across images: seven allocations per PNG image against one per QOI or PPM image
 //! (`tests/io/replay.rs` counts both).
 
+mod image_file;
 mod index;
 
 use super::device::{crop_into, Window};
 use super::{sleep_until_or_stop, FrameSource, SourceError, SourceStats, WarningKind, WarningLimiter};
-use image::codecs::png::PngDecoder;
-use image::{ColorType, ImageDecoder, ImageError, Limits};
+use image_file::{read_file, Encoded, Problem};
 use index::{FrameIndex, Row};
 use omnitrack_core::frame::{FrameSet, ImageFault, SensorImage};
 use omnitrack_core::rig::Rig;
 use omnitrack_core::trajectory::{load_tum, Trajectory};
 use std::fmt;
-use std::fs::File;
-use std::io::{self, Cursor, Read};
+use std::io;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
@@ -66,10 +65,6 @@ pub const FRAMES_HEADER: &str = "frame,sensor,timestamp_ns,path";
 
 /// Warnings of one kind printed before the rest are only counted.
 const WARN_LIMIT: u32 = 5;
-
-/// Most memory the PNG decoder may use for one image's metadata chunks (guards against a corrupt
-/// header asking for gigabytes).
-const DECODER_MAX_ALLOC: u64 = 64 << 20;
 
 /// How fast a recording is replayed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -308,66 +303,6 @@ impl FrameSource for ReplaySource {
     }
 }
 
-/// What went wrong with one image, for the warning line.
-#[derive(Debug)]
-enum Problem {
-    Io(io::Error),
-    /// A symbolic link to a file outside the recording.
-    Outside,
-    /// A FIFO, a device or a directory.
-    NotAFile,
-    /// Larger than any image of the sensor's size can be (bytes).
-    TooLarge(u64),
-    /// Neither a PNG, a QOI nor a binary PPM/PGM (by its first bytes).
-    UnknownFormat,
-    Decode(ImageError),
-    Qoi(qoi::Error),
-    /// A PPM or PGM header that cannot be read, or data shorter than it says.
-    Pnm(&'static str),
-    Size {
-        found: (u32, u32),
-        expected: (u32, u32),
-    },
-    Format(ColorType),
-    /// A device frame that does not hold the sensor's crop window.
-    Window {
-        found: (u32, u32),
-        crop: [u32; 4],
-    },
-}
-
-impl fmt::Display for Problem {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            Problem::Io(e) if e.kind() == io::ErrorKind::NotFound => f.write_str("file not found"),
-            Problem::Io(e) => write!(f, "cannot read: {e}"),
-            Problem::Outside => f.write_str("a path that leads outside the recording through a link, not followed"),
-            Problem::NotAFile => f.write_str("not a regular file"),
-            Problem::TooLarge(n) => write!(f, "{n} bytes, more than an image of the sensor's size can be"),
-            Problem::UnknownFormat => f.write_str("not a PNG, QOI or binary PPM/PGM image (by its first bytes)"),
-            Problem::Decode(e) => write!(f, "not a valid PNG: {e}"),
-            Problem::Qoi(e) => write!(f, "not a valid QOI image: {e}"),
-            Problem::Pnm(e) => write!(f, "not a valid binary PPM/PGM image: {e}"),
-            Problem::Size { found, expected } => {
-                write!(
-                    f,
-                    "image is {}x{}, sensor is {}x{}",
-                    found.0, found.1, expected.0, expected.1
-                )
-            }
-            Problem::Window { found, crop } => write!(
-                f,
-                "image is {}x{}: neither the sensor's own image nor a device frame holding its crop {crop:?}",
-                found.0, found.1
-            ),
-            Problem::Format(c) => write!(
-                f,
-                "pixel format {c:?} cannot be used (8-bit RGB, RGBA or grey expected)"
-            ),
-        }
-    }
-}
-
 /// Reads the image at `path` (PNG, QOI or binary PPM/PGM, told apart by its first bytes) into
 /// `img`'s buffer as RGB8. `file_buf` and `rgba` are scratch space sized at open. Leaves `img`'s
 /// flags alone (the caller sets them).
@@ -446,162 +381,6 @@ fn load_window(
     Ok(())
 }
 
-/// An image file read into memory, its header parsed: the formats a recording may hold
-/// (docs/interfaces.md, "Recording"). It lives on the stack for one image: boxing the PNG
-/// decoder to even the variants out would cost an allocation per image instead.
-#[allow(clippy::large_enum_variant)]
-enum Encoded<'a> {
-    Png(PngDecoder<Cursor<&'a [u8]>>),
-    /// QOI (the Quite OK Image format): its header, and the whole file for the decoder.
-    Qoi(qoi::Header, &'a [u8]),
-    /// Binary PPM (`P6`, RGB) or PGM (`P5`, grey) of maximum value 255: raw 8-bit pixels.
-    Pnm {
-        width: u32,
-        height: u32,
-        channels: usize,
-        data: &'a [u8],
-    },
-}
-
-impl<'a> Encoded<'a> {
-    /// The image in `bytes`, its format told by its first bytes.
-    fn open(bytes: &'a [u8]) -> Result<Encoded<'a>, (ImageFault, Problem)> {
-        let corrupt = |p| (ImageFault::Corrupt, p);
-        if bytes.starts_with(b"\x89PNG") {
-            let mut limits = Limits::default();
-            limits.max_alloc = Some(DECODER_MAX_ALLOC);
-            return PngDecoder::with_limits(Cursor::new(bytes), limits)
-                .map(Encoded::Png)
-                .map_err(|e| corrupt(Problem::Decode(e)));
-        }
-        if bytes.starts_with(b"qoif") {
-            let header = qoi::decode_header(bytes).map_err(|e| corrupt(Problem::Qoi(e)))?;
-            return Ok(Encoded::Qoi(header, bytes));
-        }
-        if bytes.starts_with(b"P6") || bytes.starts_with(b"P5") {
-            let channels = if bytes[1] == b'6' { 3 } else { 1 };
-            let (width, height, data) = pnm_header(bytes).map_err(|e| corrupt(Problem::Pnm(e)))?;
-            let need = width as usize * height as usize * channels;
-            if data.len() < need {
-                return Err(corrupt(Problem::Pnm("fewer pixels than its header says")));
-            }
-            return Ok(Encoded::Pnm {
-                width,
-                height,
-                channels,
-                data: &data[..need],
-            });
-        }
-        Err(corrupt(Problem::UnknownFormat))
-    }
-
-    fn dimensions(&self) -> (u32, u32) {
-        match self {
-            Encoded::Png(d) => d.dimensions(),
-            Encoded::Qoi(h, _) => (h.width, h.height),
-            Encoded::Pnm { width, height, .. } => (*width, *height),
-        }
-    }
-
-    /// Bytes per pixel as stored (1 grey, 2 grey + alpha, 3 RGB, 4 RGBA).
-    fn channels(&self) -> Result<usize, (ImageFault, Problem)> {
-        match self {
-            Encoded::Png(d) => match d.color_type() {
-                ColorType::L8 => Ok(1),
-                ColorType::La8 => Ok(2),
-                ColorType::Rgb8 => Ok(3),
-                ColorType::Rgba8 => Ok(4),
-                other => Err((ImageFault::WrongFormat, Problem::Format(other))),
-            },
-            Encoded::Qoi(h, _) => Ok(h.channels.as_u8() as usize),
-            Encoded::Pnm { channels, .. } => Ok(*channels),
-        }
-    }
-
-    /// Decodes the pixels as stored into `out` (exactly width × height × channels bytes).
-    fn read_native(self, out: &mut [u8]) -> Result<(), (ImageFault, Problem)> {
-        match self {
-            Encoded::Png(d) => d.read_image(out).map_err(|e| (ImageFault::Corrupt, Problem::Decode(e))),
-            Encoded::Qoi(_, bytes) => qoi::Decoder::new(bytes)
-                .and_then(|mut d| d.decode_to_buf(out))
-                .map(|_| ())
-                .map_err(|e| (ImageFault::Corrupt, Problem::Qoi(e))),
-            Encoded::Pnm { data, .. } => {
-                out.copy_from_slice(data);
-                Ok(())
-            }
-        }
-    }
-
-    /// Decodes an image of `img`'s size into its buffer as RGB8 (`rgba`: scratch space for a
-    /// four-channel PNG).
-    fn decode_rgb(self, rgba: &mut [u8], img: &mut SensorImage) -> Result<(), (ImageFault, Problem)> {
-        let n = img.width() as usize * img.height() as usize;
-        let pixels = img.pixels_mut();
-        match self {
-            Encoded::Png(d) => decode_png_rgb(d, rgba, pixels, n),
-            // QOI's decoder writes RGB whatever the file holds (alpha dropped).
-            Encoded::Qoi(_, bytes) => qoi::Decoder::new(bytes)
-                .map(|d| d.with_channels(qoi::Channels::Rgb))
-                .and_then(|mut d| d.decode_to_buf(pixels))
-                .map(|_| ())
-                .map_err(|e| (ImageFault::Corrupt, Problem::Qoi(e))),
-            Encoded::Pnm { channels: 3, data, .. } => {
-                pixels.copy_from_slice(data);
-                Ok(())
-            }
-            Encoded::Pnm { data, .. } => {
-                for (dst, &g) in pixels.chunks_exact_mut(3).zip(data) {
-                    dst.fill(g);
-                }
-                Ok(())
-            }
-        }
-    }
-}
-
-/// The width, height and pixel data of a binary PPM/PGM (`P6`/`P5`, netpbm's layout: the magic,
-/// then width, height and maximum value as decimal numbers separated by white space, comments
-/// from `#` to the end of a line allowed between them, then one white-space byte and the
-/// pixels). Only 8-bit files (maximum value 255) are taken.
-fn pnm_header(bytes: &[u8]) -> Result<(u32, u32, &[u8]), &'static str> {
-    let mut at = 2;
-    let mut field = || -> Result<u32, &'static str> {
-        loop {
-            match bytes.get(at) {
-                Some(b' ' | b'\t' | b'\n' | b'\r' | 0x0b | 0x0c) => at += 1,
-                Some(b'#') => {
-                    while bytes.get(at).is_some_and(|&b| b != b'\n') {
-                        at += 1;
-                    }
-                }
-                Some(b'0'..=b'9') => break,
-                _ => return Err("header ends before width, height and maximum value"),
-            }
-        }
-        let mut v: u32 = 0;
-        while let Some(&b @ b'0'..=b'9') = bytes.get(at) {
-            v = v
-                .checked_mul(10)
-                .and_then(|v| v.checked_add(u32::from(b - b'0')))
-                .ok_or("a header number too large")?;
-            at += 1;
-        }
-        Ok(v)
-    };
-    let (width, height, max) = (field()?, field()?, field()?);
-    if width == 0 || height == 0 {
-        return Err("zero width or height");
-    }
-    if max != 255 {
-        return Err("not 8-bit (maximum value other than 255)");
-    }
-    match bytes.get(at) {
-        Some(b' ' | b'\t' | b'\n' | b'\r') => Ok((width, height, &bytes[at + 1..])),
-        _ => Err("no white space between the header and the pixels"),
-    }
-}
-
 /// The device frame shared by the cropped sensors of one recorded frame.
 #[derive(Debug)]
 struct DeviceFrame {
@@ -640,71 +419,5 @@ impl DeviceFrame {
 
     fn holds(&self, path: &Path) -> bool {
         self.valid && self.path == path
-    }
-}
-
-/// Reads the regular file at `path` (inside `root`, at most `most` bytes) into `file_buf`.
-fn read_file(path: &Path, root: &Path, file_buf: &mut Vec<u8>, most: u64) -> Result<(), (ImageFault, Problem)> {
-    file_buf.clear();
-    let missing = |e| (ImageFault::Missing, Problem::Io(e));
-    // Only a regular file inside the recording. Every link on the path is resolved first (a
-    // folder of the recording linked to /etc leads out as surely as a linked file does), and
-    // what is opened is the resolved path that was checked. A FIFO (which would block the read)
-    // or a device (/dev/zero, which never ends) is refused before it is opened.
-    let real = std::fs::canonicalize(path).map_err(missing)?;
-    if !real.starts_with(root) {
-        return Err((ImageFault::Missing, Problem::Outside));
-    }
-    let meta = std::fs::metadata(&real).map_err(missing)?;
-    if !meta.is_file() {
-        return Err((ImageFault::Missing, Problem::NotAFile));
-    }
-    if meta.len() > most {
-        return Err((ImageFault::Corrupt, Problem::TooLarge(meta.len())));
-    }
-    File::open(&real)
-        .and_then(|f| f.take(most).read_to_end(file_buf))
-        .map_err(missing)?;
-    Ok(())
-}
-
-/// Decodes a PNG of `n` pixels into `pixels` as RGB8 (grey, grey + alpha and RGBA converted).
-fn decode_png_rgb(
-    decoder: PngDecoder<Cursor<&[u8]>>,
-    rgba: &mut [u8],
-    pixels: &mut [u8],
-    n: usize,
-) -> Result<(), (ImageFault, Problem)> {
-    let corrupt = |e: ImageError| (ImageFault::Corrupt, Problem::Decode(e));
-    match decoder.color_type() {
-        ColorType::Rgb8 => decoder.read_image(pixels).map_err(corrupt),
-        ColorType::L8 => {
-            decoder.read_image(&mut pixels[..n]).map_err(corrupt)?;
-            // Expand in place from the back: pixel i's source byte (i) is never overwritten before
-            // it is read, since writes for pixels ≥ i land at 3i.. ≥ i.
-            for i in (0..n).rev() {
-                let g = pixels[i];
-                pixels[3 * i..3 * i + 3].fill(g);
-            }
-            Ok(())
-        }
-        ColorType::La8 => {
-            decoder.read_image(&mut pixels[..2 * n]).map_err(corrupt)?;
-            // Same in-place expansion: pixel i reads 2i, writes 3i..3i+3 (≥ 2i + 1 for i ≥ 1).
-            for i in (0..n).rev() {
-                let g = pixels[2 * i];
-                pixels[3 * i..3 * i + 3].fill(g);
-            }
-            Ok(())
-        }
-        ColorType::Rgba8 => {
-            let src = &mut rgba[..4 * n];
-            decoder.read_image(src).map_err(corrupt)?;
-            for (dst, src) in pixels.chunks_exact_mut(3).zip(src.chunks_exact(4)) {
-                dst.copy_from_slice(&src[..3]);
-            }
-            Ok(())
-        }
-        other => Err((ImageFault::WrongFormat, Problem::Format(other))),
     }
 }

@@ -16,7 +16,8 @@
 
 use super::*;
 use std::collections::BTreeMap;
-use std::io::{BufRead, BufReader, Seek, SeekFrom};
+use std::fs::File;
+use std::io::{BufRead, BufReader, Read, Seek, SeekFrom};
 
 /// A row longer than this is not a row of the format (four short fields): skipped, counted.
 const MAX_LINE: usize = 4096;
