@@ -51,17 +51,13 @@ mod index;
 use super::device::{crop_into, Window};
 use super::{sleep_until_or_stop, FrameSource, SourceError, SourceStats, WarningKind, WarningLimiter};
 use image_file::{read_file, Encoded, Problem};
+pub use index::FRAMES_HEADER;
 use index::{FrameIndex, Row};
 use omnitrack_core::frame::{FrameSet, ImageFault, SensorImage};
 use omnitrack_core::rig::Rig;
 use omnitrack_core::trajectory::{load_tum, Trajectory};
-use std::fmt;
-use std::io;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
-
-/// The exact header line of `frames.csv`.
-pub const FRAMES_HEADER: &str = "frame,sensor,timestamp_ns,path";
 
 /// Warnings of one kind printed before the rest are only counted.
 const WARN_LIMIT: u32 = 5;

@@ -14,10 +14,17 @@
 //! itself is read through a fixed buffer, and a line longer than any row can sensibly be is
 //! skipped and counted without being held.
 
-use super::*;
+use crate::capture::{SourceError, SourceStats, WarningKind, WarningLimiter};
+use omnitrack_core::rig::Rig;
 use std::collections::BTreeMap;
+use std::fmt;
 use std::fs::File;
+use std::io;
 use std::io::{BufRead, BufReader, Read, Seek, SeekFrom};
+use std::path::{Path, PathBuf};
+
+/// The exact header line of `frames.csv`.
+pub const FRAMES_HEADER: &str = "frame,sensor,timestamp_ns,path";
 
 /// A row longer than this is not a row of the format (four short fields): skipped, counted.
 const MAX_LINE: usize = 4096;
