@@ -162,3 +162,37 @@ fn the_interface_document_names_every_option_of_publish() {
     assert_eq!(long_options(command), long_options(&options_lines), "{command}");
     assert!(long_options(&options_lines).contains("rig-in-base"));
 }
+
+/// Every `cargo run … -p omnitrack-ros2 -- ARGS` line of the README and the rig guide is one the
+/// command line takes as written (run with `--help` appended: the arguments are parsed, nothing
+/// is opened). The front door's README test leaves these lines to this one.
+#[test]
+fn the_documented_commands_are_ones_the_command_line_takes() {
+    let mut checked = 0;
+    for doc in ["README.md", "docs/rig-guide.md"] {
+        let path = format!("{}/../../{doc}", env!("CARGO_MANIFEST_DIR"));
+        let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{path}: {e}"));
+        for line in text.lines() {
+            let line = line.split(" #").next().unwrap_or(line).trim();
+            let Some((cargo, args)) = line.split_once(" -- ") else {
+                continue;
+            };
+            if !cargo.starts_with("cargo run") || !cargo.contains("-p omnitrack-ros2") {
+                continue;
+            }
+            let mut argv: Vec<&str> = args.split_whitespace().collect();
+            argv.push("--help");
+            let out = Command::new(BIN).args(&argv).output().unwrap();
+            assert!(
+                out.status.success(),
+                "{doc}: `{line}`: {}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+            checked += 1;
+        }
+    }
+    assert!(
+        checked >= 1,
+        "no `cargo run -p omnitrack-ros2 -- …` line found in the docs"
+    );
+}
