@@ -35,7 +35,6 @@
 use omnitrack_io::publish::{format_pose_line, PoseSample, PoseSubscriber, SamplePublisher, WireError};
 use std::io::Write;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
 use std::time::{Duration, Instant};
 use zenoh::qos::CongestionControl;
 use zenoh::Wait;
@@ -320,15 +319,8 @@ pub fn listen(
     Ok(summary)
 }
 
-/// A flag set by SIGINT or SIGTERM (the second of either ends the process at once).
-pub fn stop_on_signals() -> Arc<AtomicBool> {
-    let stop = Arc::new(AtomicBool::new(false));
-    for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
-        let _ = signal_hook::flag::register_conditional_shutdown(signal, 1, Arc::clone(&stop));
-        let _ = signal_hook::flag::register(signal, Arc::clone(&stop));
-    }
-    stop
-}
+/// A flag set by SIGINT or SIGTERM (the subscriber processes' one, from omnitrack-io).
+pub use omnitrack_io::publish::stop_on_signals;
 
 #[cfg(test)]
 mod tests {

@@ -41,7 +41,6 @@ use ros2_client::dds::rustdds;
 use ros2_client::qos::{History, Reliability, WhenFull};
 use ros2_client::{Context, Node, NodeName, NodeOptions, Publisher, QosProfile, Subscription};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 /// The default ROS topic of the poses (DDS topic `rt/omnitrack/pose`).
@@ -411,15 +410,8 @@ pub fn rig_pose_if_tracking(s: &omnitrack_io::publish::PoseSample) -> Option<(Is
         .flatten()
 }
 
-/// A flag set by SIGINT or SIGTERM (the second of either ends the process at once).
-pub fn stop_on_signals() -> Arc<AtomicBool> {
-    let stop = Arc::new(AtomicBool::new(false));
-    for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
-        let _ = signal_hook::flag::register_conditional_shutdown(signal, 1, Arc::clone(&stop));
-        let _ = signal_hook::flag::register(signal, Arc::clone(&stop));
-    }
-    stop
-}
+/// A flag set by SIGINT or SIGTERM (the subscriber processes' one, from omnitrack-io).
+pub use omnitrack_io::publish::stop_on_signals;
 
 #[cfg(test)]
 mod tests {

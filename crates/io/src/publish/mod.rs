@@ -42,7 +42,8 @@ mod listen;
 mod sample;
 
 use std::fmt::Debug;
-use std::sync::Once;
+use std::sync::atomic::AtomicBool;
+use std::sync::{Arc, Once};
 use std::time::{Duration, Instant};
 
 use iceoryx2::port::listener::{Listener, ListenerWaitError};
@@ -127,6 +128,19 @@ impl PublishError {
             detail: format!("{detail:?}{}", domain.foreign_files()),
         }
     }
+}
+
+/// The stop flag of a subscriber process (`omnitrack-link`, `omnitrack-ros2`): set by SIGINT
+/// or SIGTERM, whose first arrival cuts a [`PoseSubscriber::wait`] short; the second of either
+/// ends the process at once. The device pipeline has its own, which it can undo
+/// (`omnitrack_runtime::pipeline::stop_on_signals`).
+pub fn stop_on_signals() -> Arc<AtomicBool> {
+    let stop = Arc::new(AtomicBool::new(false));
+    for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        let _ = signal_hook::flag::register_conditional_shutdown(signal, 1, Arc::clone(&stop));
+        let _ = signal_hook::flag::register(signal, Arc::clone(&stop));
+    }
+    stop
 }
 
 static LOG_LEVEL: Once = Once::new();
