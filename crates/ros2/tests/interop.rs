@@ -356,6 +356,25 @@ fn check_diagnostics(d: &Value) {
     );
 }
 
+/// One tick of the tracker as the tests play it: pose `n`, captured 5 ms before it is published
+/// (as a live camera's frame would be), kept in `sent`; and every fifth tick a status.
+fn publish_tick(
+    n: u64,
+    poses: &SamplePublisher<PoseSample>,
+    statuses: &SamplePublisher<StatusSample>,
+    status: &mut StatusSample,
+    sent: &mut std::collections::HashMap<u64, PoseSample>,
+) {
+    let p = pose(n, (monotonic_ns() - 5_000_000) as u64);
+    poses.publish(&p).unwrap();
+    sent.insert(n, p);
+    if n.is_multiple_of(5) {
+        status.sequence = n / 5;
+        status.timestamp_ns = monotonic_ns() as u64;
+        statuses.publish(status).unwrap();
+    }
+}
+
 /// The status the tests publish, every fifth frame.
 fn interop_status() -> StatusSample {
     let mut status = StatusSample {
@@ -439,15 +458,7 @@ fn cyclone_dds_receives_every_field_in_ros_time_and_rep_105_frames() {
     let mut n = 0u64;
     let mut status = interop_status();
     loop {
-        // Captured 5 ms before it is published, as a live camera's frame would be.
-        let p = pose(n, (monotonic_ns() - 5_000_000) as u64);
-        poses.publish(&p).unwrap();
-        sent.insert(n, p);
-        if n.is_multiple_of(5) {
-            status.sequence = n / 5;
-            status.timestamp_ns = monotonic_ns() as u64;
-            statuses.publish(&status).unwrap();
-        }
+        publish_tick(n, &poses, &statuses, &mut status, &mut sent);
         n += 1;
         std::thread::sleep(Duration::from_millis(20));
         while let Ok(line) = from_peer.try_recv() {
@@ -1009,14 +1020,7 @@ fn a_ros_2_jazzy_node_over_fast_dds_receives_every_field_and_sees_the_publisher(
     let start = Instant::now();
     let mut n = 0u64;
     loop {
-        let p = pose(n, (monotonic_ns() - 5_000_000) as u64);
-        poses.publish(&p).unwrap();
-        sent.insert(n, p);
-        if n.is_multiple_of(5) {
-            status.sequence = n / 5;
-            status.timestamp_ns = monotonic_ns() as u64;
-            statuses.publish(&status).unwrap();
-        }
+        publish_tick(n, &poses, &statuses, &mut status, &mut sent);
         n += 1;
         std::thread::sleep(Duration::from_millis(20));
         match peer.try_wait().unwrap() {
