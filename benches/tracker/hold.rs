@@ -195,11 +195,18 @@ pub(crate) fn hold(
                         p.rotation.angle_to(&g.rotation).to_degrees()
                     )
                 });
+                // The published covariance's largest position σ: how well the frame's lines
+                // (and the filter) fix the pose, beside how far it is from the truth.
+                let sigma_cm = r
+                    .pose
+                    .map(|_| r.covariance.fixed_view::<3, 3>(0, 0).symmetric_eigenvalues().max().max(0.0).sqrt() * 100.0);
                 eprintln!(
-                    "    {name} stretch {k} frame {}: {:?} {} inliers {} explains {:.2} u/p/a {:?}{}",
+                    "    {name} stretch {k} frame {}: {:?} {} σ {} edges {} inliers {} explains {:.2} u/p/a {:?}{} | {}",
                     start + i,
                     r.state,
                     err.unwrap_or_else(|| "     --          ".into()),
+                    sigma_cm.map_or_else(|| "  -- ".into(), |s| format!("{s:5.1}")),
+                    edges.len(),
                     r.inliers,
                     r.explained,
                     r.states,
@@ -209,7 +216,8 @@ pub(crate) fn hold(
                         Some(TrackerEvent::Committed { .. }) => " committed",
                         Some(TrackerEvent::Searched(_)) => " searched",
                         None => "",
-                    }
+                    },
+                    truth_at(ts).map_or_else(String::new, |g| truth_fit(rig, model, table, cfg, edges, &g, r.pose))
                 );
             }
         }
@@ -261,4 +269,65 @@ pub(crate) fn hold(
         sum.filtered_few_lines
     );
     sum
+}
+
+/// With `--verbose`: the pose the frame's own lines give when every segment in sight of the
+/// true pose is matched there (the nearest edge within the inlier angle) and fitted from it.
+/// Far from the truth, the lines themselves (their detection, or the model) carry the error;
+/// near it, maintenance's matching or its sampling does.
+fn truth_fit(
+    rig: &Rig,
+    model: &Model,
+    table: &omnitrack::visibility::VisibilityTable,
+    cfg: &TrackerConfig,
+    edges: &[omnitrack::edges::Edge],
+    truth: &omnitrack::geometry::Pose,
+    tracked: Option<omnitrack::geometry::Pose>,
+) -> String {
+    use omnitrack::tracker::matching::{best_edge, correspondence, Gate, Predicted};
+    let centres: Vec<_> = rig.sensors.iter().map(|s| s.centre()).collect();
+    let Some(set) = table.query(&nalgebra::Point3::from(truth.translation.vector)) else {
+        return "truth fit: no visibility set".into();
+    };
+    let gate = Gate::geometric(cfg.maintenance.inlier_angle_deg.to_radians());
+    let min_len = cfg.edges.min_edge_length_deg.to_radians();
+    let mut c = Vec::new();
+    for &s in set.segments {
+        let seg = &model.segments[s as usize];
+        let ends = [seg.a, seg.b];
+        let pred = Predicted::new(&ends, truth, &centres);
+        if pred.length_rad < min_len {
+            continue;
+        }
+        if let Some((e, _)) = best_edge(&pred, &centres, edges, &gate) {
+            c.push(correspondence(&edges[e], &ends));
+        }
+    }
+    let Some(p) = (c.len() >= 4)
+        .then(|| omnitrack::solver::r_and_t_refine(&c, truth, &cfg.solver_options()))
+        .flatten()
+    else {
+        return format!("truth fit: {} lines, no fit", c.len());
+    };
+    let mut scratch = vec![0.0; 2 * c.len()];
+    let robust = omnitrack::solver::r_and_t_cauchy(&c, truth, &cfg.solver_options(), &mut scratch)
+        .map_or(f64::NAN, |r| (r.translation.vector - truth.translation.vector).norm() * 100.0);
+    let from_tracked = tracked
+        .and_then(|t| omnitrack::solver::r_and_t_cauchy(&c, &t, &cfg.solver_options(), &mut scratch))
+        .map_or(f64::NAN, |r| (r.translation.vector - truth.translation.vector).norm() * 100.0);
+    let mut alphas: Vec<f64> = c
+        .iter()
+        .map(|k| omnitrack::geometry::Correspondence::alpha(k, truth).to_degrees())
+        .collect();
+    alphas.sort_by(f64::total_cmp);
+    format!(
+        "truth fit: {} lines, {:.1} cm {:.2}° from the truth (Cauchy {:.1} cm, from the tracked pose {:.1} cm), α at the truth median {:.2}° worst {:.2}°",
+        c.len(),
+        (p.translation.vector - truth.translation.vector).norm() * 100.0,
+        p.rotation.angle_to(&truth.rotation).to_degrees(),
+        robust,
+        from_tracked,
+        alphas[alphas.len() / 2],
+        alphas[alphas.len() - 1]
+    )
 }
