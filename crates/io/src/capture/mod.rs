@@ -30,6 +30,7 @@
 //! [`SourceStats`], warned on standard error a few times per kind, and the stream goes on.
 //! [`SourceError`] is only for the whole source failing (cannot open, wrong frame set).
 
+pub mod control;
 pub mod convert;
 pub mod device;
 pub mod live;
