@@ -16,7 +16,7 @@
 //! *warning*. A key not in the rig file is never touched.
 //!
 //! The protocol layers are always compiled and tested against fake devices that speak the
-//! protocols' bytes (crates/io/tests/io/camctl_*.rs); only the thin adapters onto the real
+//! protocols' bytes (crates/io/tests/camctl/); only the thin adapters onto the real
 //! ioctls (`capture::v4l2`) and USB endpoints (`capture::usb`) sit behind the cargo features.
 
 pub mod gencp;

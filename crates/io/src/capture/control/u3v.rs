@@ -143,13 +143,9 @@ enum Check {
 /// Applies every key of `control` through the camera's node map and reads each back (see the
 /// module doc).
 pub fn apply(map: &NodeMap, port: &mut dyn Port, control: &CameraControl, report: &mut ControlReport) {
-    let mut checks: Vec<(&'static str, Vec<Check>)> = Vec::new();
-    let mut run = |key: &'static str, r: Result<Vec<Check>, Outcome>, report: &mut ControlReport| match r {
-        Ok(c) => checks.push((key, c)),
-        Err(o) => report.push(key, o),
-    };
+    let mut written: Vec<(&'static str, Result<Vec<Check>, Outcome>)> = Vec::new();
     if let Some(trigger) = &control.trigger {
-        run("trigger", write_trigger(map, port, trigger), report);
+        written.push(("trigger", write_trigger(map, port, trigger)));
     }
     if let Some(exposure) = control.exposure_us {
         let r = write_setting(
@@ -160,28 +156,30 @@ pub fn apply(map: &NodeMap, port: &mut dyn Port, control: &CameraControl, report
             &["ExposureTime", "ExposureTimeAbs"],
             " µs",
         );
-        run("exposure_us", r, report);
+        written.push(("exposure_us", r));
     }
     if let Some(gain) = control.gain {
-        run(
+        written.push((
             "gain",
             write_setting(map, port, gain, "GainAuto", &["Gain", "GainAbs"], " dB"),
-            report,
-        );
+        ));
     }
     if let Some(auto) = control.white_balance_auto {
         let entry = if auto { "Continuous" } else { "Off" };
-        run(
+        written.push((
             "white_balance",
             write_entry(map, port, "BalanceWhiteAuto", entry).map(|c| vec![c]),
-            report,
-        );
+        ));
     }
     if let Some(hz) = control.frame_rate_hz {
-        run("frame_rate_hz", write_frame_rate(map, port, hz), report);
+        written.push(("frame_rate_hz", write_frame_rate(map, port, hz)));
     }
-    for (key, list) in checks {
-        report.push(key, read_back(map, port, &list));
+    for (key, result) in written {
+        let outcome = match result {
+            Ok(checks) => read_back(map, port, &checks),
+            Err(o) => o,
+        };
+        report.push(key, outcome);
     }
 }
 

@@ -392,7 +392,7 @@ impl NodeMap {
         if e.name != "Enumeration" {
             return Err(error(
                 name,
-                NodeErrorKind::Invalid(format!("is a {}, not an Enumeration", e.name)),
+                NodeErrorKind::Unsupported(format!("node kind '{}'", e.name)),
             ));
         }
         Ok(e.children_named("EnumEntry")
@@ -423,7 +423,7 @@ impl NodeMap {
             let names: Vec<&str> = entries.iter().map(|(n, _)| n.as_str()).collect();
             return Err(error(
                 name,
-                NodeErrorKind::NotWritable(format!("without an entry '{entry}' (it has: {})", names.join(", "))),
+                NodeErrorKind::Invalid(format!("has no entry '{entry}' (it has: {})", names.join(", "))),
             ));
         };
         self.set(port, name, *v)
