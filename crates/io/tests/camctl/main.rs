@@ -7,4 +7,5 @@ mod fake_u3v;
 mod fake_v4l2;
 mod gencp;
 mod genicam;
+mod live;
 mod v4l2;

@@ -121,6 +121,31 @@ impl ControlReport {
     }
 }
 
+/// [`enforce`] under [`ControlPolicy::Enforce`]; nothing under [`ControlPolicy::Report`] (the
+/// report is read back from the source).
+pub fn settle(report: &ControlReport, policy: super::ControlPolicy) -> Result<(), super::SourceError> {
+    match policy {
+        super::ControlPolicy::Enforce => enforce(report),
+        super::ControlPolicy::Report => Ok(()),
+    }
+}
+
+/// Says a report on standard error and turns its errors into the device's opening error: every
+/// finding that is not plainly set is a line (`warning: ` before a rounded value; the errors
+/// after the first, which the returned error carries, as `omnitrack: `).
+pub fn enforce(report: &ControlReport) -> Result<(), super::SourceError> {
+    let mut first_error = true;
+    for f in &report.findings {
+        match &f.outcome {
+            Outcome::Set { .. } => {}
+            Outcome::Rounded { .. } => eprintln!("warning: {}", report.line(f)),
+            _ if first_error => first_error = false,
+            _ => eprintln!("omnitrack: {}", report.line(f)),
+        }
+    }
+    report.error().map_or(Ok(()), Err)
+}
+
 impl fmt::Display for Outcome {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
