@@ -51,6 +51,19 @@ pub enum Outcome {
 }
 
 impl Outcome {
+    /// The outcome's name in `check --json`: `set`, `rounded`, `changed`, `out_of_range`,
+    /// `refused` or `not_supported`.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Outcome::Set { .. } => "set",
+            Outcome::Rounded { .. } => "rounded",
+            Outcome::Changed { .. } => "changed",
+            Outcome::OutOfRange { .. } => "out_of_range",
+            Outcome::Refused { .. } => "refused",
+            Outcome::NotSupported { .. } => "not_supported",
+        }
+    }
+
     /// Whether this outcome stops a run (see the module doc).
     pub fn is_error(&self) -> bool {
         !matches!(self, Outcome::Set { .. } | Outcome::Rounded { .. })
