@@ -26,7 +26,8 @@ pub struct FakeV4l2 {
     pub log: Vec<String>,
 }
 
-pub fn ctrl(id: u32, kind: u32, name: &str, min: i32, max: i32, step: i32, value: i32, flags: u32) -> FakeCtrl {
+/// A control of `[minimum, maximum, step]`.
+pub fn ctrl(id: u32, kind: u32, name: &str, [min, max, step]: [i32; 3], value: i32, flags: u32) -> FakeCtrl {
     FakeCtrl {
         query: QueryCtrl {
             id,
@@ -50,26 +51,22 @@ impl FakeV4l2 {
     pub fn uvc() -> FakeV4l2 {
         FakeV4l2 {
             controls: vec![
-                ctrl(CID_EXPOSURE_AUTO, TYPE_MENU, "Auto Exposure", 1, 3, 1, 3, 0),
+                ctrl(CID_EXPOSURE_AUTO, TYPE_MENU, "Auto Exposure", [1, 3, 1], 3, 0),
                 ctrl(
                     CID_EXPOSURE_ABSOLUTE,
                     TYPE_INTEGER,
                     "Exposure Time, Absolute",
-                    3,
-                    2047,
-                    1,
+                    [3, 2047, 1],
                     250,
                     FLAG_INACTIVE,
                 ),
-                ctrl(CID_GAIN, TYPE_INTEGER, "Gain", 0, 255, 1, 64, 0),
-                ctrl(CID_AUTOGAIN, TYPE_BOOLEAN, "Gain, Automatic", 0, 1, 1, 1, 0),
+                ctrl(CID_GAIN, TYPE_INTEGER, "Gain", [0, 255, 1], 64, 0),
+                ctrl(CID_AUTOGAIN, TYPE_BOOLEAN, "Gain, Automatic", [0, 1, 1], 1, 0),
                 ctrl(
                     CID_AUTO_WHITE_BALANCE,
                     TYPE_BOOLEAN,
                     "White Balance, Automatic",
-                    0,
-                    1,
-                    1,
+                    [0, 1, 1],
                     1,
                     0,
                 ),

@@ -168,7 +168,7 @@ fn a_device_that_ignores_or_refuses_a_write_is_reported() {
     let mut dev = FakeV4l2::uvc();
     dev.controls.retain(|c| c.query.id != CID_AUTOGAIN);
     dev.controls
-        .push(ctrl(0x0098_0999, TYPE_INTEGER, "Other", 0, 1, 1, 0, 0));
+        .push(ctrl(0x0098_0999, TYPE_INTEGER, "Other", [0, 1, 1], 0, 0));
     let r = run(
         &mut dev,
         CameraControl {

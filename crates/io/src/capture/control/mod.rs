@@ -134,7 +134,7 @@ impl ControlReport {
     }
 }
 
-/// [`enforce`] under [`ControlPolicy::Enforce`]; nothing under [`ControlPolicy::Report`] (the
+/// [`enforce`] under [`ControlPolicy::Enforce`](super::ControlPolicy::Enforce); nothing under [`ControlPolicy::Report`](super::ControlPolicy::Report) (the
 /// report is read back from the source).
 pub fn settle(report: &ControlReport, policy: super::ControlPolicy) -> Result<(), super::SourceError> {
     match policy {
