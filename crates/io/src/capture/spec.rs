@@ -113,7 +113,7 @@ pub struct SourceOptions {
 /// What a live camera that does not take the rig's `[control]` as asked does to its opening.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum ControlPolicy {
-    /// A control error fails the opening (one line; the others on standard error).
+    /// A control error fails the opening, in one line naming the first and counting the rest.
     #[default]
     Enforce,
     /// The camera opens whatever its controls did; the report is kept for

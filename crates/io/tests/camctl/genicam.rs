@@ -184,3 +184,46 @@ fn features_the_file_lacks_or_this_reader_cannot_follow_are_named() {
         "control.gain: not supported: 'GainRaw': a selector-indexed register (pIndex) is not supported by omnitrack's GenICam reader"
     );
 }
+
+#[test]
+fn a_damaged_genicam_file_is_an_error_or_a_report_never_a_panic() {
+    let c = CameraControl {
+        exposure_us: Some(Setting::Fixed(8000.0)),
+        gain: Some(Setting::Fixed(6.5)),
+        frame_rate_hz: Some(100.0),
+        white_balance_auto: Some(false),
+        trigger: None,
+    };
+    let pieces: [&str; 12] = [
+        "<", ">", "/", "0x", "9", "-1", "64", "LSB", "Big", "pValue", "Gain", "((",
+    ];
+    let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+    let mut next = || {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        seed
+    };
+    let mut loaded = 0;
+    for _ in 0..300 {
+        let mut xml = CAMERA_XML.to_string();
+        for _ in 0..1 + next() % 4 {
+            let at = (next() as usize) % xml.len();
+            let at = (0..=at).rev().find(|&i| xml.is_char_boundary(i)).unwrap_or(0);
+            let end = (at + 1 + (next() as usize) % 6).min(xml.len());
+            let end = (end..=xml.len())
+                .find(|&i| xml.is_char_boundary(i))
+                .unwrap_or(xml.len());
+            xml.replace_range(at..end, pieces[(next() % 12) as usize]);
+        }
+        let mut cp = GenCp::new(FakeCamera::new(xml.as_bytes(), false), Duration::from_millis(5));
+        if let Ok(map) = load_node_map(&mut cp) {
+            loaded += 1;
+            let mut report = ControlReport::new("cam", "sensor 0");
+            apply(&map, &mut cp, &c, &mut report);
+            assert_eq!(report.findings.len(), 4);
+            assert!(report.lines().all(|l| !l.contains('\n')));
+        }
+    }
+    assert!(loaded > 0, "some damage leaves a file that still parses");
+}

@@ -137,7 +137,7 @@ fn what_the_device_cannot_do_is_one_error_line_each() {
     let e = r.error().unwrap().to_string();
     assert_eq!(
         e,
-        "/dev/video0: sensor 0, control.exposure_us: 500000 µs is outside the device's range [300, 204700] µs; not set (and 4 more control error(s))"
+        "/dev/video0: sensor 0, control.exposure_us: 500000 µs is outside the device's range [300, 204700] µs; not set (and 4 more control error(s): `omnitrack check --source` lists them)"
     );
 }
 

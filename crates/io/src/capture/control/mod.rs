@@ -116,14 +116,15 @@ impl ControlReport {
         format!("{}: {}, control.{}: {}", self.device, self.sensors, f.key, f.outcome)
     }
 
-    /// The findings that stop a run, as a [`super::SourceError`] whose message holds the first
-    /// and counts the rest (every line is printed by whoever opened the device).
+    /// The findings that stop a run, as a [`super::SourceError`]: the first, and how many
+    /// more (`omnitrack check --source` lists them all; printing them here would repeat them at
+    /// every reopening attempt of a camera that came back different).
     pub fn error(&self) -> Option<super::SourceError> {
         let mut errors = self.findings.iter().filter(|f| f.outcome.is_error());
         let first = errors.next()?;
         let more = errors.count();
         let tail = if more > 0 {
-            format!(" (and {more} more control error(s))")
+            format!(" (and {more} more control error(s): `omnitrack check --source` lists them)")
         } else {
             String::new()
         };
@@ -134,8 +135,9 @@ impl ControlReport {
     }
 }
 
-/// [`enforce`] under [`ControlPolicy::Enforce`](super::ControlPolicy::Enforce); nothing under [`ControlPolicy::Report`](super::ControlPolicy::Report) (the
-/// report is read back from the source).
+/// [`enforce`] under [`ControlPolicy::Enforce`](super::ControlPolicy::Enforce); nothing under
+/// [`ControlPolicy::Report`](super::ControlPolicy::Report) (the report is read back from the
+/// source).
 pub fn settle(report: &ControlReport, policy: super::ControlPolicy) -> Result<(), super::SourceError> {
     match policy {
         super::ControlPolicy::Enforce => enforce(report),
@@ -143,17 +145,12 @@ pub fn settle(report: &ControlReport, policy: super::ControlPolicy) -> Result<()
     }
 }
 
-/// Says a report on standard error and turns its errors into the device's opening error: every
-/// finding that is not plainly set is a line (`warning: ` before a rounded value; the errors
-/// after the first, which the returned error carries, as `omnitrack: `).
+/// Says a report's rounded values on standard error (`warning: ` and the line) and turns its
+/// errors into the device's opening error ([`ControlReport::error`]).
 pub fn enforce(report: &ControlReport) -> Result<(), super::SourceError> {
-    let mut first_error = true;
     for f in &report.findings {
-        match &f.outcome {
-            Outcome::Set { .. } => {}
-            Outcome::Rounded { .. } => eprintln!("warning: {}", report.line(f)),
-            _ if first_error => first_error = false,
-            _ => eprintln!("omnitrack: {}", report.line(f)),
+        if matches!(f.outcome, Outcome::Rounded { .. }) {
+            eprintln!("warning: {}", report.line(f));
         }
     }
     report.error().map_or(Ok(()), Err)

@@ -345,4 +345,27 @@ mod tests {
         }
         assert_eq!(variables("TO * VAR + ROUND(FROM)").unwrap(), vec!["TO", "VAR", "FROM"]);
     }
+
+    #[test]
+    fn any_text_is_a_value_or_an_error_never_a_panic() {
+        let pieces = [
+            "(", ")", "-", "**", "?", ":", "1", "0x", "VAR", "ROUND(", ",", "<<", "99", "~", "!", ".",
+        ];
+        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        for _ in 0..3000 {
+            let mut text = String::new();
+            for _ in 0..seed % 12 {
+                seed ^= seed << 13;
+                seed ^= seed >> 7;
+                seed ^= seed << 17;
+                text.push_str(pieces[(seed % pieces.len() as u64) as usize]);
+            }
+            seed = seed.wrapping_add(1);
+            let _ = eval(&text);
+            let _ = variables(&text);
+        }
+        // Nesting past the bound is an error, not a stack overflow.
+        assert!(eval(&"(".repeat(100_000)).is_err());
+        assert!(eval(&"-".repeat(100_000)).is_err());
+    }
 }
