@@ -132,3 +132,14 @@ fn a_silent_or_garbled_device_is_an_error_never_a_panic() {
         let _ = cp.write_mem(0, &[1, 2]);
     }
 }
+
+#[test]
+fn request_ids_wrap_past_zero() {
+    let mut cp = client(FakeCamera::standard());
+    for _ in 0..65_537 {
+        cp.read_mem(0x1CC, 4).unwrap();
+    }
+    let ids: Vec<u16> = cp.endpoint_mut().commands.iter().map(|(_, id)| *id).collect();
+    assert_eq!(&ids[65_533..], &[65_534, 65_535, 1, 2]);
+    assert!(!ids.contains(&0), "0 is never a request id");
+}

@@ -180,6 +180,28 @@ fn a_device_that_ignores_or_refuses_a_write_is_reported() {
         lines(&r),
         vec!["/dev/video0: sensor 0, control.gain: not supported: the device has no V4L2_CID_AUTOGAIN"]
     );
+    // A fixed exposure on a device without V4L2_CID_EXPOSURE_AUTO: nothing to switch off.
+    dev.controls.retain(|c| c.query.id != CID_EXPOSURE_AUTO);
+    let r = run(
+        &mut dev,
+        CameraControl {
+            exposure_us: Some(Setting::Fixed(1000.0)),
+            ..CameraControl::default()
+        },
+    );
+    assert!(!r.has_errors(), "{:?}", lines(&r));
+    assert_eq!(dev.control(CID_EXPOSURE_ABSOLUTE).value, 10);
+    let r = run(
+        &mut dev,
+        CameraControl {
+            exposure_us: Some(Setting::Auto),
+            ..CameraControl::default()
+        },
+    );
+    assert_eq!(
+        lines(&r),
+        vec!["/dev/video0: sensor 0, control.exposure_us: not supported: the device has no V4L2_CID_EXPOSURE_AUTO"]
+    );
     // A fixed gain on that device needs no auto gain switched off.
     let r = run(
         &mut dev,

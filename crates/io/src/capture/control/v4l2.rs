@@ -10,7 +10,7 @@
 //!
 //! | key | controls |
 //! | --- | --- |
-//! | `exposure_us` | `V4L2_CID_EXPOSURE_AUTO` (menu: 1 manual for a number; 0 auto, else 3 aperture priority, UVC's auto, for `"auto"`), then `V4L2_CID_EXPOSURE_ABSOLUTE` in units of 100 µs |
+//! | `exposure_us` | `V4L2_CID_EXPOSURE_AUTO` (menu: 1 manual for a number, where the device has the control; 0 auto, else 3 aperture priority, UVC's auto, for `"auto"`, which needs it), then `V4L2_CID_EXPOSURE_ABSOLUTE` in units of 100 µs (sensor drivers whose only exposure is `V4L2_CID_EXPOSURE`, in lines of unknown length, are not supported) |
 //! | `gain` | `V4L2_CID_AUTOGAIN` (off for a number, where the device has it; on for `"auto"`, which needs it), then `V4L2_CID_GAIN` in the driver's unit |
 //! | `white_balance` | `V4L2_CID_AUTO_WHITE_BALANCE` |
 //! | `frame_rate_hz` | `VIDIOC_S_PARM`'s `timeperframe` (the driver picks its nearest interval), where `V4L2_CAP_TIMEPERFRAME` says it has one |
@@ -220,12 +220,13 @@ fn set_number(io: &mut dyn V4l2ControlIo, q: &QueryCtrl, asked: f64, scale: f64,
 }
 
 fn exposure_outcome(io: &mut dyn V4l2ControlIo, exposure: Setting) -> Outcome {
-    let mode = match query(io, CID_EXPOSURE_AUTO, "V4L2_CID_EXPOSURE_AUTO") {
-        Ok(q) => q,
-        Err(o) => return o,
-    };
+    let mode = io.query_ctrl(CID_EXPOSURE_AUTO).ok();
     match exposure {
         Setting::Auto => {
+            let mode = match query(io, CID_EXPOSURE_AUTO, "V4L2_CID_EXPOSURE_AUTO") {
+                Ok(q) => q,
+                Err(o) => return o,
+            };
             // UVC cameras offer only manual (1) and aperture priority (3), their "auto".
             let value = if mode.minimum <= EXPOSURE_AUTO {
                 EXPOSURE_AUTO
@@ -235,9 +236,15 @@ fn exposure_outcome(io: &mut dyn V4l2ControlIo, exposure: Setting) -> Outcome {
             set_exact(io, &mode, value, "auto")
         }
         Setting::Fixed(us) => {
-            let manual = set_exact(io, &mode, EXPOSURE_MANUAL, "manual");
-            if manual.is_error() {
-                return manual;
+            // A device without an automatic exposure has nothing to switch off.
+            if mode.is_some() {
+                let manual = match query(io, CID_EXPOSURE_AUTO, "V4L2_CID_EXPOSURE_AUTO") {
+                    Ok(q) => set_exact(io, &q, EXPOSURE_MANUAL, "manual"),
+                    Err(o) => o,
+                };
+                if manual.is_error() {
+                    return manual;
+                }
             }
             match query(io, CID_EXPOSURE_ABSOLUTE, "V4L2_CID_EXPOSURE_ABSOLUTE") {
                 Ok(q) => set_number(io, &q, us, 100.0, " µs"),
