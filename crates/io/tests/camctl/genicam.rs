@@ -150,10 +150,6 @@ fn features_the_file_lacks_or_this_reader_cannot_follow_are_named() {
             "<Enumeration Name=\"BalanceWhiteAuto\">",
             "<Enumeration Name=\"Unused\">",
         )
-        .replace(
-            "<IntReg Name=\"GainRaw\">",
-            "<IntReg Name=\"GainRaw\">\n      <pIndex Offset=\"4\">TriggerSelectorReg</pIndex>",
-        )
         .replace("<Enumeration Name=\"GainAuto\">", "<Command Name=\"GainAuto\">")
         .replace(
             "<pValue>GainAutoReg</pValue>\n    </Enumeration>",
@@ -174,14 +170,14 @@ fn features_the_file_lacks_or_this_reader_cannot_follow_are_named() {
             "control.white_balance: not supported: the camera's GenICam file has no feature 'BalanceWhiteAuto'",
         ]
     );
-    let xml = CAMERA_XML.replace(
-        "<IntReg Name=\"GainRaw\">",
-        "<IntReg Name=\"GainRaw\">\n      <pIndex Offset=\"4\">TriggerSelectorReg</pIndex>",
+    let xml = CAMERA_XML.replace("<IntReg Name=\"GainRaw\">", "<Register Name=\"GainRaw\">").replace(
+        "<Sign>Unsigned</Sign><Endianess>LittleEndian</Endianess>\n    </IntReg>\n    <Enumeration Name=\"BalanceWhiteAuto\">",
+        "<Sign>Unsigned</Sign><Endianess>LittleEndian</Endianess>\n    </Register>\n    <Enumeration Name=\"BalanceWhiteAuto\">",
     );
     let (lines, _, _) = control(FakeCamera::new(xml.as_bytes(), false), &c);
     assert_eq!(
         lines[0],
-        "control.gain: not supported: 'GainRaw': a selector-indexed register (pIndex) is not supported by omnitrack's GenICam reader"
+        "control.gain: not supported: 'GainRaw': node kind 'Register' is not supported by omnitrack's GenICam reader"
     );
 }
 
@@ -226,4 +222,43 @@ fn a_damaged_genicam_file_is_an_error_or_a_report_never_a_panic() {
         }
     }
     assert!(loaded > 0, "some damage leaves a file that still parses");
+}
+
+#[test]
+fn a_register_indexed_by_its_selector_is_written_where_the_selector_points() {
+    // TriggerMode per trigger: FrameStart's mode 8 bytes after AcquisitionStart's; and an
+    // ExposureMode that must be Timed for a fixed exposure.
+    let xml = CAMERA_XML
+        .replace(
+            "<EnumEntry Name=\"FrameStart\"><Value>0</Value></EnumEntry>\n      <EnumEntry Name=\"AcquisitionStart\"><Value>1</Value></EnumEntry>",
+            "<EnumEntry Name=\"FrameStart\"><Value>1</Value></EnumEntry>\n      <EnumEntry Name=\"AcquisitionStart\"><Value>0</Value></EnumEntry>",
+        )
+        .replace(
+            "<MaskedIntReg Name=\"TriggerModeReg\">",
+            "<MaskedIntReg Name=\"TriggerModeReg\">\n      <pIndex Offset=\"8\">TriggerSelectorReg</pIndex>",
+        )
+        .replace(
+            "<Group Comment=\"AcquisitionControl\">",
+            "<Group Comment=\"AcquisitionControl\">\n    <Enumeration Name=\"ExposureMode\">\n      \
+             <EnumEntry Name=\"Timed\"><Value>1</Value></EnumEntry>\n      \
+             <EnumEntry Name=\"TriggerWidth\"><Value>2</Value></EnumEntry>\n      \
+             <pValue>ExposureModeReg</pValue>\n    </Enumeration>\n    \
+             <IntReg Name=\"ExposureModeReg\"><Address>0x2002C</Address><Length>4</Length>\
+             <AccessMode>RW</AccessMode></IntReg>",
+        );
+    let mut cam = FakeCamera::new(xml.as_bytes(), false);
+    cam.put(0x2002C, &2u32.to_le_bytes());
+    cam.put(TRIGGER_SELECTOR, &0u32.to_le_bytes());
+    let c = CameraControl {
+        trigger: Some(Trigger::Line("Line0".into())),
+        exposure_us: Some(Setting::Fixed(1000.0)),
+        ..CameraControl::default()
+    };
+    let (lines, errors, cam) = control(cam, &c);
+    assert!(!errors, "{lines:?}");
+    assert_eq!(cam.u32_at(TRIGGER_SELECTOR), 1, "FrameStart");
+    assert_eq!(cam.u32_at(TRIGGER) & 1, 0, "AcquisitionStart's mode untouched");
+    assert_eq!(cam.u32_at(TRIGGER + 8) & 1, 1, "FrameStart's mode on");
+    assert_eq!(cam.u32_at(0x2002C), 1, "ExposureMode Timed");
+    assert_eq!(cam.f32_at(EXPOSURE), 1000.0);
 }

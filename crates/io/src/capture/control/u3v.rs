@@ -17,7 +17,7 @@
 //! | key | features |
 //! | --- | --- |
 //! | `trigger` | `TriggerSelector` = `FrameStart` (where it exists), `TriggerMode` = `Off`/`On`, `TriggerSource` = the line |
-//! | `exposure_us` | `ExposureAuto` = `Off` (if the camera has it) and `ExposureTime` (µs; `ExposureTimeAbs` on pre-SFNC-2 cameras), or `ExposureAuto` = `Continuous` |
+//! | `exposure_us` | `ExposureMode` = `Timed`, `ExposureAuto` = `Off` (each if the camera has it) and `ExposureTime` (µs; `ExposureTimeAbs` on pre-SFNC-2 cameras), or `ExposureAuto` = `Continuous` |
 //! | `gain` | `GainAuto` = `Off` (if it exists) and `Gain` (dB; `GainAbs`), or `GainAuto` = `Continuous` |
 //! | `white_balance` | `BalanceWhiteAuto` = `Off` / `Continuous` |
 //! | `frame_rate_hz` | `AcquisitionFrameRateEnable` = true (if it exists; `AcquisitionFrameRateEnabled` on some) and `AcquisitionFrameRate` (`AcquisitionFrameRateAbs`) |
@@ -259,6 +259,10 @@ fn write_setting(
         }
         Setting::Fixed(v) => {
             let mut checks = Vec::new();
+            // A time, not the trigger pulse's width: the exposure the rig file states.
+            if auto == "ExposureAuto" && map.has(port, "ExposureMode") {
+                checks.push(write_entry(map, port, "ExposureMode", "Timed")?);
+            }
             if map.has(port, auto) {
                 checks.push(write_entry(map, port, auto, "Off")?);
             }

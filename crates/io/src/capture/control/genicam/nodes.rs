@@ -10,10 +10,10 @@
 //! `Min`/`pMin`, `Max`/`pMax`, `Inc`/`pInc`, `OnValue`/`OffValue`, `Address` and `pAddress`
 //! (summed), `Length`, `Endianess`, `Sign`, `LSB`/`MSB`/`Bit`, `AccessMode`,
 //! `ImposedAccessMode`, `pIsImplemented`, `pIsAvailable`, `pIsLocked`, `pVariable`,
-//! `Constant`, `FormulaTo`/`FormulaFrom`/`Formula`. Not understood, each an error naming the
-//! node: any other kind (`Command`, `String`, `StringReg`, `Register`, `IntSwissKnife` with
-//! `Expression`s, …), selector-indexed registers (`pIndex`), variables with a suffix
-//! (`X.Max`), ports other than the device's. No value is cached: every read goes to the camera.
+//! `Constant`, `FormulaTo`/`FormulaFrom`/`Formula`, and selector-indexed registers (`pIndex`
+//! with `Offset` or `pOffset`). Not understood, each an error naming the node: any other kind
+//! (`Command`, `String`, `StringReg`, `Register`, SwissKnives with `Expression`s, …), variables
+//! with a suffix (`X.Max`), ports other than the device's. No value is cached: every read goes to the camera.
 
 use super::formula;
 use super::xml::Element;
@@ -250,11 +250,17 @@ impl NodeMap {
 
     /// A register node's address (every `Address` and `pAddress` summed) and length.
     fn register(&self, port: &mut dyn Port, e: &Element, name: &str, depth: usize) -> Result<(u64, usize), NodeError> {
-        if e.child("pIndex").is_some() {
-            return Err(error(
-                name,
-                NodeErrorKind::Unsupported("a selector-indexed register (pIndex)".into()),
-            ));
+        // A selector-indexed register: the selector's value times the offset, added.
+        let mut indexed = 0f64;
+        if let Some(index) = e.child("pIndex") {
+            let offset = match (index.attribute("Offset"), index.attribute("pOffset")) {
+                (Some(o), _) => {
+                    number(o).ok_or_else(|| error(name, NodeErrorKind::Invalid(format!("bad pIndex Offset '{o}'"))))?
+                }
+                (None, Some(p)) => self.get_at(port, p, depth + 1)?,
+                (None, None) => 1.0,
+            };
+            indexed = self.get_at(port, &index.text, depth + 1)? * offset;
         }
         if let Some(p) = e.child_text("pPort").filter(|p| *p != "Device") {
             return Err(error(name, NodeErrorKind::Unsupported(format!("the port '{p}'"))));
@@ -279,7 +285,8 @@ impl NodeMap {
                 ))
             }
         };
-        if !any || address < 0.0 {
+        address += indexed;
+        if !any || address < 0.0 || !address.is_finite() {
             return Err(error(name, NodeErrorKind::Invalid("no register address".into())));
         }
         Ok((address as u64, len))
