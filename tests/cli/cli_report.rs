@@ -549,7 +549,20 @@ fn check_json_reports_every_file_with_every_field() {
     for (s, json) in loaded.sensors.iter().zip(sensors) {
         assert_eq!(
             keys(json),
-            sorted(&["id", "width", "height", "lens", "max_off_axis_deg", "centre_m"])
+            sorted(&[
+                "id",
+                "width",
+                "height",
+                "lens",
+                "max_off_axis_deg",
+                "centre_m",
+                "control"
+            ])
+        );
+        assert_eq!(
+            json["control"],
+            serde_json::json!([]),
+            "no [control]: the camera left as it is"
         );
         assert_eq!(u(&json["id"]), s.id as u64);
         assert_eq!(

@@ -3,6 +3,7 @@
 #[path = "../common/mod.rs"]
 mod common;
 
+mod cli_control;
 mod cli_manual;
 mod cli_pose;
 mod cli_record;

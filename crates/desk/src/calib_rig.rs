@@ -40,12 +40,14 @@ pub fn assemble(name: &str, file: &str, cameras: Vec<Camera>, reference: usize) 
             device: None,
             usb_serial: None,
             crop: None,
+            control: Default::default(),
         })
         .collect();
     let rig = Rig {
         name: name.into(),
         sensors,
         usb: None,
+        control: Default::default(),
     };
     // Through the rig file's own checks (and its rounding of the quaternion's print): what the
     // user gets is exactly what `Rig::load` will read.

@@ -6,8 +6,10 @@
 //! The TOML is walked by hand rather than through serde derive so that each message can say which
 //! sensor (by id) a bad key belongs to, which serde's path-less errors cannot.
 
+pub mod control;
 pub mod view;
 
+pub use control::{CameraControl, Setting, Trigger};
 pub use view::ViewMap;
 
 use crate::geometry::{
@@ -41,6 +43,9 @@ pub struct Sensor {
     /// (several sensors may share one device, e.g. a dual-fisheye camera); width and height are
     /// the sensor's resolution.
     pub crop: Option<[u32; 4]>,
+    /// What the rig asks of this sensor's camera: its `[sensors.control]` keys over the rig's
+    /// `[control]`; empty leaves the camera as it is ([`control`]).
+    pub control: CameraControl,
 }
 
 /// How the rig's USB3 Vision cameras are found on the bus: the optional `[usb]` table.
@@ -63,6 +68,9 @@ pub struct Rig {
     pub sensors: Vec<Sensor>,
     /// The `[usb]` table, for `--source usb`.
     pub usb: Option<UsbRig>,
+    /// The rig-wide `[control]` table, every sensor's default (each sensor's merged control is
+    /// [`Sensor::control`]); kept to write the file back as it was.
+    pub control: CameraControl,
 }
 
 /// A rig file that cannot be used, with everything needed to fix it in one line.
@@ -78,7 +86,7 @@ pub struct RigError {
 /// The lens models a rig file may name.
 const LENS_MODELS: &str = "\"kb4\", \"pinhole\", \"radtan\", \"equirectangular\", \"ds\", \"eucm\" or \"omni\"";
 
-const SENSOR_KEYS: [&str; 10] = [
+const SENSOR_KEYS: [&str; 11] = [
     "id",
     "resolution",
     "model",
@@ -89,6 +97,7 @@ const SENSOR_KEYS: [&str; 10] = [
     "device",
     "usb_serial",
     "crop",
+    "control",
 ];
 
 impl Sensor {
@@ -163,10 +172,10 @@ impl Rig {
             err(String::new(), format!("not valid TOML: {}", one_line(&e.to_string())))
         })?;
         for key in table.keys() {
-            if key != "name" && key != "sensors" && key != "usb" {
+            if !["name", "sensors", "usb", "control"].contains(&key.as_str()) {
                 return Err(err(
                     format!("key '{key}': "),
-                    "unknown key (expected 'name', [[sensors]] and an optional [usb])".into(),
+                    "unknown key (expected 'name', [[sensors]], an optional [usb] and an optional [control])".into(),
                 ));
             }
         }
@@ -185,9 +194,10 @@ impl Rig {
                 ))
             }
         };
+        let control = control::rig_control(&table).map_err(|(key, m)| err(format!("key '{key}': "), m))?;
         let mut sensors: Vec<Option<Sensor>> = vec![None; entries.len()];
         for (index, entry) in entries.iter().enumerate() {
-            let sensor = parse_sensor(entry, index, entries.len()).map_err(|(place, m)| err(place, m))?;
+            let sensor = parse_sensor(entry, index, entries.len(), &control).map_err(|(place, m)| err(place, m))?;
             let id = sensor.id;
             if sensors[id].is_some() {
                 return Err(err(format!("sensor {id}, key 'id': "), "duplicate id".into()));
@@ -204,7 +214,12 @@ impl Rig {
             Some(v) => Some(parse_usb(v).map_err(|(place, m)| err(place, m))?),
         };
         check_usb_serials(&sensors).map_err(|(place, m)| err(place, m))?;
-        Ok(Rig { name, sensors, usb })
+        Ok(Rig {
+            name,
+            sensors,
+            usb,
+            control,
+        })
     }
 
     /// The rig as TOML in the format of docs/interfaces.md ("Rig file"), with every number written
@@ -217,6 +232,13 @@ impl Rig {
                 out,
                 "\n[usb]\nvendor_id = 0x{:04x}\nproduct_id = 0x{:04x}",
                 usb.vendor_id, usb.product_id
+            );
+        }
+        if !self.control.is_empty() {
+            let _ = write!(
+                out,
+                "\n[control]\n{}",
+                self.control.toml_lines(&CameraControl::default())
             );
         }
         for s in &self.sensors {
@@ -249,6 +271,10 @@ impl Rig {
             if let Some(serial) = &s.usb_serial {
                 let _ = writeln!(out, "usb_serial = {}", Value::String(serial.clone()));
             }
+            let own = s.control.toml_lines(&self.control);
+            if !own.is_empty() {
+                let _ = write!(out, "\n[sensors.control]\n{own}");
+            }
         }
         out
     }
@@ -266,7 +292,7 @@ pub fn one_line(s: &str) -> String {
 
 type PlaceError = (String, String);
 
-fn parse_sensor(entry: &Value, index: usize, count: usize) -> Result<Sensor, PlaceError> {
+fn parse_sensor(entry: &Value, index: usize, count: usize, rig_control: &CameraControl) -> Result<Sensor, PlaceError> {
     let at_entry = |m: &str| (format!("sensor entry {} (of {count}): ", index + 1), m.to_string());
     let Value::Table(t) = entry else {
         return Err(at_entry("must be a table ([[sensors]])"));
@@ -444,6 +470,14 @@ fn parse_sensor(entry: &Value, index: usize, count: usize) -> Result<Sensor, Pla
             Some([c[0] as u32, c[1] as u32, c[2] as u32, c[3] as u32])
         }
     };
+    let own = match t.get("control") {
+        None => CameraControl::default(),
+        Some(v) => control::parse_control(v).map_err(|(key, m)| fail(&key, m))?,
+    };
+    let control = rig_control.overridden_by(&own);
+    if let Some((key, m)) = control.contradiction() {
+        return Err(fail(&key, m));
+    }
     Ok(Sensor {
         id,
         width: resolution[0] as u32,
@@ -453,6 +487,7 @@ fn parse_sensor(entry: &Value, index: usize, count: usize) -> Result<Sensor, Pla
         device,
         usb_serial,
         crop,
+        control,
     })
 }
 

@@ -20,7 +20,7 @@
 
 use super::SourceError;
 use omnitrack_core::frame::SensorImage;
-use omnitrack_core::rig::Rig;
+use omnitrack_core::rig::{CameraControl, Rig};
 use std::fmt::Write as _;
 
 /// Most sensors one device's frame may be split into (a fixed bound, so that a capture thread
@@ -40,7 +40,7 @@ pub struct Window {
 }
 
 /// One camera to open: a V4L2 device or a USB3 Vision camera, and the sensors it delivers.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct CaptureDevice {
     /// Device number, in the order of each device's first sensor (see the module doc).
     pub index: usize,
@@ -61,6 +61,9 @@ pub struct CaptureDevice {
     pub windows: Vec<Window>,
     /// The frame is the one sensor's image: read straight into its buffer, no copy.
     pub direct: bool,
+    /// What the rig asks of the camera (its sensors' `[control]`, which must agree); empty
+    /// leaves it as it is.
+    pub control: CameraControl,
 }
 
 impl CaptureDevice {
@@ -135,6 +138,16 @@ pub fn capture_devices(rig: &Rig) -> Result<Vec<CaptureDevice>, SourceError> {
                 )));
             }
         }
+        // One camera has one exposure: sensors cut from its frame must ask the same of it.
+        if let Some(&k) = group.iter().find(|&&k| rig.sensors[k].control != first.control) {
+            let keys = first.control.differing_keys(&rig.sensors[k].control);
+            return Err(rig_error(format!(
+                "{label} share '{shared_name}', but sensor {k}'s control.{} differs from sensor {}'s: \
+                 one camera takes one setting",
+                keys.first().copied().unwrap_or("exposure_us"),
+                group[0]
+            )));
+        }
         let direct = group.len() == 1 && first.crop.is_none();
         let windows: Vec<Window> = group
             .iter()
@@ -162,6 +175,7 @@ pub fn capture_devices(rig: &Rig) -> Result<Vec<CaptureDevice>, SourceError> {
             usb_serial: first.usb_serial.clone(),
             windows,
             direct,
+            control: first.control.clone(),
         });
     }
     Ok(devices)
@@ -286,6 +300,20 @@ mod tests {
         let d = capture_devices(&r).unwrap();
         assert_eq!((d.len(), d[0].width, d[0].height), (1, 4, 6));
         assert_eq!(d[0].usb_serial.as_deref(), Some("A"));
+        // They take one [control] between them: the same, or the camera could not honour both.
+        let r = rig(&[
+            "usb_serial = \"A\"\ncrop = [0, 0, 4, 3]\n[sensors.control]\nexposure_us = 100",
+            "usb_serial = \"A\"\ncrop = [0, 3, 4, 3]\n[sensors.control]\nexposure_us = 100",
+        ]);
+        assert_eq!(capture_devices(&r).unwrap()[0].control, r.sensors[0].control);
+        let r = rig(&[
+            "usb_serial = \"A\"\ncrop = [0, 0, 4, 3]\n[sensors.control]\nexposure_us = 100",
+            "usb_serial = \"A\"\ncrop = [0, 3, 4, 3]\n[sensors.control]\nexposure_us = 200\ngain = 2",
+        ]);
+        assert_eq!(
+            capture_devices(&r).unwrap_err().to_string(),
+            "t: sensors 0 and 1 share 'A', but sensor 1's control.exposure_us differs from sensor 0's: one camera takes one setting"
+        );
     }
 
     #[test]

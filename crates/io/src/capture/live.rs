@@ -115,6 +115,12 @@ pub trait LiveCamera: Sized + Send {
         let _ = stop;
         self.read(img)
     }
+
+    /// What the camera made of the rig's `[control]` when it was opened (`None`: nothing was
+    /// asked, or the driver has no control channel).
+    fn control_report(&self) -> Option<&super::control::ControlReport> {
+        None
+    }
 }
 
 /// The longest a live read waits before it looks at the run's stop flag again.
@@ -359,5 +365,12 @@ impl<C: LiveCamera> FrameSource for LiveSource<C> {
 
     fn stats(&self) -> &SourceStats {
         &self.stats
+    }
+
+    fn control_reports(&self) -> Vec<super::control::ControlReport> {
+        self.slots
+            .iter()
+            .filter_map(|s| s.camera.as_ref()?.control_report().cloned())
+            .collect()
     }
 }

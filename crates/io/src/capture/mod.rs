@@ -30,6 +30,7 @@
 //! [`SourceStats`], warned on standard error a few times per kind, and the stream goes on.
 //! [`SourceError`] is only for the whole source failing (cannot open, wrong frame set).
 
+pub mod control;
 pub mod convert;
 pub mod device;
 pub mod live;
@@ -39,14 +40,18 @@ pub mod spec;
 pub mod u3v;
 #[cfg(feature = "usb")]
 pub mod usb;
+#[cfg(feature = "usb")]
+pub mod usb_control;
 #[cfg(feature = "v4l")]
 pub mod v4l2;
+#[cfg(feature = "v4l")]
+pub mod v4l2_ioctl;
 
 pub use live::LiveSource;
 pub use omnitrack_core::frame::{FrameSet, ImageFault, SensorImage};
 pub use open::{open_source, open_source_with};
 pub use replay::{Pacing, ReplaySource};
-pub use spec::{SourceOptions, SourceSpec, SourceSpecError};
+pub use spec::{ControlPolicy, SourceOptions, SourceSpec, SourceSpecError};
 
 use omnitrack_core::rig::{Rig, RigError};
 use omnitrack_core::trajectory::TumError;
@@ -248,6 +253,12 @@ pub trait FrameSource {
 
     /// Counters so far.
     fn stats(&self) -> &SourceStats;
+
+    /// What each live camera made of the rig's `[control]` when it was last opened, one report
+    /// per camera asked anything ([`control`]); none for a recording.
+    fn control_reports(&self) -> Vec<control::ControlReport> {
+        Vec::new()
+    }
 }
 
 /// The longest a source's own wait goes without looking at its caller's stop

@@ -105,6 +105,20 @@ pub struct SourceOptions {
     pub frame_timeout: Duration,
     /// How often a lost live sensor is reopened (default 1 s).
     pub reopen_interval: Duration,
+    /// What a live camera's control errors do when it is opened: stop the opening (`run`,
+    /// `record`) or only be reported (`check --source`).
+    pub control: ControlPolicy,
+}
+
+/// What a live camera that does not take the rig's `[control]` as asked does to its opening.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum ControlPolicy {
+    /// A control error fails the opening, in one line naming the first and counting the rest.
+    #[default]
+    Enforce,
+    /// The camera opens whatever its controls did; the report is kept for
+    /// [`super::FrameSource::control_reports`].
+    Report,
 }
 
 impl Default for SourceOptions {
@@ -113,6 +127,7 @@ impl Default for SourceOptions {
             pacing: Pacing::RealTime,
             frame_timeout: Duration::from_secs(1),
             reopen_interval: Duration::from_secs(1),
+            control: ControlPolicy::Enforce,
         }
     }
 }

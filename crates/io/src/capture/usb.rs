@@ -23,12 +23,15 @@
 //! Timestamps are [`host_time_ns`] when a frame's trailer arrives: the cameras' own tick
 //! counters are not on one clock.
 //!
-//! Not supported: the control channel. USB3 Vision cameras are configured and started through
-//! GenCP register writes whose addresses (pixel format, size, `AcquisitionStart`) come from each
-//! camera model's GenICam XML; parsing GenICam is outside this module, so the cameras must already
-//! be set to the sensor's size and a supported pixel format and be acquiring (e.g. with the
-//! vendor's tool and saved user settings that start acquisition at power-up). Frames of another
-//! size or format are rejected and counted, never shown.
+//! Camera control: a capture device whose sensors have a `[control]` table gets it through the
+//! camera's control interface when it is opened (and reopened), before frames are read
+//! ([`super::usb_control`]: exposure, gain, frame rate, white balance, trigger, each read back);
+//! a key the camera refuses, lacks or changes stops the opening with one line. Not done here: the
+//! image format and acquisition start (GenICam's `PixelFormat`, `Width`, `Height`,
+//! `AcquisitionStart`), so the cameras must already be set to the sensor's size and a supported
+//! pixel format and be acquiring (e.g. with the vendor's tool and saved user settings that start
+//! acquisition at power-up). Frames of another size or format are rejected and counted, never
+//! shown.
 //!
 //! Allocation: opening allocates (device lists, the transfer buffer and the parser's payload
 //! buffer); reading allocates nothing in Rust. libusb's synchronous bulk transfer allocates its
@@ -112,6 +115,8 @@ pub struct UsbCamera {
     /// see the module doc).
     size: (u32, u32),
     timeout: Duration,
+    /// What the camera made of the rig's `[control]`, if anything was asked.
+    control: Option<super::control::ControlReport>,
 }
 
 impl std::fmt::Debug for UsbCamera {
@@ -249,6 +254,12 @@ impl LiveCamera for UsbCamera {
         handle
             .claim_interface(interface)
             .map_err(|e| usb_error(&name, label, "cannot claim the streaming interface", e))?;
+        let mut control = None;
+        if !target.control.is_empty() {
+            let report = super::usb_control::apply(&device, &handle, &target.control, &name, label)?;
+            super::control::settle(&report, options.control)?;
+            control = Some(report);
+        }
         env.ports[id] = Some((bus, ports));
         Ok(UsbCamera {
             name,
@@ -258,6 +269,7 @@ impl LiveCamera for UsbCamera {
             parser: U3vStream::new(target.width, target.height),
             size: (target.width, target.height),
             timeout: options.frame_timeout,
+            control,
         })
     }
 
@@ -267,6 +279,10 @@ impl LiveCamera for UsbCamera {
 
     fn frame_size(&self) -> (u32, u32) {
         self.size
+    }
+
+    fn control_report(&self) -> Option<&super::control::ControlReport> {
+        self.control.as_ref()
     }
 
     fn read(&mut self, img: &mut SensorImage) -> Result<u64, ReadFailure> {

@@ -14,6 +14,12 @@
 //! `BA81` (BGGR). A device whose offered formats all fail at that size is an error listing what it
 //! offers. Then [`BUFFERS`] driver buffers are memory-mapped and streaming starts on the first read.
 //!
+//! Camera control: when the sensors ask for it (`[control]` of the rig file), the exposure,
+//! gain, white balance and frame interval are set once the format is, before the buffers are
+//! requested, and each is read back ([`super::control::v4l2`] over [`super::v4l2_ioctl`]); under
+//! the default [`ControlPolicy::Enforce`](super::ControlPolicy) a control the device refuses,
+//! lacks or changes fails the opening in one line.
+//!
 //! Reading: each read waits (up to the frame timeout; after the first, which starts the stream,
 //! in polls of [`READ_SLICE`] with the run's stop looked at between them) for the next filled
 //! buffer, converts its
@@ -196,6 +202,8 @@ pub struct V4l2Camera {
     streaming: bool,
     /// `Some` until dropped; taken by [`Drop`] to stop it without panicking.
     stream: Option<Stream<'static>>,
+    /// What the device made of the rig's `[control]`, if anything was asked.
+    control: Option<super::control::ControlReport>,
     /// Kept open for the stream's lifetime.
     _device: Device,
 }
@@ -309,6 +317,16 @@ impl LiveCamera for V4l2Camera {
                 ),
             });
         };
+        // Before the buffers are requested: drivers refuse a new frame interval (EBUSY) once
+        // buffers are allocated.
+        let mut control = None;
+        if !target.control.is_empty() {
+            let mut report = super::control::ControlReport::new(path, id);
+            let mut io = super::v4l2_ioctl::DeviceControls::new(&device);
+            super::control::v4l2::apply(&mut io, &target.control, &mut report);
+            super::control::settle(&report, options.control)?;
+            control = Some(report);
+        }
         // The driver's size: larger than asked for a device split into crops.
         let (w, h) = (set.width, set.height);
         let packed = w as usize * format.bytes_per_pixel();
@@ -327,6 +345,7 @@ impl LiveCamera for V4l2Camera {
             handle: device.handle(),
             streaming: false,
             stream: Some(stream),
+            control,
             _device: device,
         })
     }
@@ -337,6 +356,10 @@ impl LiveCamera for V4l2Camera {
 
     fn frame_size(&self) -> (u32, u32) {
         (self.width, self.height)
+    }
+
+    fn control_report(&self) -> Option<&super::control::ControlReport> {
+        self.control.as_ref()
     }
 
     fn read(&mut self, img: &mut SensorImage) -> Result<u64, ReadFailure> {
