@@ -6,7 +6,7 @@
 //! each pose sample. Out: for a sample at least [`ImageOptions::every`] after the last image set,
 //! one (image, annotations) pair per sensor, as JSON bytes.
 //!
-//! The images are the view's own reading of the recording, not the tracker's frames: the
+//! [`Worker`] runs them on a thread of their own. The images are the view's own reading of the recording, not the tracker's frames: the
 //! tracker shares nothing but its pose and status, so the view never touches its frame path.
 //! The frame of a sample is the recording's frame at the sample's sequence number, checked by
 //! its timestamp (a sample whose frame has another time gets no images, counted). A live camera
@@ -18,6 +18,8 @@
 //! thread.
 
 use std::path::PathBuf;
+use std::sync::mpsc::{channel, sync_channel, Receiver, SyncSender, TrySendError};
+use std::thread::JoinHandle;
 use std::time::Duration;
 
 use base64::Engine;
@@ -106,7 +108,7 @@ impl Images {
 
     /// The image set of a sample, if one is due: per sensor, its `CompressedImage` and its
     /// `ImageAnnotations`.
-    pub fn at(&mut self, s: &PoseSample) -> Result<Option<Vec<(Vec<u8>, Vec<u8>)>>, ImageError> {
+    pub fn at(&mut self, s: &PoseSample) -> Result<Option<ImageSet>, ImageError> {
         let t = s.timestamp_ns;
         if self.last_ns.is_some_and(|last| t.saturating_sub(last) < self.every_ns) {
             return Ok(None);
@@ -152,6 +154,84 @@ impl Images {
             set.push((to_bytes(&compressed), to_bytes(&annotations)));
         }
         Ok(Some(set))
+    }
+}
+
+/// One sensor's image and its annotations, as JSON bytes.
+pub type ImageSet = Vec<(Vec<u8>, Vec<u8>)>;
+
+/// [`Images`] on a thread of their own: the view's pose loop hands a sample over when the
+/// thread is idle and never waits for an image to be read, detected and encoded (tens of
+/// milliseconds), so that the poses reach the viewer and the file at the tracker's rate.
+pub struct Worker {
+    to: Option<SyncSender<PoseSample>>,
+    from: Receiver<Result<(u64, ImageSet), ImageError>>,
+    thread: Option<JoinHandle<()>>,
+    sensors: usize,
+    /// Samples offered while the thread was busy.
+    pub busy: u64,
+}
+
+impl Worker {
+    /// Starts the thread.
+    pub fn start(mut images: Images) -> Worker {
+        let sensors = images.sensors();
+        let (to, rx) = sync_channel::<PoseSample>(1);
+        let (tx, from) = channel();
+        let thread = std::thread::Builder::new()
+            .name("view-images".into())
+            .spawn(move || {
+                for s in rx {
+                    match images.at(&s) {
+                        Ok(Some(set)) => {
+                            if tx.send(Ok((s.timestamp_ns, set))).is_err() {
+                                return;
+                            }
+                        }
+                        Ok(None) => {}
+                        Err(e) => {
+                            let _ = tx.send(Err(e));
+                            return;
+                        }
+                    }
+                }
+            })
+            .ok();
+        Worker {
+            to: thread.is_some().then_some(to),
+            from,
+            thread,
+            sensors,
+            busy: 0,
+        }
+    }
+
+    /// Sensors of the recording's rig.
+    pub fn sensors(&self) -> usize {
+        self.sensors
+    }
+
+    /// Hands `s` to the thread if it is idle; never blocks.
+    pub fn offer(&mut self, s: &PoseSample) {
+        if let Some(to) = &self.to {
+            if let Err(TrySendError::Full(_)) = to.try_send(*s) {
+                self.busy += 1;
+            }
+        }
+    }
+
+    /// An image set made since the last call (its sample's time), or why the images stopped.
+    pub fn take(&self) -> Option<Result<(u64, ImageSet), ImageError>> {
+        self.from.try_recv().ok()
+    }
+
+    /// Lets the thread finish the sample in hand and returns what it made since the last take.
+    pub fn finish(mut self) -> Vec<Result<(u64, ImageSet), ImageError>> {
+        drop(self.to.take());
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+        self.from.try_iter().collect()
     }
 }
 

@@ -104,6 +104,10 @@ pub struct Summary {
     pub mcap_error: Option<String>,
     /// Image sets (one image per sensor) sent.
     pub image_sets: u64,
+    /// Pose samples that came while the images' thread was busy (no image set looked for).
+    pub images_skipped: u64,
+    /// Why the images stopped before the end, if they did.
+    pub images_error: Option<String>,
     /// WebSocket messages sent, lost by slow clients, connections refused.
     pub ws_sent: u64,
     pub ws_dropped: u64,
@@ -122,6 +126,25 @@ impl Out {
         self.to_file(channel, log_time_ns, data);
         if let Some(server) = &mut self.server {
             server.send(channel, log_time_ns, data);
+        }
+    }
+
+    /// Sends an image set; false when the images stopped (one line says why; the poses go on).
+    fn images(&mut self, made: Result<(u64, images::ImageSet), images::ImageError>) -> bool {
+        match made {
+            Ok((t, set)) => {
+                self.summary.image_sets += 1;
+                for (k, (image, annotations)) in set.into_iter().enumerate() {
+                    self.send(ch::FIXED + 2 * k, t, &image);
+                    self.send(ch::FIXED + 2 * k + 1, t, &annotations);
+                }
+                true
+            }
+            Err(e) => {
+                eprintln!("omnitrack-view: images: {e}; the images stop here, the poses go on");
+                self.summary.images_error = Some(e.to_string());
+                false
+            }
         }
     }
 
@@ -187,7 +210,10 @@ pub fn run(o: &Options, stop: &AtomicBool, on_start: &mut dyn FnMut(Option<Socke
         None => Vec::new(),
     };
     let mut images = match &o.images {
-        Some(io) => Some(images::Images::open(io, o.model.is_some().then_some(&segments))?),
+        Some(io) => Some(images::Worker::start(images::Images::open(
+            io,
+            o.model.is_some().then_some(&segments),
+        )?)),
         None => None,
     };
     let table = channels(images.as_ref().map_or(0, |i| i.sensors()));
@@ -262,18 +288,23 @@ pub fn run(o: &Options, stop: &AtomicBool, on_start: &mut dyn FnMut(Option<Socke
         } else {
             trajectory.flush(&mut out, false);
         }
-        if let Some(images) = &mut images {
-            if let Some(set) = images.at(&sample)? {
-                out.summary.image_sets += 1;
-                for (k, (image, annotations)) in set.into_iter().enumerate() {
-                    let (image_channel, annotation_channel) = (ch::FIXED + 2 * k, ch::FIXED + 2 * k + 1);
-                    out.send(image_channel, t, &image);
-                    out.send(annotation_channel, t, &annotations);
+        if let Some(worker) = &mut images {
+            worker.offer(&sample);
+            while let Some(made) = worker.take() {
+                if !out.images(made) {
+                    images = None;
+                    break;
                 }
             }
         }
     }
     trajectory.flush(&mut out, false);
+    if let Some(worker) = images {
+        out.summary.images_skipped = worker.busy;
+        for made in worker.finish() {
+            out.images(made);
+        }
+    }
     let mut summary = std::mem::take(&mut out.summary);
     if let Some(file) = out.mcap.take() {
         match file.finish() {
