@@ -129,6 +129,17 @@ impl Out {
         }
     }
 
+    /// A quiet moment: the file gets what it holds in memory, at most once per flush interval.
+    fn tick(&mut self) {
+        if let Some(file) = &mut self.mcap {
+            if let Err(e) = file.tick() {
+                eprintln!("omnitrack-view: {e}; the file ends here, the live view goes on");
+                self.summary.mcap_error = Some(e.to_string());
+                self.mcap = None;
+            }
+        }
+    }
+
     /// Sends an image set; false when the images stopped (one line says why; the poses go on).
     fn images(&mut self, made: Result<(u64, images::ImageSet), images::ImageError>) -> bool {
         match made {
@@ -261,7 +272,10 @@ pub fn run(o: &Options, stop: &AtomicBool, on_start: &mut dyn FnMut(Option<Socke
         }
         let sample = match poses.wait(Duration::from_millis(20)) {
             Ok(Some(s)) => s,
-            Ok(None) => continue,
+            Ok(None) => {
+                out.tick();
+                continue;
+            }
             // SIGINT/SIGTERM interrupt the wait (iceoryx2 reports it as an error): a stop.
             Err(_) if stop.load(Ordering::Relaxed) => break,
             Err(e) => return Err(e.into()),

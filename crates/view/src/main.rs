@@ -10,7 +10,8 @@
 //! ```
 //!
 //! `serve` says where to connect on standard error at start and prints a summary line at the
-//! end. Errors are one line on standard error and exit code 1; usage errors exit 2.
+//! end. Errors are one line on standard error and exit code 1; usage errors are one line too
+//! and exit 2.
 
 use clap::{Parser, Subcommand};
 use omnitrack_view::images::ImageOptions;
@@ -77,8 +78,8 @@ enum Command {
         /// The building model, drawn under the trajectory and re-projected into the images.
         #[arg(long, value_name = "MODEL.obj")]
         model: Option<PathBuf>,
-        /// The recording the tracker replays (`--source replay:DIR`): its images go out with the
-        /// re-projected model and the detected edges.
+        /// The recording the tracker replays (its source `replay:DIR`): its images go out with
+        /// the re-projected model and the detected edges.
         #[arg(long, value_name = "DIR")]
         recording: Option<PathBuf>,
         /// At most one set of images per this many seconds of the recording.
@@ -178,7 +179,10 @@ fn manual() -> omnitrack_manual::Manual {
 }
 
 fn main() {
-    match run_cli(Cli::parse()) {
+    match run_cli(omnitrack_runtime::cli::parse_or_exit::<Cli>(
+        "omnitrack-view",
+        "omnitrack-view serve",
+    )) {
         Ok(()) => {}
         Err(MainError::Output(e)) if e.kind() == std::io::ErrorKind::BrokenPipe => {}
         Err(e) => {

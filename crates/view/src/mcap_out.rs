@@ -6,8 +6,8 @@
 //! messages in uncompressed chunks, and at [`McapOut::finish`] the summary (statistics,
 //! chunk and message indexes) that lets a viewer seek.
 //!
-//! What a crash can lose: the chunk being filled. [`McapOut::write`] closes the chunk and
-//! flushes the file every [`FLUSH_EVERY`], so a SIGKILL loses at most that much of the run, and
+//! What a crash can lose: the chunk being filled. [`McapOut::write`] and [`McapOut::tick`]
+//! close the chunk and flush the file every [`FLUSH_EVERY`], so a SIGKILL loses at most that much of the run, and
 //! the file up to there reads with a streaming reader (the summary is missing, not the
 //! messages). A failed write is reported once and the file is closed there; the caller goes on
 //! serving the live view (the poses are the tracker's, not the file's).
@@ -97,6 +97,17 @@ impl McapOut {
             .write_to_known_channel(&header, data)
             .map_err(|e| self.error("write", e.to_string()))?;
         self.messages += 1;
+        if self.flushed.elapsed() >= FLUSH_EVERY {
+            self.flushed = Instant::now();
+            self.writer.flush().map_err(|e| self.error("write", e.to_string()))?;
+        }
+        Ok(())
+    }
+
+    /// Closes the chunk and flushes the file if [`FLUSH_EVERY`] has passed since the last flush:
+    /// called when no message came for a while, so that a quiet tracker's last poses reach the
+    /// disk too.
+    pub fn tick(&mut self) -> Result<(), McapError> {
         if self.flushed.elapsed() >= FLUSH_EVERY {
             self.flushed = Instant::now();
             self.writer.flush().map_err(|e| self.error("write", e.to_string()))?;
