@@ -410,3 +410,181 @@ fn handle_request(
     }
     added
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::schemas::channels;
+    use std::time::Instant;
+    use tungstenite::client::IntoClientRequest;
+
+    type Client = WebSocket<TcpStream>;
+
+    /// A client, once the server took its connection (the server's handshake is on its
+    /// client's thread).
+    fn connect(server: &mut Server) -> Client {
+        let addr = server.addr();
+        let request = format!("ws://{addr}").into_client_request().unwrap();
+        let stream = TcpStream::connect(addr).unwrap();
+        let deadline = Instant::now() + Duration::from_secs(5);
+        let before = server.clients();
+        while server.clients() == before && Instant::now() < deadline {
+            server.accept();
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        stream.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+        let (mut ws, _) = tungstenite::client(request, stream).unwrap();
+        ws.get_mut().set_read_timeout(Some(Duration::from_millis(100))).unwrap();
+        for op in ["serverInfo", "advertise"] {
+            assert_eq!(text(&mut ws)["op"], op);
+        }
+        ws
+    }
+
+    fn text(ws: &mut Client) -> Value {
+        let deadline = Instant::now() + Duration::from_secs(5);
+        loop {
+            match ws.read() {
+                Ok(Message::Text(t)) => return serde_json::from_str(t.as_str()).unwrap(),
+                Ok(m) => panic!("expected text, got {m:?}"),
+                Err(_) if Instant::now() < deadline => {}
+                Err(e) => panic!("{e}"),
+            }
+        }
+    }
+
+    /// Message frames (subscription, time, payload) until `n` came or a second passed.
+    fn frames(ws: &mut Client, server: &mut Server, n: usize) -> Vec<(u32, u64, String)> {
+        let mut got = Vec::new();
+        let deadline = Instant::now() + Duration::from_secs(1);
+        while got.len() < n && Instant::now() < deadline {
+            server.accept();
+            if let Ok(Message::Binary(b)) = ws.read() {
+                let sub = u32::from_le_bytes(b[1..5].try_into().unwrap());
+                let t = u64::from_le_bytes(b[5..13].try_into().unwrap());
+                got.push((sub, t, String::from_utf8(b[13..].to_vec()).unwrap()));
+            }
+        }
+        got
+    }
+
+    fn subscribe(ws: &mut Client, id: u32, channel_index: usize) {
+        let s = json!({"op": "subscribe", "subscriptions": [{"id": id, "channelId": channel_index + 1}]});
+        ws.send(Message::text(s.to_string())).unwrap();
+    }
+
+    fn server() -> Server {
+        let mut keep = vec![Keep::Last; channels(0).len()];
+        keep[1] = Keep::All;
+        Server::bind("127.0.0.1:0".parse().unwrap(), channels(0), &keep).unwrap()
+    }
+
+    #[test]
+    fn a_late_subscriber_gets_what_its_channel_keeps_once_then_what_follows() {
+        let mut server = server();
+        let mut ws = connect(&mut server);
+        // Before anyone subscribes: channel 0 keeps its last, channel 1 all.
+        server.send(0, 1, b"{\"a\":1}");
+        server.send(0, 2, b"{\"a\":2}");
+        server.send(1, 3, b"{\"b\":1}");
+        server.send(1, 4, b"{\"b\":2}");
+        subscribe(&mut ws, 7, 0);
+        subscribe(&mut ws, 9, 1);
+        let kept = frames(&mut ws, &mut server, 3);
+        assert_eq!(
+            kept,
+            [
+                (7, 2, "{\"a\":2}".to_string()),
+                (9, 3, "{\"b\":1}".to_string()),
+                (9, 4, "{\"b\":2}".to_string())
+            ]
+        );
+        server.send(0, 5, b"{\"a\":3}");
+        server.send(2, 6, b"{}");
+        let next = frames(&mut ws, &mut server, 2);
+        assert_eq!(
+            next,
+            [(7, 5, "{\"a\":3}".to_string())],
+            "nothing of channel 2, nothing twice"
+        );
+        ws.send(Message::text(
+            json!({"op": "unsubscribe", "subscriptionIds": [7]}).to_string(),
+        ))
+        .unwrap();
+        std::thread::sleep(Duration::from_millis(100));
+        server.send(0, 8, b"{\"a\":4}");
+        assert!(frames(&mut ws, &mut server, 1).is_empty(), "unsubscribed");
+        assert_eq!(server.close().1, 0, "nothing dropped");
+    }
+
+    #[test]
+    fn requests_it_does_not_understand_get_a_warning_and_the_connection_stays() {
+        let mut server = server();
+        let mut ws = connect(&mut server);
+        for (request, says) in [
+            ("not json", "not JSON"),
+            ("{\"op\":\"advertise\"}", "'advertise' is not supported"),
+            (
+                "{\"op\":\"subscribe\",\"subscriptions\":[{\"id\":1,\"channelId\":999}]}",
+                "cannot subscribe 1 to channel 999",
+            ),
+        ] {
+            ws.send(Message::text(request)).unwrap();
+            let status = text(&mut ws);
+            assert_eq!(
+                (status["op"].as_str(), status["level"].as_u64()),
+                (Some("status"), Some(1))
+            );
+            assert!(status["message"].as_str().unwrap().contains(says), "{status}");
+        }
+        subscribe(&mut ws, 1, 0);
+        std::thread::sleep(Duration::from_millis(100));
+        server.send(0, 1, b"{}");
+        assert_eq!(frames(&mut ws, &mut server, 1).len(), 1);
+    }
+
+    #[test]
+    fn a_client_that_reads_nothing_never_holds_up_the_sender_or_the_others() {
+        let mut server = server();
+        // Subscribed, then never reads: its socket and queue fill.
+        let mut stalled = connect(&mut server);
+        subscribe(&mut stalled, 1, 0);
+        let mut reader = connect(&mut server);
+        subscribe(&mut reader, 1, 0);
+        std::thread::sleep(Duration::from_millis(200));
+        let payload = vec![b'x'; 64 << 10];
+        let started = Instant::now();
+        for t in 0..2_000 {
+            server.send(0, t, &payload);
+            if t % 50 == 0 {
+                let _ = frames(&mut reader, &mut server, 1);
+            }
+        }
+        assert!(started.elapsed() < Duration::from_secs(30), "{:?}", started.elapsed());
+        let (_, dropped, _) = server.counts();
+        assert!(
+            dropped > 0,
+            "128 MB to a client that reads nothing: some must be dropped"
+        );
+        let _ = frames(&mut reader, &mut server, 1);
+        drop(stalled);
+    }
+
+    #[test]
+    fn more_clients_than_it_serves_are_refused_and_a_port_in_use_is_named() {
+        let mut server = server();
+        let addr = server.addr();
+        let clients: Vec<Client> = (0..MAX_CLIENTS).map(|_| connect(&mut server)).collect();
+        let extra = TcpStream::connect(addr).unwrap();
+        std::thread::sleep(Duration::from_millis(50));
+        server.accept();
+        assert_eq!(server.counts().2, 1);
+        assert_eq!(server.clients(), MAX_CLIENTS);
+        drop((clients, extra));
+        let e = Server::bind(addr, channels(0), &[]).err().unwrap().to_string();
+        assert!(
+            e.starts_with(&addr.to_string()) && e.contains("choose another with --port"),
+            "{e}"
+        );
+    }
+}
