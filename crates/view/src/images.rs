@@ -251,7 +251,9 @@ fn encode_jpeg(rgb: &[u8], width: u32, height: u32, quality: u8) -> Result<Vec<u
 fn world_to_rig(s: &PoseSample) -> Option<(UnitQuaternion<f64>, Vector3<f64>)> {
     let [w, x, y, z] = s.rotation_wxyz;
     let q = nalgebra::Quaternion::new(w, x, y, z);
-    if !(q.norm() - 1.0).abs().lt(&1e-6) {
+    // A sample with a zero or damaged quaternion (NaN fails the test too) has no pose to draw.
+    let unit = (q.norm() - 1.0).abs() < 1e-6;
+    if !unit {
         return None;
     }
     let r_world_rig = UnitQuaternion::from_quaternion(q);

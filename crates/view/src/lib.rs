@@ -123,7 +123,7 @@ struct Out {
 
 impl Out {
     fn send(&mut self, channel: usize, log_time_ns: u64, data: &[u8]) {
-        self.to_file(channel, log_time_ns, data);
+        self.write_file(channel, log_time_ns, data);
         if let Some(server) = &mut self.server {
             server.send(channel, log_time_ns, data);
         }
@@ -159,7 +159,7 @@ impl Out {
         }
     }
 
-    fn to_file(&mut self, channel: usize, log_time_ns: u64, data: &[u8]) {
+    fn write_file(&mut self, channel: usize, log_time_ns: u64, data: &[u8]) {
         if let Some(file) = &mut self.mcap {
             match file.write(channel, log_time_ns, data) {
                 Ok(()) => self.summary.mcap_messages += 1,
@@ -257,18 +257,29 @@ pub fn run(o: &Options, stop: &AtomicBool, on_start: &mut dyn FnMut(Option<Socke
     let mut trajectory = Trajectory::default();
     let mut last_status: Option<StatusSample> = None;
     let mut last_sequence: Option<u64> = None;
+    // A service that fails mid-run ends the loop, not the file: what came is finished first.
+    let mut failure: Option<PublishError> = None;
 
     while !stop.load(Ordering::Relaxed) && o.count.is_none_or(|n| out.summary.poses < n) {
         if let Some(server) = &mut out.server {
             server.accept();
         }
-        while let Some(s) = statuses.receive()? {
+        let status = match statuses.receive() {
+            Ok(s) => s,
+            Err(e) => {
+                failure = Some(e);
+                break;
+            }
+        };
+        if let Some(s) = status {
             out.summary.statuses += 1;
             out.send(ch::STATUS, s.timestamp_ns, &messages::status_sample(&s));
             if let Some((level, line)) = messages::state_change(last_status.as_ref(), &s) {
                 out.send(ch::LOG, s.timestamp_ns, &messages::log(s.timestamp_ns, level, &line));
             }
             last_status = Some(s);
+            // The next status before the next pose wait: a burst is taken whole.
+            continue;
         }
         let sample = match poses.wait(Duration::from_millis(20)) {
             Ok(Some(s)) => s,
@@ -278,11 +289,14 @@ pub fn run(o: &Options, stop: &AtomicBool, on_start: &mut dyn FnMut(Option<Socke
             }
             // SIGINT/SIGTERM interrupt the wait (iceoryx2 reports it as an error): a stop.
             Err(_) if stop.load(Ordering::Relaxed) => break,
-            Err(e) => return Err(e.into()),
+            Err(e) => {
+                failure = Some(e);
+                break;
+            }
         };
         let t = sample.timestamp_ns;
         if !model_in_file {
-            out.to_file(ch::MODEL, t, &messages::model(&segments, t));
+            out.write_file(ch::MODEL, t, &messages::model(&segments, t));
             model_in_file = true;
         }
         out.summary.poses += 1;
@@ -328,6 +342,9 @@ pub fn run(o: &Options, stop: &AtomicBool, on_start: &mut dyn FnMut(Option<Socke
     }
     if let Some(server) = out.server.take() {
         (summary.ws_sent, summary.ws_dropped, summary.ws_refused) = server.close();
+    }
+    if let Some(e) = failure {
+        return Err(e.into());
     }
     Ok(summary)
 }
