@@ -212,8 +212,20 @@ mod bench {
             .collect();
         let mut plan = vec![
             ("as fast as it decodes, lossless", None, true, false, false),
-            ("paced 30 Hz, latest wins, standing still to start", pace, false, true, false),
-            ("paced 30 Hz, latest wins, walking from the start", pace, false, false, false),
+            (
+                "paced 30 Hz, latest wins, standing still to start",
+                pace,
+                false,
+                true,
+                false,
+            ),
+            (
+                "paced 30 Hz, latest wins, walking from the start",
+                pace,
+                false,
+                false,
+                false,
+            ),
         ];
         if view {
             plan.push(("the same, standing still, with the live view", pace, false, true, true));
@@ -312,7 +324,10 @@ mod bench {
         if view {
             let _ = writeln!(out);
             for (without, with) in [(1, 3), (2, 4)] {
-                let (a, b) = (percentile(&runs[without].latency, 0.99), percentile(&runs[with].latency, 0.99));
+                let (a, b) = (
+                    percentile(&runs[without].latency, 0.99),
+                    percentile(&runs[with].latency, 0.99),
+                );
                 let _ = writeln!(
                     out,
                     "Live view (issue 49: p99 within 10 % of without): '{}' p99 {a:.1} ms without, {b:.1} ms with the view ({:+.1} %).",
