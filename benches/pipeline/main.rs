@@ -26,7 +26,8 @@
 //! `--peer-frames N` (frames the edge detectors are compared on, default 20), `--no-results`
 //! (print only), `--appearance SPEC` (render with `Appearance::from_spec(SPEC)`, e.g.
 //! `realistic`, the preset of docs/real-photos.md; the recording and the results file are named
-//! after it). Recordings are cached in `target/omnitrack-cache/` (or `$OMNITRACK_CACHE`), as
+//! after it), `--view` (two more paced runs with the live view beside them, `view.rs`, and the
+//! change of their p99 latency against the runs without). Recordings are cached in `target/omnitrack-cache/` (or `$OMNITRACK_CACHE`), as
 //! for `benches/tracker/`.
 //!
 //! CPU (issue 51): besides wall-clock times, every run reports CPU time from the threads' own
@@ -90,6 +91,7 @@ mod bench {
         let mut peer_frames = 20usize;
         let mut results = true;
         let mut appearance: Option<String> = None;
+        let mut view = false;
         let mut it = std::env::args().skip(1);
         while let Some(x) = it.next() {
             match x.as_str() {
@@ -99,6 +101,7 @@ mod bench {
                 "--no-realtime" => realtime = false,
                 "--no-opencv" => opencv = false,
                 "--no-results" => results = false,
+                "--view" => view = true,
                 "--appearance" => appearance = Some(it.next().expect("--appearance SPEC")),
                 "--peer-frames" => peer_frames = it.next().and_then(|s| s.parse().ok()).expect("--peer-frames N"),
                 "--format" => {
@@ -207,16 +210,35 @@ mod bench {
                 })
             })
             .collect();
-        let runs = [
-            ("as fast as it decodes, lossless", None, true, false),
-            ("paced 30 Hz, latest wins, standing still to start", pace, false, true),
-            ("paced 30 Hz, latest wins, walking from the start", pace, false, false),
-        ]
-        .map(|(name, pace, lossless, still)| {
-            run(
-                name, &replayed, &model, &table, &cfg, hint, frames, pace, lossless, still,
-            )
-        });
+        let mut plan = vec![
+            ("as fast as it decodes, lossless", None, true, false, false),
+            (
+                "paced 30 Hz, latest wins, standing still to start",
+                pace,
+                false,
+                true,
+                false,
+            ),
+            (
+                "paced 30 Hz, latest wins, walking from the start",
+                pace,
+                false,
+                false,
+                false,
+            ),
+        ];
+        if view {
+            plan.push(("the same, standing still, with the live view", pace, false, true, true));
+            plan.push(("the same, walking, with the live view", pace, false, false, true));
+        }
+        let runs: Vec<_> = plan
+            .into_iter()
+            .map(|(name, pace, lossless, still, view)| {
+                run(
+                    name, &replayed, &model, &table, &cfg, hint, frames, pace, lossless, still, view,
+                )
+            })
+            .collect();
 
         // The edge detectors alone on the first frames, on this thread (hogs still running).
         let mut peer_source = ReplaySource::open(&rec, Pacing::AsFastAsPossible).unwrap();
@@ -287,6 +309,30 @@ mod bench {
                     out,
                     "(run '{}': {} samples received of {} published)",
                     r.name, r.received, s.poses_published
+                );
+            }
+        }
+        for r in &runs {
+            if let Some((v, received)) = &r.view {
+                let _ = writeln!(
+                    out,
+                    "(run '{}': the view got {} poses, {} missed, wrote {} MCAP messages, sent {} image sets; its client received {} messages, {} lost)",
+                    r.name, v.poses, v.poses_missed, v.mcap_messages, v.image_sets, received, v.ws_dropped
+                );
+            }
+        }
+        if view {
+            let _ = writeln!(out);
+            for (without, with) in [(1, 3), (2, 4)] {
+                let (a, b) = (
+                    percentile(&runs[without].latency, 0.99),
+                    percentile(&runs[with].latency, 0.99),
+                );
+                let _ = writeln!(
+                    out,
+                    "Live view (issue 49: p99 within 10 % of without): '{}' p99 {a:.1} ms without, {b:.1} ms with the view ({:+.1} %).",
+                    runs[without].name,
+                    100.0 * (b / a - 1.0)
                 );
             }
         }
@@ -481,6 +527,9 @@ mod bench {
             if hogs > 0 {
                 file.push_str(&format!("-hogs{hogs}"));
             }
+            if view {
+                file.push_str("-view");
+            }
             let mut command = format!("cargo bench --bench pipeline -- --frames {frames}");
             match building {
                 Some(b) => command.push_str(&format!(" --building {b}")),
@@ -497,6 +546,9 @@ mod bench {
             }
             if !realtime {
                 command.push_str(" --no-realtime");
+            }
+            if view {
+                command.push_str(" --view");
             }
             match omnitrack::desk::results::write(
                 root,
@@ -516,6 +568,8 @@ mod bench {
 mod costs;
 #[cfg(feature = "desk")]
 mod runs;
+#[cfg(feature = "desk")]
+mod view;
 
 fn main() {
     #[cfg(feature = "desk")]

@@ -89,6 +89,8 @@ pub(crate) struct Run {
     /// Capture → pose received of the first frame (initialisation search), ms.
     pub(crate) init_ms: f64,
     pub(crate) received: usize,
+    /// With the live view beside the run: its summary and the messages its client received.
+    pub(crate) view: Option<(omnitrack_view::Summary, u64)>,
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -103,6 +105,7 @@ pub(crate) fn run(
     pace: Option<Duration>,
     lossless: bool,
     stand_still_to_start: bool,
+    view: bool,
 ) -> Run {
     let nanos = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
@@ -123,7 +126,8 @@ pub(crate) fn run(
         hold: stand_still_to_start.then(|| Arc::clone(&tracking)),
         period_ns,
     };
-    let subscriber = PoseSubscriber::create(&service).unwrap();
+    let subscriber = PoseSubscriber::create(&format!("{service}/pose")).unwrap();
+    let view = view.then(|| crate::view::start(&service, rec));
     let done = Arc::new(AtomicBool::new(false));
     let done2 = Arc::clone(&done);
     // (sequence, tracking, received ns) per sample.
@@ -147,7 +151,7 @@ pub(crate) fn run(
             seed: 1,
             max_frames: None,
         },
-        pose_service: Some(service.clone()),
+        pose_service: Some(format!("{service}/pose")),
         status_service: Some(format!("{service}/status")),
         lossless,
         ..PipelineOptions::default()
@@ -162,6 +166,7 @@ pub(crate) fn run(
     let summary = run_pipeline(source, model, table, cfg, &opts, &mut sink).unwrap();
     done.store(true, Ordering::Relaxed);
     let got = receiver.join().unwrap();
+    let view = view.map(crate::view::View::finish);
     let mut latency = Vec::new();
     let mut init_ms = f64::NAN;
     let mut tracking_started = false;
@@ -187,6 +192,7 @@ pub(crate) fn run(
         latency,
         init_ms,
         received: got.len(),
+        view,
     }
 }
 
