@@ -227,13 +227,16 @@ impl Workspace {
             for t in 0..self.strip_px {
                 let d = self.params.hue_strip_offset_px + t as f32;
                 for sign in [1.0f32, -1.0] {
-                    // +1 keeps the value positive, so truncation rounds.
-                    let x = (p[0] + sign * d * dx + 1.5) as usize;
-                    let y = (p[1] + sign * d * dy + 1.5) as usize;
-                    if x < 1 || y < 1 || x > self.w || y > self.h {
+                    // +1 keeps the value positive, so truncation rounds. To i32, which is
+                    // cheaper than to usize and decides the same: whatever either cast makes of
+                    // a value below 1, above i32's range or NaN is off the image.
+                    let x = (p[0] + sign * d * dx + 1.5) as i32;
+                    let y = (p[1] + sign * d * dy + 1.5) as i32;
+                    if x < 1 || y < 1 || x as usize > self.w || y as usize > self.h {
                         strip.push(OUTSIDE);
                         continue;
                     }
+                    let (x, y) = (x as usize, y as usize);
                     let i = ((y - 1) * self.w + x - 1) * 3;
                     prefetch(rgb, i);
                     strip.push(i as u32);
