@@ -289,8 +289,9 @@ pub(crate) fn bin_step(bin: u8) -> (isize, isize) {
 
 /// Non-maximum suppression of row v (columns 1..w−1) across the gradient's bin: an edgel is at
 /// least `threshold`, larger than its neighbour on one side and no smaller than the other.
-/// Branch-free over the row (all four neighbour pairs are read, the bin's is kept), so that it
-/// vectorises.
+/// Branch-free within a block of [`NMS_BLOCK`] pixels (all four neighbour pairs are read, the
+/// bin's is kept), so that it vectorises; a block without a magnitude at the threshold is
+/// skipped.
 #[inline(always)]
 fn nms_row(gx: &[i16], gy: &[i16], mag: &[i16], map: &mut [u8], w: usize, v: usize, threshold: i16) -> u32 {
     let n = w - 2;
