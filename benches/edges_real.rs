@@ -21,7 +21,9 @@
 //!   trimming (`EdgeParams::piece_nfa`, `piece_trim`; both on by default).
 //!
 //! Besides the times it prints the mean phase times and counters per image
-//! (`EdgeDetector::sensor_stats`: pixel pass, chains, merging and selection).
+//! (`EdgeDetector::sensor_stats`: pixel pass, chains, merging and selection), and a digest of
+//! every edge of every image bit for bit: a change meant to leave the detector's output as it
+//! was must leave the digest as it was.
 //!
 //! Each image goes through a one-sensor pinhole rig of its size (built once per size) and
 //! `EdgeDetector::detect_sensor` on the calling thread (one thread: one sensor cannot be split
@@ -182,14 +184,18 @@ intrinsics = [{fx:?}, {fy:?}, {cx:?}, {cy:?}]\nrotation_wxyz = [1.0, 0.0, 0.0, 0
                 (EdgeDetector::with_params(&rig, &config, params), rig)
             });
         }
-        // Warm-up pass; it also writes the CSVs (the detector is deterministic).
+        // Warm-up pass; it also writes the CSVs (the detector is deterministic) and hashes every
+        // edge's fields bit for bit (their `Debug` text: shortest round-trip floats), so that a
+        // change meant to keep the output can be checked for exactly that.
         let mut edges_total = 0usize;
+        let mut digest = std::collections::hash_map::DefaultHasher::new();
         for (name, si) in &images {
             let (det, rig) = detectors
                 .get_mut(&(si.width(), si.height()))
                 .expect("a detector per size");
             let edges = det.detect_sensor(si);
             edges_total += edges.len();
+            std::hash::Hash::hash(&format!("{edges:?}"), &mut digest);
             let path = out_dir.join(format!("{name}.csv"));
             std::fs::write(&path, edges_csv(edges, rig)).unwrap_or_else(|e| fail(&format!("{}: {e}", path.display())));
         }
@@ -259,6 +265,10 @@ p50 {:.3} ms, p99 {:.3} ms, max {:.3} ms per image, {:.1} edges per image \
             counts[4] / runs,
             counts[6] / runs,
             counts[5] / runs
+        );
+        println!(
+            "digest of every edge of every image, bit for bit: {:016x}",
+            std::hash::Hasher::finish(&digest)
         );
         println!("CSV per image and timing.csv: {}", out_dir.display());
     }

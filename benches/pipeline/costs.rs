@@ -23,11 +23,14 @@ pub(crate) struct Ours {
     pub(crate) edges_per_frame: f64,
 }
 
-pub(crate) fn time_ours(rig: &Rig, cfg: &TrackerConfig, frames: &[FrameSet], passes: usize) -> Ours {
-    let params = EdgeParams {
-        threads: 1,
-        ..EdgeParams::default()
-    };
+pub(crate) fn time_ours(
+    rig: &Rig,
+    cfg: &TrackerConfig,
+    frames: &[FrameSet],
+    passes: usize,
+    params: EdgeParams,
+) -> Ours {
+    let params = EdgeParams { threads: 1, ..params };
     let mut det = EdgeDetector::with_params(rig, &cfg.edges, params);
     for f in frames {
         det.detect(f);

@@ -103,6 +103,14 @@ impl EdgeDetector {
         Self::with_params(rig, config, EdgeParams::default())
     }
 
+    /// The detector a tracker needs ([`EdgeParams::for_tracking`]): the edges of
+    /// [`EdgeDetector::new`], without the a-contrario test of the pieces each edge shows, which
+    /// only a line detector's user reads (`omnitrack edges`, the YorkUrban benchmark). The test
+    /// was 7 % of the detector's CPU on the `lab` frames (docs/edges.md).
+    pub fn for_tracking(rig: &Rig, config: &EdgeConfig) -> EdgeDetector {
+        Self::with_params(rig, config, EdgeParams::for_tracking())
+    }
+
     pub fn with_params(rig: &Rig, config: &EdgeConfig, params: EdgeParams) -> EdgeDetector {
         let hue = Arc::new(HueTable::new(config.min_hue_saturation, config.min_hue_value));
         let mut tables: Vec<(omnitrack_core::geometry::Lens, u32, u32, RayTable)> = Vec::new();

@@ -21,7 +21,8 @@ pub(crate) struct Rows {
     x: Vec<u16>,
     /// The rows whose y derivative is taken (smoothed across columns), ×16: [slot][channel][u].
     y: Vec<u16>,
-    /// Scratch rows: horizontal passes (Full smoothing), column sums and differences.
+    /// Scratch rows: horizontal passes (Full smoothing); column sums and differences, one row
+    /// per channel.
     t: Vec<u16>,
     cs: Vec<i16>,
     cd: Vec<i16>,
@@ -35,8 +36,8 @@ impl Rows {
             x: vec![0; 9 * w],
             y: vec![0; 9 * w],
             t: vec![0; 3 * w],
-            cs: vec![0; w],
-            cd: vec![0; w],
+            cs: vec![0; 3 * w],
+            cd: vec![0; 3 * w],
         }
     }
 }
@@ -117,19 +118,23 @@ pub(crate) fn gradients_and_edgels(
                 let xr = |k: usize| &rows.x[(3 * k + ch) * w..(3 * k + ch + 1) * w];
                 let yr = |k: usize| &rows.y[(3 * k + ch) * w..(3 * k + ch + 1) * w];
                 let (x0, x1, x2, y0, y2) = (xr(a), xr(b), xr(c), yr(a), yr(c));
-                column_sums(x0, x1, x2, y0, y2, &mut rows.cs, &mut rows.cd);
-                sobel_row(
-                    &rows.cs[..w - 2],
-                    &rows.cs[2..],
-                    &rows.cd[..w - 2],
-                    &rows.cd[1..w - 1],
-                    &rows.cd[2..],
-                    &mut gx[span.clone()],
-                    &mut gy[span.clone()],
-                    &mut mag[span.clone()],
-                    ch > 0,
-                );
+                let out = ch * w..(ch + 1) * w;
+                column_sums(x0, x1, x2, y0, y2, &mut rows.cs[out.clone()], &mut rows.cd[out]);
             }
+            // The three channels' Sobel in one loop, the largest kept in registers: gx, gy and
+            // mag are written once a pixel instead of written and twice rewritten.
+            let cs = |ch: usize, from: usize| &rows.cs[ch * w + from..ch * w + from + w - 2];
+            let cd = |ch: usize, from: usize| &rows.cd[ch * w + from..ch * w + from + w - 2];
+            sobel_rows(
+                [
+                    [cs(0, 0), cs(0, 2), cd(0, 0), cd(0, 1), cd(0, 2)],
+                    [cs(1, 0), cs(1, 2), cd(1, 0), cd(1, 1), cd(1, 2)],
+                    [cs(2, 0), cs(2, 2), cd(2, 0), cd(2, 1), cd(2, 2)],
+                ],
+                &mut gx[span.clone()],
+                &mut gy[span.clone()],
+                &mut mag[span.clone()],
+            );
             // Rows s − 2..=s of `mag` are final: suppress non-maxima on row s − 1.
             if s >= 2 {
                 edgels += nms_row(gx, gy, mag, map, w, s - 1, threshold);
@@ -214,50 +219,44 @@ fn horizontal_u8(src: &[u8], scale: u16, out: &mut [u16]) {
     out[w - 1] = 4 * scale * src[w - 1] as u16;
 }
 
-/// One row of the Sobel on the column sums `s` and differences `d` (u ± 1 as slices of equal
-/// length); with `fold` a pixel keeps its earlier gradient unless the new one is larger.
-#[allow(clippy::too_many_arguments)]
+/// One row of the Sobel of each of three channels (per channel: column sums at u − 1 and u + 1,
+/// differences at u − 1, u, u + 1, as slices of equal length); per pixel the gradient of the
+/// channel with the largest L1 magnitude, the first of equals.
 #[inline(always)]
-fn sobel_row(
-    s0: &[i16],
-    s2: &[i16],
-    d0: &[i16],
-    d1: &[i16],
-    d2: &[i16],
-    gx: &mut [i16],
-    gy: &mut [i16],
-    mag: &mut [i16],
-    fold: bool,
-) {
-    let n = gx
-        .len()
-        .min(gy.len())
-        .min(mag.len())
-        .min(s0.len())
-        .min(s2.len())
-        .min(d0.len())
-        .min(d1.len())
-        .min(d2.len());
-    let (s0, s2, d0, d1, d2) = (&s0[..n], &s2[..n], &d0[..n], &d1[..n], &d2[..n]);
+fn sobel_rows(ch: [[&[i16]; 5]; 3], gx: &mut [i16], gy: &mut [i16], mag: &mut [i16]) {
+    let n = ch
+        .iter()
+        .flatten()
+        .map(|s| s.len())
+        .fold(gx.len().min(gy.len()).min(mag.len()), usize::min);
+    let [[r0, r1, r2, r3, r4], [g0, g1, g2, g3, g4], [b0, b1, b2, b3, b4]] = ch;
+    let (r0, r1, r2, r3, r4) = (&r0[..n], &r1[..n], &r2[..n], &r3[..n], &r4[..n]);
+    let (g0, g1, g2, g3, g4) = (&g0[..n], &g1[..n], &g2[..n], &g3[..n], &g4[..n]);
+    let (b0, b1, b2, b3, b4) = (&b0[..n], &b1[..n], &b2[..n], &b3[..n], &b4[..n]);
     let (gx, gy, mag) = (&mut gx[..n], &mut gy[..n], &mut mag[..n]);
-    if fold {
-        for u in 0..n {
-            let x = s2[u].wrapping_sub(s0[u]);
-            let y = d0[u].wrapping_add(d1[u].wrapping_mul(2)).wrapping_add(d2[u]);
-            let m = x.wrapping_abs().wrapping_add(y.wrapping_abs());
-            let keep = ((m > mag[u]) as i16).wrapping_neg();
-            gx[u] = (x & keep) | (gx[u] & !keep);
-            gy[u] = (y & keep) | (gy[u] & !keep);
-            mag[u] = (m & keep) | (mag[u] & !keep);
-        }
-    } else {
-        for u in 0..n {
-            let x = s2[u].wrapping_sub(s0[u]);
-            let y = d0[u].wrapping_add(d1[u].wrapping_mul(2)).wrapping_add(d2[u]);
-            gx[u] = x;
-            gy[u] = y;
-            mag[u] = x.wrapping_abs().wrapping_add(y.wrapping_abs());
-        }
+    #[inline(always)]
+    fn sobel(s0: i16, s2: i16, d0: i16, d1: i16, d2: i16) -> (i16, i16, i16) {
+        let x = s2.wrapping_sub(s0);
+        let y = d0.wrapping_add(d1.wrapping_mul(2)).wrapping_add(d2);
+        (x, y, x.wrapping_abs().wrapping_add(y.wrapping_abs()))
+    }
+    #[inline(always)]
+    fn larger(a: (i16, i16, i16), b: (i16, i16, i16)) -> (i16, i16, i16) {
+        let keep = ((b.2 > a.2) as i16).wrapping_neg();
+        (
+            (b.0 & keep) | (a.0 & !keep),
+            (b.1 & keep) | (a.1 & !keep),
+            (b.2 & keep) | (a.2 & !keep),
+        )
+    }
+    for u in 0..n {
+        let r = sobel(r0[u], r1[u], r2[u], r3[u], r4[u]);
+        let g = sobel(g0[u], g1[u], g2[u], g3[u], g4[u]);
+        let b = sobel(b0[u], b1[u], b2[u], b3[u], b4[u]);
+        let (x, y, m) = larger(larger(r, g), b);
+        gx[u] = x;
+        gy[u] = y;
+        mag[u] = m;
     }
 }
 
@@ -290,8 +289,9 @@ pub(crate) fn bin_step(bin: u8) -> (isize, isize) {
 
 /// Non-maximum suppression of row v (columns 1..w−1) across the gradient's bin: an edgel is at
 /// least `threshold`, larger than its neighbour on one side and no smaller than the other.
-/// Branch-free over the row (all four neighbour pairs are read, the bin's is kept), so that it
-/// vectorises.
+/// Branch-free within a block of [`NMS_BLOCK`] pixels (all four neighbour pairs are read, the
+/// bin's is kept), so that it vectorises; a block without a magnitude at the threshold is
+/// skipped.
 #[inline(always)]
 fn nms_row(gx: &[i16], gy: &[i16], mag: &[i16], map: &mut [u8], w: usize, v: usize, threshold: i16) -> u32 {
     let n = w - 2;
@@ -302,6 +302,49 @@ fn nms_row(gx: &[i16], gy: &[i16], mag: &[i16], map: &mut [u8], w: usize, v: usi
     let (up_left, down_right) = (&mag[i0 - w - 1..i0 - w - 1 + n], &mag[i0 + w + 1..i0 + w + 1 + n]);
     let (down_left, up_right) = (&mag[i0 + w - 1..i0 + w - 1 + n], &mag[i0 - w + 1..i0 - w + 1 + n]);
     let out = &mut map[i0..i0 + n];
+    let mut count = 0u32;
+    // A block without a magnitude at the threshold holds no edgel: most of a row is flat.
+    for c in (0..n).step_by(NMS_BLOCK) {
+        let e = (c + NMS_BLOCK).min(n);
+        if m[c..e].iter().fold(false, |a, &x| a | (x >= threshold)) {
+            count += nms_block(
+                gx, gy, m, left, right, up, down, up_left, down_right, down_left, up_right, out, c, e, threshold,
+            );
+        } else {
+            out[c..e].fill(0);
+        }
+    }
+    count
+}
+
+/// Pixels a row's non-maximum suppression tests at once, when any of them is at the threshold.
+const NMS_BLOCK: usize = 64;
+
+/// [`nms_row`] on the pixels c..e of its row (slices as there).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn nms_block(
+    gx: &[i16],
+    gy: &[i16],
+    m: &[i16],
+    left: &[i16],
+    right: &[i16],
+    up: &[i16],
+    down: &[i16],
+    up_left: &[i16],
+    down_right: &[i16],
+    down_left: &[i16],
+    up_right: &[i16],
+    out: &mut [u8],
+    c: usize,
+    e: usize,
+    threshold: i16,
+) -> u32 {
+    let (gx, gy, m, out) = (&gx[c..e], &gy[c..e], &m[c..e], &mut out[c..e]);
+    let (left, right, up, down) = (&left[c..e], &right[c..e], &up[c..e], &down[c..e]);
+    let (up_left, down_right, down_left, up_right) =
+        (&up_left[c..e], &down_right[c..e], &down_left[c..e], &up_right[c..e]);
+    let n = e - c;
     let mut count = 0u32;
     for u in 0..n {
         let (x, y) = (gx[u] as i32, gy[u] as i32);

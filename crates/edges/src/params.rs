@@ -65,6 +65,19 @@ pub struct EdgeParams {
     pub piece_trim: bool,
 }
 
+impl EdgeParams {
+    /// The defaults less what no tracker stage reads: the a-contrario test of the pieces each
+    /// edge shows (`piece_nfa` off; [`Edge::shown`](crate::Edge::shown) then lists every piece
+    /// between the gaps). The edges are the same in every other field: the test only
+    /// decides which of an edge's pieces a line detector's user is shown.
+    pub fn for_tracking() -> EdgeParams {
+        EdgeParams {
+            piece_nfa: false,
+            ..EdgeParams::default()
+        }
+    }
+}
+
 impl Default for EdgeParams {
     fn default() -> Self {
         EdgeParams {

@@ -95,6 +95,8 @@ pub(crate) struct Workspace {
     prefix: Vec<Moments>,
     stack: Vec<(u32, u32)>,
     pieces: Vec<(u32, u32)>,
+    /// One piece's hue-strip pixels (byte offsets into the image), left and right in turn.
+    strip: Vec<u32>,
     cands: Vec<Candidate>,
     /// The candidates' normals packed for the pair test of `merge_across_chains` (0 once dead),
     /// one array per coordinate so that the test of a block of pairs vectorises: the test of
@@ -174,6 +176,7 @@ impl Workspace {
             prefix: resident(Vec::with_capacity(2 * MAX_CHAIN + 1)),
             stack: resident(Vec::with_capacity(2 * MAX_CHAIN)),
             pieces: resident(Vec::with_capacity(2 * MAX_CHAIN)),
+            strip: resident(Vec::with_capacity(2 * strip_px * params.hue_samples_per_edge.max(1))),
             cands: resident(Vec::with_capacity(cand_cap)),
             normals: std::array::from_fn(|_| resident(Vec::with_capacity(cand_cap))),
             // Pieces are sampled once a pixel: none is longer than a few image perimeters.

@@ -116,7 +116,7 @@ pub fn track(
 ) -> Result<TrackerStats, RunError> {
     let rig = source.rig().clone();
     let mut frame = FrameSet::for_rig(&rig);
-    let mut detector = EdgeDetector::new(&rig, &cfg.edges);
+    let mut detector = EdgeDetector::for_tracking(&rig, &cfg.edges);
     let mut tracker = Tracker::new(&rig, model, table, cfg, opts.hint, opts.seed);
     let mut sequence = 0u64;
     let mut last_ts = 0u64;

@@ -110,6 +110,12 @@ impl Workspace {
     }
 
     /// Sub-pixel positions (parabola across the gradient), gradients and rays of a chain's edgels.
+    ///
+    /// Two passes: the first finds every edgel's sub-pixel position and asks for the ray-table
+    /// lines its bilinear interpolation will read; the second interpolates. The table (12 bytes a
+    /// pixel, 3.7 MB at 640×480) is mostly out of cache by now, and one pass that waited on each
+    /// edgel's lines in turn spent a third of the chain step there (perf, YorkUrban); asked for a
+    /// whole chain ahead, the lines arrive while the positions are still being computed.
     #[inline(never)]
     fn load_chain(&mut self, idx: impl Iterator<Item = u32>) {
         self.pos.clear();
@@ -118,7 +124,7 @@ impl Workspace {
         self.ray.clear();
         self.prefix.clear();
         self.prefix.push([0.0; 7]);
-        let w = self.w;
+        let (w, h) = (self.w, self.h);
         let ln = &**LN_MAG;
         let ln_of = |m: i16| ln[m.max(0) as usize];
         for i in idx {
@@ -144,26 +150,36 @@ impl Workspace {
             };
             let x = (i % w) as f32 + s * du as f32;
             let y = (i / w) as f32 + s * dv as f32;
-            let Some(r) = self.ray_at(x, y) else { continue };
+            prefetch_rays(&self.rays, table_corner(x, y, w, h), w);
             self.pos.push([x, y]);
             self.grad.push([gx as f32, gy as f32]);
             self.emag.push(m0);
+        }
+        // Edgels without a ray (outside the lens's image) are dropped, the rest keep their order.
+        let mut kept = 0;
+        for k in 0..self.pos.len() {
+            let [x, y] = self.pos[k];
+            let Some(r) = self.ray_at(x, y) else { continue };
+            let m0 = self.emag[k];
+            self.pos[kept] = self.pos[k];
+            self.grad[kept] = self.grad[k];
+            self.emag[kept] = m0;
+            kept += 1;
             self.ray.push(r);
             let p = *self.prefix.last().unwrap_or(&[0.0; 7]);
             let o = weighted_outer(&r, edgel_weight(m0));
             self.prefix.push(std::array::from_fn(|k| p[k] + o[k]));
         }
+        self.pos.truncate(kept);
+        self.grad.truncate(kept);
+        self.emag.truncate(kept);
     }
 
     /// Bilinear interpolation of the ray table, normalised.
     #[inline]
     fn ray_at(&self, x: f32, y: f32) -> Option<Vector3<f64>> {
         let (w, h) = (self.w, self.h);
-        let x = x.clamp(0.0, (w - 1) as f32);
-        let y = y.clamp(0.0, (h - 1) as f32);
-        let (u0, v0) = ((x as usize).min(w - 2), (y as usize).min(h - 2));
-        let (fx, fy) = (x - u0 as f32, y - v0 as f32);
-        let i = v0 * w + u0;
+        let (i, fx, fy) = table_corner(x, y, w, h);
         let t = &self.rays;
         let (a, b, c, d) = (t[i], t[i + 1], t[i + w], t[i + w + 1]);
         let mut r = [0.0f64; 3];
@@ -176,6 +192,40 @@ impl Workspace {
         let n = v.norm();
         (n.is_finite() && n > 0.5).then(|| v / n)
     }
+}
+
+/// The ray-table index of the top-left of the four pixels around (x, y) (clamped into the
+/// image), and the bilinear weights' fractions.
+#[inline(always)]
+fn table_corner(x: f32, y: f32, w: usize, h: usize) -> (usize, f32, f32) {
+    let x = x.clamp(0.0, (w - 1) as f32);
+    let y = y.clamp(0.0, (h - 1) as f32);
+    let (u0, v0) = ((x as usize).min(w - 2), (y as usize).min(h - 2));
+    (v0 * w + u0, x - u0 as f32, y - v0 as f32)
+}
+
+/// Asks the memory system for the lines holding the table entries at `i`, `i + 1`, `i + w` and
+/// `i + w + 1` (a hint: it reads nothing and cannot fault).
+#[inline(always)]
+fn prefetch_rays(table: &[[f32; 3]], (i, _, _): (usize, f32, f32), w: usize) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+        let base = table.as_ptr().cast::<i8>();
+        for at in [i, i + w] {
+            // The pair's first and last byte: 24 bytes may straddle two lines.
+            let (first, last) = (12 * at, 12 * at + 23);
+            if last < 12 * table.len() {
+                // SAFETY: both addresses are inside `table`; a prefetch only hints the cache.
+                unsafe {
+                    _mm_prefetch::<_MM_HINT_T0>(base.add(first));
+                    _mm_prefetch::<_MM_HINT_T0>(base.add(last));
+                }
+            }
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = (table, i, w);
 }
 
 /// Direction index into [`DIRS`] of the edge tangent (the gradient turned by +90°: (−gy, gx)),

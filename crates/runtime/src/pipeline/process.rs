@@ -442,7 +442,7 @@ pub(super) fn run_process(
         pool,
         ready: ready_rx,
         records: records_tx,
-        detector: EdgeDetector::new(rig, &cfg.edges),
+        detector: EdgeDetector::for_tracking(rig, &cfg.edges),
         tracker: {
             let mut tracker = Tracker::new(rig, model, table, cfg, opts.run.hint, opts.run.seed);
             // A stop is honoured within a tick, not after the whole model's search: the search
