@@ -197,9 +197,15 @@ pub(crate) fn hold(
                 });
                 // The published covariance's largest position σ: how well the frame's lines
                 // (and the filter) fix the pose, beside how far it is from the truth.
-                let sigma_cm = r
-                    .pose
-                    .map(|_| r.covariance.fixed_view::<3, 3>(0, 0).symmetric_eigenvalues().max().max(0.0).sqrt() * 100.0);
+                let sigma_cm = r.pose.map(|_| {
+                    r.covariance
+                        .fixed_view::<3, 3>(0, 0)
+                        .symmetric_eigenvalues()
+                        .max()
+                        .max(0.0)
+                        .sqrt()
+                        * 100.0
+                });
                 eprintln!(
                     "    {name} stretch {k} frame {}: {:?} {} σ {} edges {} inliers {} explains {:.2} u/p/a {:?}{} | {}",
                     start + i,
@@ -311,10 +317,14 @@ fn truth_fit(
     };
     let mut scratch = vec![0.0; 2 * c.len()];
     let robust = omnitrack::solver::r_and_t_cauchy(&c, truth, &cfg.solver_options(), &mut scratch)
-        .map_or(f64::NAN, |r| (r.translation.vector - truth.translation.vector).norm() * 100.0);
+        .map_or(f64::NAN, |r| {
+            (r.translation.vector - truth.translation.vector).norm() * 100.0
+        });
     let from_tracked = tracked
         .and_then(|t| omnitrack::solver::r_and_t_cauchy(&c, &t, &cfg.solver_options(), &mut scratch))
-        .map_or(f64::NAN, |r| (r.translation.vector - truth.translation.vector).norm() * 100.0);
+        .map_or(f64::NAN, |r| {
+            (r.translation.vector - truth.translation.vector).norm() * 100.0
+        });
     let mut alphas: Vec<f64> = c
         .iter()
         .map(|k| omnitrack::geometry::Correspondence::alpha(k, truth).to_degrees())
