@@ -4,7 +4,7 @@
 //! ```text
 //! omnitrack-view serve [--services PREFIX] [--bind ADDR] [--port N | --no-server] [--mcap FILE]
 //!     [--model MODEL.obj] [--recording DIR [--images-every-s S] [--no-edges] [--jpeg-quality Q]]
-//!     [--count N]
+//!     [--count N] [--ready]
 //! omnitrack-view completions SHELL
 //! omnitrack-view manpage [--dir DIR]
 //! ```
@@ -16,9 +16,13 @@
 use clap::{Parser, Subcommand};
 use omnitrack_view::images::ImageOptions;
 use omnitrack_view::{run, stop_on_signals, Options, ViewError, DEFAULT_PORT};
+use std::io::Write;
 use std::net::{IpAddr, SocketAddr};
 use std::path::PathBuf;
 use std::time::Duration;
+
+/// `serve --ready`'s line on standard output.
+const READY: &str = "ready";
 
 #[derive(Parser)]
 #[command(
@@ -94,6 +98,11 @@ enum Command {
         /// Stops after this many pose samples.
         #[arg(long)]
         count: Option<u64>,
+        /// Prints `ready` on standard output once subscribed (and the file created): the
+        /// handshake of a process that starts the view and then publishes (`omnitrack run
+        /// --mcap`), so that no sample comes before the view listens.
+        #[arg(long)]
+        ready: bool,
     },
     /// Prints a shell completion script for omnitrack-view (bash, zsh, fish, elvish or powershell).
     Completions {
@@ -127,6 +136,7 @@ fn run_cli(cli: Cli) -> Result<(), MainError> {
             no_edges,
             jpeg_quality,
             count,
+            ready,
         } => {
             let options = Options {
                 pose_service: format!("{services}/pose"),
@@ -152,6 +162,11 @@ fn run_cli(cli: Cli) -> Result<(), MainError> {
                     .as_ref()
                     .map_or(String::new(), |p| format!(", MCAP file {}", p.display()));
                 eprintln!("omnitrack-view: {} → {server}{file}", options.pose_service);
+                if ready {
+                    // A parent that is gone cannot be told; the view goes on either way.
+                    let mut stdout = std::io::stdout().lock();
+                    let _ = writeln!(stdout, "{READY}").and_then(|_| stdout.flush());
+                }
             })?;
             eprintln!(
                 "omnitrack-view: {} poses ({} tracking, {} missed), {} statuses, {} image sets; \
