@@ -226,3 +226,48 @@ fn a_view_that_ends_during_the_run_leaves_the_run_going_and_the_file_called_inco
         "{stderr}"
     );
 }
+
+/// A run that ends without stopping the view (SIGKILL; a second Ctrl-C is the same): the view's
+/// standard input closes with the run, and the view finishes the file all the same.
+#[cfg(feature = "desk")]
+#[test]
+fn a_run_killed_outright_still_leaves_a_finished_file() {
+    view_binary();
+    let lab = crate::common::lab_recording(FRAMES);
+    lab.table.save(&lab.rec.join("model.vis")).unwrap();
+    let file = lab.dir.path().join("killed.mcap");
+    let prefix = format!("omnitrack-test/mcap-killed-{}", std::process::id());
+    let t0 = lab.truth[0].pose.translation.vector;
+    let mut run = Command::new(OMNITRACK)
+        .args(["run", "--model", lab.rec.join("model.obj").to_str().unwrap()])
+        .args(["--source", &format!("replay:{}", lab.rec.display())])
+        .args(["--init", &format!("{},{},{},1.5", t0.x + 0.5, t0.y, t0.z)])
+        .args(["--services", &prefix, "--realtime"])
+        .arg("--mcap")
+        .arg(&file)
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+    // The view makes the file as it starts; a second more and the run has published.
+    while !file.exists() && std::time::Instant::now() < deadline {
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    std::thread::sleep(std::time::Duration::from_secs(1));
+    run.kill().unwrap();
+    run.wait().unwrap();
+    let finished = |b: &[u8]| b.len() > 16 && b.ends_with(b"\x89MCAP0\r\n");
+    let mut bytes = Vec::new();
+    while !finished(&bytes) && std::time::Instant::now() < deadline + std::time::Duration::from_secs(10) {
+        std::thread::sleep(std::time::Duration::from_millis(100));
+        bytes = std::fs::read(&file).unwrap_or_default();
+    }
+    assert!(
+        finished(&bytes),
+        "the file has no closing magic: the view did not finish it"
+    );
+    assert!(
+        mcap::Summary::read(&bytes).unwrap().is_some(),
+        "a finished file has a summary"
+    );
+}

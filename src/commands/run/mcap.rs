@@ -98,10 +98,7 @@ impl McapRecorder {
         }
         // Its start line and summary join the run's on standard error; standard output carries
         // only the handshake, so `run --json`'s output stays the run's.
-        command
-            .stdin(Stdio::null())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::inherit());
+        command.stdout(Stdio::piped()).stderr(Stdio::inherit());
         detach(&mut command);
         let mut child = command
             .spawn()
@@ -221,29 +218,12 @@ fn describe(s: ExitStatus) -> String {
 
 /// The view in a process group of its own: a Ctrl-C at the terminal reaches the run only,
 /// which publishes its last poses before it stops the view (a view stopped by the same Ctrl-C
-/// could miss them). Should the run itself end at once (a second Ctrl-C), the kernel sends the
-/// view SIGINT, so that it still finishes the file.
+/// could miss them). Should the run end without stopping it (a second Ctrl-C, SIGKILL), the
+/// view's standard input, a pipe whose other end only the run holds, closes, and `--ready`
+/// makes the view stop on that and finish the file.
 fn detach(command: &mut Command) {
     use std::os::unix::process::CommandExt;
-    command.process_group(0);
-    #[cfg(target_os = "linux")]
-    {
-        // SAFETY: between fork and exec only async-signal-safe calls (prctl, getppid) and
-        // no allocation.
-        let parent = std::process::id() as libc::pid_t;
-        unsafe {
-            command.pre_exec(move || {
-                if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGINT) != 0 {
-                    return Err(std::io::Error::last_os_error());
-                }
-                // The parent may have ended before the line above took effect.
-                if libc::getppid() != parent {
-                    return Err(std::io::Error::from_raw_os_error(libc::ESRCH));
-                }
-                Ok(())
-            });
-        }
-    }
+    command.process_group(0).stdin(Stdio::piped());
 }
 
 fn interrupt(child: &Child) {
