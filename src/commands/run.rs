@@ -2,6 +2,7 @@
 //! pipeline, poses on the iceoryx2 pose service and, if asked, a TUM trajectory; progress and
 //! the summary on standard error.
 
+mod mcap;
 mod report;
 
 use super::CommandResult;
@@ -52,6 +53,11 @@ pub struct Args {
     /// docs/interfaces.md); the human lines stay on standard error.
     #[arg(long)]
     json: bool,
+    /// Also write the run to this MCAP file (replaced if it exists): poses, status, the model
+    /// and, for a replay, the images, as the live view has them. The omnitrack-view program,
+    /// found beside omnitrack or on PATH, writes it, subscribed before the first frame.
+    #[arg(long, value_name = "FILE.mcap", conflicts_with = "no_publish")]
+    mcap: Option<PathBuf>,
 }
 
 /// `--init x,y,z[,radius_m]` (docs/interfaces.md): the search volume's centre and radius; without
@@ -87,10 +93,19 @@ pub fn run(a: Args) -> CommandResult {
         super::service_name(&a.services, "pose")?,
         super::service_name(&a.services, "status")?,
     );
+    let inputs = [Some(&a.model), a.rig.as_ref(), a.visibility.as_ref(), a.config.as_ref()];
     if let Some(out) = &a.trajectory {
-        let inputs = [Some(&a.model), a.rig.as_ref(), a.visibility.as_ref(), a.config.as_ref()];
-        refuse_to_overwrite(out, inputs.into_iter().flatten())?;
+        refuse_to_overwrite("--trajectory", out, inputs.into_iter().flatten())?;
     }
+    // Everything `--mcap` needs is checked before anything is loaded or tracked.
+    let view = match &a.mcap {
+        Some(file) => {
+            refuse_to_overwrite("--mcap", file, inputs.into_iter().flatten())?;
+            mcap::check_writable(file)?;
+            Some(mcap::find_view()?)
+        }
+        None => None,
+    };
     init_logging();
     let cfg = match &a.config {
         Some(p) => TrackerConfig::load(p)?,
@@ -137,7 +152,23 @@ pub fn run(a: Args) -> CommandResult {
         lossless: !a.realtime && a.source.is_replay(),
         ..PipelineOptions::default()
     };
+    let recorder = match (&view, &a.mcap) {
+        (Some(program), Some(file)) => Some(mcap::McapRecorder::start(&mcap::ViewArgs {
+            program,
+            file,
+            services: &a.services,
+            model: &a.model,
+            recording: match &a.source {
+                omnitrack::capture::SourceSpec::Replay(dir) => Some(dir),
+                _ => None,
+            },
+        })?),
+        _ => None,
+    };
     let summary = run_pipeline(source, &model, &table, &cfg, &opts, &mut sink)?;
+    // Right after the last sample: the view has all of them in its buffers, and its summary
+    // comes before the run's.
+    let mcap_line = recorder.map(mcap::McapRecorder::finish);
     if let Some(e) = &summary.publisher_error {
         return Err(format!(
             "cannot publish: {e} (`--no-publish` tracks without publishing; another user's tracker, or files \
@@ -166,6 +197,9 @@ pub fn run(a: Args) -> CommandResult {
             "omnitrack: {} search(es) cut short by the stop: no pose from them",
             stats.searches_cancelled
         );
+    }
+    if let Some(line) = &mcap_line {
+        eprintln!("omnitrack: {line}");
     }
     let no_pose = (poses == 0).then(|| no_pose_reason(&summary, &sink));
     let code = if no_pose.is_some() {
@@ -347,14 +381,14 @@ fn no_pose_reason(summary: &omnitrack::runtime::pipeline::PipelineSummary, sink:
 
 /// An output that is one of the inputs (`--trajectory model.obj`) would destroy it: refused.
 /// Only a file that exists can be an input, so a new output path passes.
-fn refuse_to_overwrite<'a>(out: &Path, inputs: impl Iterator<Item = &'a PathBuf>) -> Result<(), String> {
+fn refuse_to_overwrite<'a>(option: &str, out: &Path, inputs: impl Iterator<Item = &'a PathBuf>) -> Result<(), String> {
     let Ok(target) = std::fs::canonicalize(out) else {
         return Ok(());
     };
     for input in inputs {
         if std::fs::canonicalize(input).is_ok_and(|i| i == target) {
             return Err(format!(
-                "--trajectory {}: that is the input {}; refusing to overwrite it",
+                "{option} {}: that is the input {}; refusing to overwrite it",
                 out.display(),
                 input.display()
             ));

@@ -5,6 +5,7 @@ mod common;
 
 mod cli_control;
 mod cli_manual;
+mod cli_mcap;
 mod cli_pose;
 mod cli_record;
 mod cli_report;

@@ -32,7 +32,9 @@ use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
-use omnitrack_io::publish::{PoseSubscriber, PublishError, StatusSample, StatusSubscriber};
+use omnitrack_io::publish::{
+    PoseSample, PoseSubscriber, PublishError, StatusSample, StatusSubscriber, SUBSCRIBER_BUFFER,
+};
 
 use mcap_out::{McapError, McapOut};
 use schemas::channels;
@@ -212,6 +214,64 @@ impl Trajectory {
     }
 }
 
+/// The view's state between samples: where they go and what it remembers of the last ones.
+struct View<'a> {
+    out: Out,
+    images: Option<images::Worker>,
+    segments: &'a [([f64; 3], [f64; 3])],
+    model_in_file: bool,
+    trajectory: Trajectory,
+    last_status: Option<StatusSample>,
+    last_sequence: Option<u64>,
+}
+
+impl View<'_> {
+    fn status(&mut self, s: StatusSample) {
+        let out = &mut self.out;
+        out.summary.statuses += 1;
+        out.send(ch::STATUS, s.timestamp_ns, &messages::status_sample(&s));
+        if let Some((level, line)) = messages::state_change(self.last_status.as_ref(), &s) {
+            out.send(ch::LOG, s.timestamp_ns, &messages::log(s.timestamp_ns, level, &line));
+        }
+        self.last_status = Some(s);
+    }
+
+    fn pose(&mut self, sample: &PoseSample) {
+        let out = &mut self.out;
+        let t = sample.timestamp_ns;
+        if !self.model_in_file {
+            out.write_file(ch::MODEL, t, &messages::model(self.segments, t));
+            self.model_in_file = true;
+        }
+        out.summary.poses += 1;
+        if let Some(prev) = self.last_sequence {
+            out.summary.poses_missed += sample.sequence.saturating_sub(prev + 1);
+        }
+        self.last_sequence = Some(sample.sequence);
+        out.send(ch::SAMPLE, t, &messages::pose_sample(sample));
+        if messages::is_tracking(sample) {
+            out.summary.tracking += 1;
+            out.send(ch::POSE, t, &messages::pose_in_frame(sample));
+            out.send(ch::TF, t, &messages::frame_transform(sample));
+            if let Some(u) = messages::uncertainty(sample) {
+                out.send(ch::UNCERTAINTY, t, &u);
+            }
+            self.trajectory.push(out, t, sample.position_m);
+        } else {
+            self.trajectory.flush(out, false);
+        }
+        if let Some(worker) = &mut self.images {
+            worker.offer(sample);
+            while let Some(made) = worker.take() {
+                if !out.images(made) {
+                    self.images = None;
+                    break;
+                }
+            }
+        }
+    }
+}
+
 /// Views the pose and status services until `stop` is set or `count` poses came; `on_start`
 /// gets the server's address (port 0 picks one) once everything is open.
 pub fn run(o: &Options, stop: &AtomicBool, on_start: &mut dyn FnMut(Option<SocketAddr>)) -> Result<Summary, ViewError> {
@@ -220,7 +280,7 @@ pub fn run(o: &Options, stop: &AtomicBool, on_start: &mut dyn FnMut(Option<Socke
         Some(path) => messages::segments(&omnitrack_core::model::Model::load(path)?),
         None => Vec::new(),
     };
-    let mut images = match &o.images {
+    let images = match &o.images {
         Some(io) => Some(images::Worker::start(images::Images::open(
             io,
             o.model.is_some().then_some(&segments),
@@ -253,15 +313,21 @@ pub fn run(o: &Options, stop: &AtomicBool, on_start: &mut dyn FnMut(Option<Socke
         // sample's time, so that its time line is the run's).
         server.send(ch::MODEL, 0, m);
     }
-    let mut model_in_file = model_message.is_none() || out.mcap.is_none();
-    let mut trajectory = Trajectory::default();
-    let mut last_status: Option<StatusSample> = None;
-    let mut last_sequence: Option<u64> = None;
+    let mut view = View {
+        model_in_file: model_message.is_none() || out.mcap.is_none(),
+        segments: &segments,
+        out,
+        images,
+        trajectory: Trajectory::default(),
+        last_status: None,
+        last_sequence: None,
+    };
     // A service that fails mid-run ends the loop, not the file: what came is finished first.
     let mut failure: Option<PublishError> = None;
+    let more = |v: &View| o.count.is_none_or(|n| v.out.summary.poses < n);
 
-    while !stop.load(Ordering::Relaxed) && o.count.is_none_or(|n| out.summary.poses < n) {
-        if let Some(server) = &mut out.server {
+    while !stop.load(Ordering::Relaxed) && more(&view) {
+        if let Some(server) = &mut view.out.server {
             server.accept();
         }
         let status = match statuses.receive() {
@@ -272,60 +338,49 @@ pub fn run(o: &Options, stop: &AtomicBool, on_start: &mut dyn FnMut(Option<Socke
             }
         };
         if let Some(s) = status {
-            out.summary.statuses += 1;
-            out.send(ch::STATUS, s.timestamp_ns, &messages::status_sample(&s));
-            if let Some((level, line)) = messages::state_change(last_status.as_ref(), &s) {
-                out.send(ch::LOG, s.timestamp_ns, &messages::log(s.timestamp_ns, level, &line));
-            }
-            last_status = Some(s);
+            view.status(s);
             // The next status before the next pose wait: a burst is taken whole.
             continue;
         }
-        let sample = match poses.wait(Duration::from_millis(20)) {
-            Ok(Some(s)) => s,
-            Ok(None) => {
-                out.tick();
-                continue;
-            }
+        match poses.wait(Duration::from_millis(20)) {
+            Ok(Some(s)) => view.pose(&s),
+            Ok(None) => view.out.tick(),
             // SIGINT/SIGTERM interrupt the wait (iceoryx2 reports it as an error): a stop.
             Err(_) if stop.load(Ordering::Relaxed) => break,
             Err(e) => {
                 failure = Some(e);
                 break;
             }
-        };
-        let t = sample.timestamp_ns;
-        if !model_in_file {
-            out.write_file(ch::MODEL, t, &messages::model(&segments, t));
-            model_in_file = true;
         }
-        out.summary.poses += 1;
-        if let Some(prev) = last_sequence {
-            out.summary.poses_missed += sample.sequence.saturating_sub(prev + 1);
-        }
-        last_sequence = Some(sample.sequence);
-        out.send(ch::SAMPLE, t, &messages::pose_sample(&sample));
-        if messages::is_tracking(&sample) {
-            out.summary.tracking += 1;
-            out.send(ch::POSE, t, &messages::pose_in_frame(&sample));
-            out.send(ch::TF, t, &messages::frame_transform(&sample));
-            if let Some(u) = messages::uncertainty(&sample) {
-                out.send(ch::UNCERTAINTY, t, &u);
+    }
+    // A stop first takes what the buffers already hold: `omnitrack run --mcap` stops the view
+    // right after its last publish, and those samples are the run's last poses. Bounded, as a
+    // tracker that goes on publishing would otherwise keep it here.
+    if failure.is_none() {
+        for _ in 0..2 * SUBSCRIBER_BUFFER {
+            let status = statuses.receive().ok().flatten();
+            let pose = if more(&view) {
+                poses.receive().ok().flatten()
+            } else {
+                None
+            };
+            if status.is_none() && pose.is_none() {
+                break;
             }
-            trajectory.push(&mut out, t, sample.position_m);
-        } else {
-            trajectory.flush(&mut out, false);
-        }
-        if let Some(worker) = &mut images {
-            worker.offer(&sample);
-            while let Some(made) = worker.take() {
-                if !out.images(made) {
-                    images = None;
-                    break;
-                }
+            if let Some(s) = status {
+                view.status(s);
+            }
+            if let Some(s) = pose {
+                view.pose(&s);
             }
         }
     }
+    let View {
+        mut out,
+        mut trajectory,
+        images,
+        ..
+    } = view;
     trajectory.flush(&mut out, false);
     if let Some(worker) = images {
         out.summary.images_skipped = worker.busy;

@@ -4,7 +4,7 @@
 //! ```text
 //! omnitrack-view serve [--services PREFIX] [--bind ADDR] [--port N | --no-server] [--mcap FILE]
 //!     [--model MODEL.obj] [--recording DIR [--images-every-s S] [--no-edges] [--jpeg-quality Q]]
-//!     [--count N]
+//!     [--count N] [--ready]
 //! omnitrack-view completions SHELL
 //! omnitrack-view manpage [--dir DIR]
 //! ```
@@ -16,9 +16,15 @@
 use clap::{Parser, Subcommand};
 use omnitrack_view::images::ImageOptions;
 use omnitrack_view::{run, stop_on_signals, Options, ViewError, DEFAULT_PORT};
+use std::io::{Read, Write};
 use std::net::{IpAddr, SocketAddr};
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 use std::time::Duration;
+
+/// `serve --ready`'s line on standard output.
+const READY: &str = "ready";
 
 #[derive(Parser)]
 #[command(
@@ -94,6 +100,12 @@ enum Command {
         /// Stops after this many pose samples.
         #[arg(long)]
         count: Option<u64>,
+        /// For a parent process that starts the view and then publishes (`omnitrack run
+        /// --mcap`): prints `ready` on standard output once subscribed (and the file created),
+        /// so that no sample comes before the view listens, and stops as on SIGINT when
+        /// standard input closes (the parent ended, however abruptly).
+        #[arg(long)]
+        ready: bool,
     },
     /// Prints a shell completion script for omnitrack-view (bash, zsh, fish, elvish or powershell).
     Completions {
@@ -127,6 +139,7 @@ fn run_cli(cli: Cli) -> Result<(), MainError> {
             no_edges,
             jpeg_quality,
             count,
+            ready,
         } => {
             let options = Options {
                 pose_service: format!("{services}/pose"),
@@ -143,6 +156,9 @@ fn run_cli(cli: Cli) -> Result<(), MainError> {
                 count,
             };
             let stop = stop_on_signals();
+            if ready {
+                stop_at_end_of_input(&stop);
+            }
             let s = run(&options, &stop, &mut |addr| {
                 let server = addr.map_or("no server".to_string(), |a| {
                     format!("ws://{a} (Foxglove: Open connection → Foxglove WebSocket)")
@@ -152,6 +168,11 @@ fn run_cli(cli: Cli) -> Result<(), MainError> {
                     .as_ref()
                     .map_or(String::new(), |p| format!(", MCAP file {}", p.display()));
                 eprintln!("omnitrack-view: {} → {server}{file}", options.pose_service);
+                if ready {
+                    // A parent that is gone cannot be told; the view goes on either way.
+                    let mut stdout = std::io::stdout().lock();
+                    let _ = writeln!(stdout, "{READY}").and_then(|_| stdout.flush());
+                }
             })?;
             eprintln!(
                 "omnitrack-view: {} poses ({} tracking, {} missed), {} statuses, {} image sets; \
@@ -172,6 +193,19 @@ fn run_cli(cli: Cli) -> Result<(), MainError> {
         Command::Manpage(args) => omnitrack_manual::run_manpage(&manual(), &args)?,
     }
     Ok(())
+}
+
+/// Sets `stop` when standard input reaches its end or fails: a parent that holds the other end
+/// of the pipe and dies (even by SIGKILL) closes it, and the view finishes its file instead of
+/// waiting for samples that will not come.
+fn stop_at_end_of_input(stop: &Arc<AtomicBool>) {
+    let stop = Arc::clone(stop);
+    std::thread::spawn(move || {
+        let mut buf = [0u8; 256];
+        let mut input = std::io::stdin().lock();
+        while matches!(input.read(&mut buf), Ok(n) if n > 0) {}
+        stop.store(true, Ordering::Relaxed);
+    });
 }
 
 fn manual() -> omnitrack_manual::Manual {
