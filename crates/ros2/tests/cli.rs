@@ -1,6 +1,7 @@
 //! `omnitrack-ros2` without a network: its manual and completions, and bad input refused in one
 //! line naming what is wrong, before any service or DDS participant is opened.
 
+use omnitrack_testkit::docs::{check_documented_runs, interface_row, long_options};
 use std::process::Command;
 
 const BIN: &str = env!("CARGO_BIN_EXE_omnitrack-ros2");
@@ -128,23 +129,6 @@ fn bad_input_is_one_line_naming_what_is_wrong() {
     assert!(String::from_utf8_lossy(&out.stderr).starts_with("omnitrack-ros2: --topic 'a//b'"));
 }
 
-/// The long options in `text`, `--help` and `--version` left out.
-fn long_options(text: &str) -> std::collections::BTreeSet<String> {
-    let mut found = std::collections::BTreeSet::new();
-    let mut rest = text;
-    while let Some(at) = rest.find("--") {
-        let name: String = rest[at + 2..]
-            .chars()
-            .take_while(|c| c.is_ascii_lowercase() || *c == '-')
-            .collect();
-        if !name.is_empty() && name != "help" && name != "version" && !name.ends_with('-') {
-            found.insert(name.clone());
-        }
-        rest = &rest[at + 2 + name.len()..];
-    }
-    found
-}
-
 /// docs/interfaces.md's row of `omnitrack-ros2 publish` names every option the command has, and
 /// no other.
 #[test]
@@ -152,14 +136,8 @@ fn the_interface_document_names_every_option_of_publish() {
     let help = Command::new(BIN).args(["publish", "--help"]).output().unwrap();
     let help = String::from_utf8_lossy(&help.stdout);
     let options_lines: String = help.lines().filter(|l| l.trim_start().starts_with('-')).collect();
-    let docs = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../../docs/interfaces.md")).unwrap();
-    let row = docs
-        .lines()
-        .find(|l| l.starts_with("| `omnitrack-ros2 publish "))
-        .expect("a row for omnitrack-ros2 publish");
-    // The first cell, up to its closing code span (its `\|` are not cell borders).
-    let command = row.split("` |").next().unwrap();
-    assert_eq!(long_options(command), long_options(&options_lines), "{command}");
+    let command = interface_row("omnitrack-ros2 publish ");
+    assert_eq!(long_options(&command), long_options(&options_lines), "{command}");
     assert!(long_options(&options_lines).contains("rig-in-base"));
 }
 
@@ -168,29 +146,7 @@ fn the_interface_document_names_every_option_of_publish() {
 /// is opened). The front door's README test leaves these lines to this one.
 #[test]
 fn the_documented_commands_are_ones_the_command_line_takes() {
-    let mut checked = 0;
-    for doc in ["README.md", "docs/rig-guide.md"] {
-        let path = format!("{}/../../{doc}", env!("CARGO_MANIFEST_DIR"));
-        let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{path}: {e}"));
-        for line in text.lines() {
-            let line = line.split(" #").next().unwrap_or(line).trim();
-            let Some((cargo, args)) = line.split_once(" -- ") else {
-                continue;
-            };
-            if !cargo.starts_with("cargo run") || !cargo.contains("-p omnitrack-ros2") {
-                continue;
-            }
-            let mut argv: Vec<&str> = args.split_whitespace().collect();
-            argv.push("--help");
-            let out = Command::new(BIN).args(&argv).output().unwrap();
-            assert!(
-                out.status.success(),
-                "{doc}: `{line}`: {}",
-                String::from_utf8_lossy(&out.stderr)
-            );
-            checked += 1;
-        }
-    }
+    let checked = check_documented_runs(BIN, "omnitrack-ros2");
     assert!(
         checked >= 1,
         "no `cargo run -p omnitrack-ros2 -- …` line found in the docs"

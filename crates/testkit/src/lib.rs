@@ -10,6 +10,8 @@
 //! A test binary that counts declares the allocator itself (a global allocator is per binary):
 //! `#[global_allocator] static ALLOCATOR: omnitrack_testkit::Counting = omnitrack_testkit::Counting;`.
 
+pub mod docs;
+
 use omnitrack_core::Rig;
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;

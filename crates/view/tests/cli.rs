@@ -3,6 +3,7 @@
 //! documents name every option and give commands it takes; its manual and completions.
 
 use omnitrack_io::publish::{PosePublisher, PoseSample, TrackerState};
+use omnitrack_testkit::docs::{check_documented_runs, interface_row, long_options};
 use std::io::{BufRead, BufReader};
 use std::net::TcpListener;
 use std::path::Path;
@@ -182,35 +183,14 @@ fn count_and_sigint_end_with_a_whole_file_and_a_kill_loses_at_most_a_second() {
     }
 }
 
-fn long_options(text: &str) -> std::collections::BTreeSet<String> {
-    let mut found = std::collections::BTreeSet::new();
-    let mut rest = text;
-    while let Some(at) = rest.find("--") {
-        let name: String = rest[at + 2..]
-            .chars()
-            .take_while(|c| c.is_ascii_lowercase() || *c == '-')
-            .collect();
-        if !name.is_empty() && name != "help" && name != "version" && !name.ends_with('-') {
-            found.insert(name.clone());
-        }
-        rest = &rest[at + 2 + name.len()..];
-    }
-    found
-}
-
 /// docs/interfaces.md's row of `omnitrack-view serve` names every option the command has.
 #[test]
 fn the_interface_document_names_every_option_of_serve() {
     let help = Command::new(BIN).args(["serve", "--help"]).output().unwrap();
     let help = String::from_utf8_lossy(&help.stdout);
     let options: String = help.lines().filter(|l| l.trim_start().starts_with('-')).collect();
-    let docs = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../../docs/interfaces.md")).unwrap();
-    let row = docs
-        .lines()
-        .find(|l| l.starts_with("| `omnitrack-view serve "))
-        .expect("a row for omnitrack-view serve");
-    let command = row.split("` |").next().unwrap();
-    assert_eq!(long_options(command), long_options(&options), "{command}");
+    let command = interface_row("omnitrack-view serve ");
+    assert_eq!(long_options(&command), long_options(&options), "{command}");
     assert!(long_options(&options).contains("mcap"));
 }
 
@@ -218,29 +198,7 @@ fn the_interface_document_names_every_option_of_serve() {
 /// command line takes as written (`--help` appended: parsed, nothing opened).
 #[test]
 fn the_documented_commands_are_ones_the_command_line_takes() {
-    let mut checked = 0;
-    for doc in ["README.md", "docs/rig-guide.md"] {
-        let path = format!("{}/../../{doc}", env!("CARGO_MANIFEST_DIR"));
-        let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{path}: {e}"));
-        for line in text.lines() {
-            let line = line.split(" #").next().unwrap_or(line).trim();
-            let Some((cargo, args)) = line.split_once(" -- ") else {
-                continue;
-            };
-            if !cargo.starts_with("cargo run") || !cargo.contains("-p omnitrack-view") {
-                continue;
-            }
-            let mut argv: Vec<&str> = args.split_whitespace().collect();
-            argv.push("--help");
-            let out = Command::new(BIN).args(&argv).output().unwrap();
-            assert!(
-                out.status.success(),
-                "{doc}: `{line}`: {}",
-                String::from_utf8_lossy(&out.stderr)
-            );
-            checked += 1;
-        }
-    }
+    let checked = check_documented_runs(BIN, "omnitrack-view");
     assert!(
         checked >= 2,
         "the README and the rig guide give `cargo run -p omnitrack-view -- …` lines"

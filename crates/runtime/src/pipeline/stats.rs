@@ -157,15 +157,10 @@ impl StageClock {
     }
 
     pub fn summary(&self) -> StageSummary {
-        let h = &self.histogram;
         StageSummary {
-            count: h.count(),
-            p50: h.quantile(0.5),
-            p99: h.quantile(0.99),
-            max: h.max(),
-            mean: h.mean(),
             budget: self.budget,
             overruns: self.overruns,
+            ..summary_of(&self.histogram)
         }
     }
 }
