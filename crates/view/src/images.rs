@@ -23,8 +23,9 @@ use std::thread::JoinHandle;
 use std::time::Duration;
 
 use base64::Engine;
-use nalgebra::{Point2, Point3, UnitQuaternion, Vector3};
+use nalgebra::{Point2, Point3, Vector3};
 use omnitrack_core::frame::FrameSet;
+use omnitrack_core::geometry::Pose;
 use omnitrack_core::rig::Rig;
 use omnitrack_edges::{EdgeDetector, EdgeParams};
 use omnitrack_io::capture::{FrameSource, Pacing, ReplaySource};
@@ -125,7 +126,8 @@ impl Images {
         if let Some(d) = &mut self.detector {
             d.detect(&self.frame);
         }
-        let pose = is_tracking(s).then(|| world_to_rig(s)).flatten();
+        // A sample with a damaged quaternion (not unit, not finite) has no pose to draw.
+        let t_rig_world = is_tracking(s).then(|| s.pose().ok()).flatten().map(|p| p.inverse());
         let mut set = Vec::with_capacity(self.rig.sensors.len());
         for (k, sensor) in self.rig.sensors.iter().enumerate() {
             let image = self.frame.sensor(k);
@@ -142,8 +144,8 @@ impl Images {
                 "format": "jpeg",
             });
             let mut annotations = Vec::new();
-            if let Some((r, p)) = &pose {
-                let pieces = model_pieces(sensor, &self.segments, r, p);
+            if let Some(t_rig_world) = &t_rig_world {
+                let pieces = model_pieces(sensor, &self.segments, t_rig_world);
                 annotations.push(points(t, &pieces, MODEL_COLOUR, 1.5));
             }
             if let Some(d) = &self.detector {
@@ -247,26 +249,12 @@ fn encode_jpeg(rgb: &[u8], width: u32, height: u32, quality: u8) -> Result<Vec<u
     Ok(out)
 }
 
-/// (R, t) of T_rig_world for a sample: a world point p is R p + t in the rig.
-fn world_to_rig(s: &PoseSample) -> Option<(UnitQuaternion<f64>, Vector3<f64>)> {
-    let [w, x, y, z] = s.rotation_wxyz;
-    let q = nalgebra::Quaternion::new(w, x, y, z);
-    // A sample with a zero or damaged quaternion (NaN fails the test too) has no pose to draw.
-    let unit = (q.norm() - 1.0).abs() < 1e-6;
-    if !unit {
-        return None;
-    }
-    let r_world_rig = UnitQuaternion::from_quaternion(q);
-    let r = r_world_rig.inverse();
-    Some((r, -(r * Vector3::from(s.position_m))))
-}
-
-/// Line-list pairs (pixels) of the model's segments as `sensor` sees them from the pose.
+/// Line-list pairs (pixels) of the model's segments as `sensor` sees them from the pose
+/// (`t_rig_world`, the inverse of the sample's `T_world_rig`).
 fn model_pieces(
     sensor: &omnitrack_core::rig::Sensor,
     segments: &[([f64; 3], [f64; 3])],
-    r: &UnitQuaternion<f64>,
-    t: &Vector3<f64>,
+    t_rig_world: &Pose,
 ) -> Vec<[Point2<f64>; 2]> {
     let mut pieces = Vec::new();
     for (a, b) in segments {
@@ -274,7 +262,7 @@ fn model_pieces(
         let mut prev: Option<Point2<f64>> = None;
         for i in 0..=SEGMENT_SAMPLES {
             let f = i as f64 / SEGMENT_SAMPLES as f64;
-            let p_rig = Point3::from(r * (a + (b - a) * f) + t);
+            let p_rig = t_rig_world.transform_point(&Point3::from(a + (b - a) * f));
             let px = sensor.project_from_rig(&p_rig);
             if let (Some(p0), Some(p1)) = (prev, px) {
                 pieces.push([p0, p1]);
@@ -323,6 +311,7 @@ fn points(t: u64, pieces: &[[Point2<f64>; 2]], c: [f64; 4], thickness: f64) -> V
 #[cfg(test)]
 mod tests {
     use super::*;
+    use nalgebra::UnitQuaternion;
     use omnitrack_core::status::TrackerState;
 
     #[test]
@@ -337,20 +326,20 @@ mod tests {
             rotation_wxyz: [q.w, q.i, q.j, q.k],
             ..PoseSample::default()
         };
-        let (r, t) = world_to_rig(&s).unwrap();
+        let t_rig_world = s.pose().unwrap().inverse();
         // A segment 3 m ahead of the rig (world +y), across its view.
         let seg = ([1.5, 6.0, 1.5], [2.5, 6.0, 1.5]);
-        let a_rig = Point3::from(r * Vector3::from(seg.0) + t);
+        let a_rig = t_rig_world.transform_point(&Point3::from(seg.0));
         assert!((a_rig - Point3::new(3.0, 0.5, 0.0)).norm() < 1e-12, "{a_rig}");
         let seen: Vec<_> = rig
             .sensors
             .iter()
-            .map(|k| model_pieces(k, &[seg], &r, &t))
+            .map(|k| model_pieces(k, &[seg], &t_rig_world))
             .filter(|p| !p.is_empty())
             .collect();
         assert!(!seen.is_empty(), "no sensor sees a segment 3 m ahead");
         for (k, sensor) in rig.sensors.iter().enumerate() {
-            let pieces = model_pieces(sensor, &[seg], &r, &t);
+            let pieces = model_pieces(sensor, &[seg], &t_rig_world);
             if let (Some(first), Some(want)) = (pieces.first(), sensor.project_from_rig(&a_rig)) {
                 assert!((first[0] - want).norm() < 1e-9, "sensor {k}");
             }
@@ -359,6 +348,6 @@ mod tests {
             rotation_wxyz: [0.0; 4],
             ..s
         };
-        assert!(world_to_rig(&not_a_rotation).is_none());
+        assert!(not_a_rotation.pose().is_err(), "a damaged sample is not drawn");
     }
 }
