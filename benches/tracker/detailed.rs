@@ -15,7 +15,7 @@
 //!
 //! **Hints** as `zind_bench` makes them: a ball of radius 1.5 m or 3 m whose centre is 0.72 m
 //! from the truth in a seeded direction, and the whole model. A trial gives up after
-//! [`WINDOW`] frames without a pose; a commit is judged [`AFTER`] frames later.
+//! [`WINDOW_S`] seconds of frames without a pose (`--window`; `--rows` picks the volumes); a commit is judged [`AFTER`] frames later.
 //! A wrong commit is any pose more than 1 m or 10° off on any frame of the trial.
 
 use nalgebra::{Point3, Translation3, UnitQuaternion, Vector3};
@@ -35,9 +35,9 @@ use std::time::Instant;
 use crate::{cache_root, Args};
 use omnitrack::desk::results::percentile;
 
-/// Frames a trial waits for a pose (30 s: three whole-model search budgets), and frames after
-/// the commit it is judged at.
-const WINDOW: usize = 300;
+/// Frames a trial waits for a pose by default (30 s: three whole-model search budgets;
+/// `--window SECONDS` sets another), and frames after the commit it is judged at.
+const WINDOW_S: f64 = 30.0;
 const AFTER: usize = 10;
 /// The hints' centres lie this far from the truth (m), as `zind_bench`'s.
 const HINT_OFFSET_M: f64 = 0.72;
@@ -158,6 +158,16 @@ pub(crate) fn detailed(a: &Args, rig: &Rig, label: &str, options: &RecordingOpti
         ("hint, radius 3 m", Some(3.0)),
         ("no hint", None),
     ];
+    let wanted = |r: Option<f64>| {
+        a.rows.as_deref().is_none_or(|spec| {
+            spec.split(',').any(|w| match (w.trim(), r) {
+                ("none", None) => true,
+                (w, Some(r)) => w.parse::<f64>().is_ok_and(|w| (w - r).abs() < 1e-9),
+                _ => false,
+            })
+        })
+    };
+    let window = (a.window_s * 1e9 / interval_ns as f64).round().max(1.0) as usize;
     let mut rows: Vec<Row> = volumes.iter().map(|_| Row::default()).collect();
     let mut blind = 0;
     for (k, t) in truth.iter().enumerate() {
@@ -170,6 +180,9 @@ pub(crate) fn detailed(a: &Args, rig: &Rig, label: &str, options: &RecordingOpti
         let truth_pose = t.pose;
         for (v, &(row_name, radius)) in volumes.iter().enumerate() {
             let angle = draw.next() * std::f64::consts::TAU;
+            if !wanted(radius) || a.only.as_ref().is_some_and(|o| !o.contains(&k)) {
+                continue;
+            }
             let hint = radius.map(|r| SearchVolume {
                 centre: Point3::from(
                     truth_pose.translation.vector + Vector3::new(angle.cos(), angle.sin(), 0.0) * HINT_OFFSET_M,
@@ -178,7 +191,7 @@ pub(crate) fn detailed(a: &Args, rig: &Rig, label: &str, options: &RecordingOpti
             });
             let mut tracker = Tracker::new(rig, &model, &table, &cfg, hint, 1 + k as u64);
             if tracker.segments_in_view(&truth_pose) < 3 {
-                if v == 0 {
+                if volumes[..v].iter().all(|w| !wanted(w.1)) {
                     blind += 1;
                 }
                 continue;
@@ -193,8 +206,8 @@ pub(crate) fn detailed(a: &Args, rig: &Rig, label: &str, options: &RecordingOpti
                     p.rotation.angle_to(&truth_pose.rotation).to_degrees(),
                 )
             };
-            for f in 0..WINDOW + AFTER {
-                if committed_at.is_none() && f >= WINDOW {
+            for f in 0..window + AFTER {
+                if committed_at.is_none() && f >= window {
                     break;
                 }
                 let ts = t.timestamp_ns + f as u64 * interval_ns;
@@ -261,12 +274,15 @@ pub(crate) fn detailed(a: &Args, rig: &Rig, label: &str, options: &RecordingOpti
         "{name} ({} segments, {long} used), rig {}, {} starts ({blind} more that see fewer than 3 model segments not counted), appearance {label}",
         model.segments.len(),
         rig.name,
-        rows[0].counted,
+        rows.iter().map(|r| r.counted).max().unwrap_or(0),
     );
     let mut table = String::from(
         "| search | within 10 cm / 2° | within 30 cm / 5° | wrong commits | no pose | cells looked at (all searches) | first pose p50 / max (ms) |\n| --- | --- | --- | --- | --- | --- | --- |",
     );
-    for (row, (row_name, _)) in rows.iter_mut().zip(volumes) {
+    for (row, (row_name, radius)) in rows.iter_mut().zip(volumes) {
+        if !wanted(radius) {
+            continue;
+        }
         row.first_pose_ms.sort_by(f64::total_cmp);
         let (looked, of) = row.cells.iter().fold((0, 0), |s, c| (s.0 + c.0, s.1 + c.1));
         table.push_str(&format!(
@@ -283,11 +299,18 @@ pub(crate) fn detailed(a: &Args, rig: &Rig, label: &str, options: &RecordingOpti
     println!("\n{title}:\n\n{table}");
     let note = format!(
         "{table}\n\nStarts drawn with seed {}; {}. Wrong: a pose more than 1 m or 10° off on any frame. \
-         First-pose times are wall time (edges and search) on this machine, with whatever else ran on it.",
+         First-pose times are wall time (edges and search) on this machine, with whatever else ran on it. \
+         A trial waits {} s of frames for a pose{}.",
         a.seed,
         match &a.config {
             Some(c) => format!("config {} (NOT the shipped one)", c.display()),
             None => "the shipped configuration".into(),
+        },
+        a.window_s,
+        if a.window_s == WINDOW_S {
+            " (the default)"
+        } else {
+            " (NOT the default 30 s)"
         }
     );
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
@@ -369,7 +392,7 @@ pub(crate) fn diagnose(
     let candidates = candidates.to_vec();
     let _ = write!(
         line,
-        "; grid merit {:.3}\n    search: {} rotations, looked at {} of {} cells, triplets in {} of {}, work {}{}",
+        "; grid merit {:.3}\n    search: {} rotations, looked at {} of {} cells, triplets in {} of {}, work {} (scan {} over {} positions, {} climbed), {:.0} ms{}",
         init.grid_merit(truth).unwrap_or(f64::NAN),
         report.rotations,
         report.plan_cells_scanned,
@@ -377,8 +400,26 @@ pub(crate) fn diagnose(
         report.cells_searched,
         report.cells_in_volume,
         report.work,
+        report.scan_work,
+        report.positions_scored,
+        report.climbed,
+        report.elapsed.as_secs_f64() * 1e3,
         if report.backstop { " (backstop)" } else { "" }
     );
+    // The grid's kept positions under the truth's rotation (within 10°), nearest the truth first.
+    let mut kept: Vec<(f64, f64)> = init
+        .grid_kept()
+        .filter(|(_, p)| err(p).1 <= 10.0)
+        .map(|(m, p)| (err(&p).0, m))
+        .collect();
+    kept.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let _ = write!(
+        line,
+        "\n      grid kept under the truth's rotation (m from the truth, merit):"
+    );
+    for (d, m) in kept.iter().take(8) {
+        let _ = write!(line, " {d:.2}/{m:.3}");
+    }
     for c in candidates.iter().take(8) {
         let (dp, dr) = err(&c.pose);
         let _ = write!(

@@ -120,6 +120,10 @@ struct Args {
     starts: usize,
     one_frame: bool,
     model: Option<PathBuf>,
+    /// `--model` mode: seconds of frames a trial waits for a pose, and the rows searched.
+    window_s: f64,
+    rows: Option<String>,
+    only: Option<Vec<usize>>,
 }
 
 fn args() -> Args {
@@ -146,6 +150,9 @@ fn args() -> Args {
         starts: 10,
         one_frame: false,
         model: None,
+        window_s: 30.0,
+        rows: None,
+        only: None,
     };
     let mut it = std::env::args().skip(1);
     while let Some(x) = it.next() {
@@ -195,6 +202,16 @@ fn args() -> Args {
             "--seconds" => a.seconds = it.next().and_then(|s| s.parse().ok()).expect("--seconds S"),
             "--starts" => a.starts = it.next().and_then(|s| s.parse().ok()).expect("--starts N"),
             "--hold" => a.hold = it.next().and_then(|s| s.parse().ok()).expect("--hold N"),
+            "--window" => a.window_s = it.next().and_then(|s| s.parse().ok()).expect("--window SECONDS"),
+            "--only" => {
+                let spec = it.next().expect("--only K,K,...");
+                a.only = Some(
+                    spec.split(',')
+                        .map(|k| k.trim().parse().expect("--only K,K,..."))
+                        .collect(),
+                );
+            }
+            "--rows" => a.rows = Some(it.next().expect("--rows 1.5,3,none")),
             "--init-trials" => a.init_trials = it.next().and_then(|s| s.parse().ok()).expect("--init-trials N"),
             _ => {}
         }

@@ -358,6 +358,8 @@ pub struct Initialiser<'m> {
     /// This frame's rotations from vanishing directions.
     vanishing_rot: [UnitQuaternion<f64>; MAX_ROTATIONS],
     vanishing_count: usize,
+    /// The grid's best positions climbed and polished in this search.
+    climbed: usize,
     yaw_twins: bool,
     /// A rotation the rig cannot have turned further from than the angle (rad): samples beyond
     /// it are dropped before they take a place in the pool.
@@ -436,6 +438,7 @@ impl<'m> Initialiser<'m> {
             grid_segs: resident(Vec::with_capacity(max_set)),
             vanishing_rot: [UnitQuaternion::identity(); MAX_ROTATIONS],
             vanishing_count: 0,
+            climbed: 0,
             yaw_twins: true,
             rotation_prior: None,
             sweep_from_m: 0.0,

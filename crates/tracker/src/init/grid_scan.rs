@@ -82,6 +82,7 @@ pub(super) struct GridLane {
     /// Cells whose every position was scored, and the first of the lane's cells that was not
     /// (`None`: all of them were).
     scanned: usize,
+    positions: u64,
     resume: Option<usize>,
     /// The wall clock's backstop or a cancellation stopped the lane.
     backstop: bool,
@@ -99,6 +100,7 @@ impl GridLane {
             said: 0,
             rays_charged: 0,
             scanned: 0,
+            positions: 0,
             resume: None,
             backstop: false,
         }
@@ -141,6 +143,9 @@ pub(super) struct GridSweep {
     pub skipped: usize,
     pub scanned: usize,
     pub next_m: Option<f64>,
+    /// The work the scan charged, and the lattice positions it scored.
+    pub work: u64,
+    pub positions: u64,
 }
 
 impl Initialiser<'_> {
@@ -166,6 +171,7 @@ impl Initialiser<'_> {
             lane.said = 0;
             lane.rays_charged = lane.sight.rays_cast();
             lane.scanned = 0;
+            lane.positions = 0;
             lane.resume = None;
             lane.backstop = false;
         }
@@ -183,6 +189,8 @@ impl Initialiser<'_> {
             skipped: first,
             scanned: 0,
             next_m: None,
+            work: 0,
+            positions: 0,
         };
         let mut resume = None::<usize>;
         self.grid_best = used[0].best.clone();
@@ -200,6 +208,8 @@ impl Initialiser<'_> {
                 (a, b) => a.or(b),
             };
             self.work = self.work.saturating_add(lane.work);
+            sweep.work += lane.work;
+            sweep.positions += lane.positions;
             self.backstop_hit |= lane.backstop;
         }
         sweep.next_m = resume.map(|ci| self.plan_cells[ci].0);
@@ -291,6 +301,7 @@ impl Initialiser<'_> {
         lane.segs.clear();
         lane.segs.extend(lane.order.iter().map(|o| o.1));
         lane.spend(work::SIGHT);
+        lane.positions += 1;
         let mut z = z_lo;
         while z <= z_hi + 1e-9 {
             let p = Point3::new(x, y, z);

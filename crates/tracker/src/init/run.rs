@@ -68,6 +68,7 @@ impl Initialiser<'_> {
                 self.vanishing_count += 1;
             }
         }
+        self.climbed = 0;
         // The grid search under the vanishing directions first: on real photographs it finds
         // what the triplets miss, and the triplets then have what is left of the time budget.
         let sweep = self.grid_search(edges, volume, limit);
@@ -75,6 +76,9 @@ impl Initialiser<'_> {
         report.plan_cells_scanned = sweep.scanned;
         report.plan_cells_skipped = sweep.skipped;
         report.swept_to_m = sweep.next_m;
+        report.scan_work = sweep.work;
+        report.positions_scored = sweep.positions;
+        report.climbed = self.climbed;
         report.grid_elapsed = started.elapsed();
         report.rotations = self.vanishing_count;
         // The triplets leave twice what polishing their best samples costs: a cell's sampling

@@ -160,6 +160,7 @@ impl Initialiser<'_> {
                 ),
                 grid.min_len,
             );
+            self.climbed += 1;
             if let Some(c) = self.polish(&start, edges) {
                 self.offer(c);
             }
@@ -197,6 +198,18 @@ impl Initialiser<'_> {
         }
         self.grid_segs = segs;
         pose
+    }
+
+    /// The grid's kept positions of the last [`Self::run`] as poses under their rotations, with
+    /// their coarse merits (for diagnosis: whether the truth's neighbour was among them).
+    pub fn grid_kept(&self) -> impl Iterator<Item = (f64, Pose)> + '_ {
+        self.grid_best[..self.vanishing_count]
+            .iter()
+            .zip(&self.vanishing_rot)
+            .flat_map(|(best, r)| {
+                best.iter()
+                    .map(move |b| (b.0, Pose::from_parts(Translation3::from(b.1.coords), *r)))
+            })
     }
 
     /// The grid's coarse merit of `pose` against the edges of the last [`Self::run`] (for

@@ -138,6 +138,12 @@ pub struct InitReport {
     /// climbs and polishes), and how many rotations it had.
     pub grid_elapsed: Duration,
     pub rotations: usize,
+    /// Of `work`, what the grid's scan of its lattice spent (module `grid_scan`), and the
+    /// lattice positions it scored.
+    pub scan_work: u64,
+    pub positions_scored: u64,
+    /// The grid's best positions climbed and polished.
+    pub climbed: usize,
     /// The volume held no valid node: the diameter (m) of the volume actually searched, about
     /// the same centre, out to the nearest valid nodes (`None`: the volume as given).
     pub widened_to_m: Option<f64>,
