@@ -1,8 +1,9 @@
-//! The deployment files (tools/deploy/) and the Debian package they go into (Cargo.toml,
-//! `[package.metadata.deb]`), read as files: the udev rule takes cameras, not every composite
-//! device; the systemd unit runs the binary the package installs, built with the sources the unit
-//! may ask for; the package's files exist; the unit, the sysusers and the tmpfiles name one user.
-//! `tools/deploy/check-deb.sh` checks a built package (CI).
+//! The deployment files (tools/deploy/) and the Debian packages they go into (Cargo.toml's
+//! `[package.metadata.deb]`, and crates/view's, crates/link's and crates/ros2's), read as files:
+//! the udev rule takes cameras, not every composite device; the systemd unit runs the binary the
+//! package installs, built with the sources the unit may ask for; the packages' files exist, no
+//! file in two of them; the unit, the sysusers and the tmpfiles name one user.
+//! `tools/deploy/check-deb.sh` checks the built packages (CI).
 
 use std::path::PathBuf;
 
@@ -19,17 +20,33 @@ fn rules(text: &str) -> Vec<&str> {
         .collect()
 }
 
-fn deb() -> toml::Table {
-    let manifest: toml::Table = toml::from_str(&read("Cargo.toml")).unwrap();
-    manifest["package"]["metadata"]["deb"]
+/// The programs with a Debian package each, and the manifests that describe them.
+const PACKAGES: [(&str, &str); 4] = [
+    ("omnitrack", "Cargo.toml"),
+    ("omnitrack-view", "crates/view/Cargo.toml"),
+    ("omnitrack-link", "crates/link/Cargo.toml"),
+    ("omnitrack-ros2", "crates/ros2/Cargo.toml"),
+];
+
+fn deb_of(manifest: &str) -> toml::Table {
+    let manifest_text: toml::Table = toml::from_str(&read(manifest)).unwrap();
+    manifest_text["package"]["metadata"]["deb"]
         .as_table()
-        .expect("Cargo.toml has [package.metadata.deb]")
+        .unwrap_or_else(|| panic!("{manifest} has no [package.metadata.deb]"))
         .clone()
 }
 
-/// (source, destination) of each file of the package.
+fn deb() -> toml::Table {
+    deb_of("Cargo.toml")
+}
+
+/// (source, destination) of each file of the tracker's package.
 fn assets() -> Vec<(String, String)> {
-    deb()["assets"]
+    assets_of(&deb())
+}
+
+fn assets_of(deb: &toml::Table) -> Vec<(String, String)> {
+    deb["assets"]
         .as_array()
         .unwrap()
         .iter()
@@ -129,29 +146,68 @@ fn the_unit_runs_the_binary_the_package_installs_with_the_sources_it_asks_for() 
     assert!(unit.contains("EnvironmentFile=-/etc/default/omnitrack"), "{unit}");
 }
 
-/// Every file the package takes from the repository exists; the generated ones (completions,
-/// manual pages) are those `tools/deploy/build-deb.sh` writes; /etc gets the shipped rig and
+/// Every file the packages take from the repository exists; the generated ones (the program,
+/// its completions and manual pages) are those `tools/deploy/build-deb.sh` builds and writes,
+/// each program's into its own package, and every program has its completions for three shells
+/// and its manual pages; no two packages install one file; /etc gets the shipped rig and
 /// tracker config, the defaults file, and nothing else.
 #[test]
-fn every_file_of_the_package_exists_or_is_made_by_its_build() {
+fn every_file_of_the_packages_exists_or_is_made_by_their_build() {
     let script = read("tools/deploy/build-deb.sh");
+    assert!(
+        script.contains("share=\"$target/$profile/share/$program\"")
+            && script.contains("completions/$program.$shell")
+            && script.contains("manpage --dir \"$share/man1\""),
+        "build-deb.sh no longer writes share/PROGRAM/{{completions,man1}}"
+    );
+    let mut installed = std::collections::BTreeSet::new();
     let mut etc = Vec::new();
-    for (source, dest) in assets() {
-        if let Some(made) = source.strip_prefix("target/release/") {
-            let made = made.trim_start_matches("share/");
-            assert!(
-                made == "omnitrack"
-                    || (made.starts_with("completions/omnitrack.") && script.contains("completions/omnitrack.$shell"))
-                    || (made.starts_with("man/man1/") && script.contains("manpage --dir \"$share/man/man1\"")),
-                "{source}: not made by build-deb.sh"
-            );
-        } else {
-            let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(&source);
-            assert!(path.is_file(), "{source} does not exist");
+    for (program, manifest) in PACKAGES {
+        let known = script
+            .lines()
+            .find_map(|l| l.strip_prefix("known="))
+            .unwrap_or_default();
+        assert!(
+            known.split(['"', ' ']).any(|w| w == program),
+            "build-deb.sh does not know the package {program}: {known}"
+        );
+        let deb = deb_of(manifest);
+        assert_eq!(deb["name"].as_str(), Some(program), "{manifest}");
+        let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(manifest);
+        let dir = dir.parent().unwrap();
+        let mut made = Vec::new();
+        for (source, dest) in assets_of(&deb) {
+            if let Some(built) = source.strip_prefix("target/release/") {
+                made.push(built.to_string());
+                let ok = built == program
+                    || built
+                        .strip_prefix(&format!("share/{program}/completions/{program}."))
+                        .is_some()
+                    || built == format!("share/{program}/man1/*.1.gz");
+                assert!(ok, "{manifest}: {source}: not made by build-deb.sh for {program}");
+            } else {
+                assert!(dir.join(&source).is_file(), "{manifest}: {source} does not exist");
+            }
+            if dest.starts_with("etc/") {
+                etc.push(dest.clone());
+            }
+            // The manual pages, a glob, are named by their program; check-deb.sh compares the
+            // packages' actual files.
+            if source.contains('*') {
+                continue;
+            }
+            let file = if dest.ends_with('/') {
+                format!("{dest}{}", source.rsplit('/').next().unwrap())
+            } else {
+                dest.clone()
+            };
+            assert!(installed.insert(file.clone()), "{manifest}: {file} is in two packages");
         }
-        if dest.starts_with("etc/") {
-            etc.push(dest);
+        for shell in ["bash", "zsh", "fish"] {
+            let completion = format!("share/{program}/completions/{program}.{shell}");
+            assert!(made.contains(&completion), "{manifest}: no {completion}");
         }
+        assert!(made.iter().any(|m| m.contains("/man1/")), "{manifest}: no manual pages");
     }
     etc.sort();
     assert_eq!(

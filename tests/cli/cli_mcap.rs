@@ -1,6 +1,7 @@
 //! `omnitrack run --mcap FILE` (issue 49 item 4): the run starts `omnitrack-view serve
 //! --no-server --mcap FILE` beside itself, subscribed before the first frame, and stops it after
-//! the last, so the file holds every tracked pose; a missing view and a path that cannot be
+//! the last, so the file holds every tracked pose, even when a stop signal reaches the view too
+//! (systemd's SIGTERM to the whole service); a missing view and a path that cannot be
 //! written are one line before anything is tracked; a view that ends during the run leaves the
 //! run going and its summary saying the file is incomplete (docs/interfaces.md, `run`).
 //!
@@ -270,4 +271,76 @@ fn a_run_killed_outright_still_leaves_a_finished_file() {
         mcap::Summary::read(&bytes).unwrap().is_some(),
         "a finished file has a summary"
     );
+}
+
+/// The parent of `pid` (from /proc/PID/stat: the field after the command's closing parenthesis
+/// and the state).
+#[cfg(feature = "desk")]
+fn parent_of(pid: u32) -> Option<u32> {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    stat.rsplit_once(')')?.1.split_whitespace().nth(1)?.parse().ok()
+}
+
+/// systemd stops a service with SIGTERM to every process of its control group (the default
+/// `KillMode=control-group`): the run and its view at once. The view used to stop at once and
+/// miss what the run published after it (the frame in hand, and the status the run publishes as
+/// it stops: missing in every try); it now waits for the run, so the file has every sample the
+/// run published and the run calls it written.
+#[cfg(feature = "desk")]
+#[test]
+fn a_sigterm_to_the_run_and_its_view_together_leaves_every_published_sample_in_the_file() {
+    view_binary();
+    let lab = crate::common::lab_recording(FRAMES);
+    lab.table.save(&lab.rec.join("model.vis")).unwrap();
+    let file = lab.dir.path().join("stopped.mcap");
+    let prefix = format!("omnitrack-test/mcap-stopped-{}", std::process::id());
+    let t0 = lab.truth[0].pose.translation.vector;
+    let run = Command::new(OMNITRACK)
+        .args(["run", "--model", lab.rec.join("model.obj").to_str().unwrap()])
+        .args(["--source", &format!("replay:{}", lab.rec.display())])
+        .args(["--init", &format!("{},{},{},1.5", t0.x + 0.5, t0.y, t0.z)])
+        .args(["--services", &prefix, "--realtime", "--json"])
+        .arg("--mcap")
+        .arg(&file)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+    while !file.exists() && std::time::Instant::now() < deadline {
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    // Two seconds of the six: the run has tracked and is mid-recording.
+    std::thread::sleep(std::time::Duration::from_secs(2));
+    let view = std::fs::read_dir("/proc")
+        .unwrap()
+        .filter_map(|e| e.ok()?.file_name().to_str()?.parse::<u32>().ok())
+        .find(|&pid| parent_of(pid) == Some(run.id()))
+        .expect("the run's view process");
+    for pid in [view, run.id()] {
+        // SAFETY: signals to the run we started and to its child.
+        unsafe { libc::kill(pid as i32, libc::SIGTERM) };
+    }
+    let out = run.wait_with_output().unwrap();
+    let (code, stdout, stderr) = text(&out);
+    // 3: stopped before its first pose (a loaded machine's search can outlast the two seconds);
+    // what is published is recorded all the same.
+    assert!(code == 0 || code == 3, "exit {code}: {stderr}");
+    let summary: serde_json::Value = serde_json::from_str(&stdout).unwrap_or_else(|e| panic!("{e}: {stdout}"));
+    let published = summary["samples_published"]["pose"].as_u64().unwrap();
+    assert!(published > 0 && published < FRAMES as u64, "stopped mid-run: {summary}");
+    assert!(
+        stderr.contains(&format!("omnitrack: MCAP file {} written", file.display())),
+        "{stderr}"
+    );
+    let bytes = std::fs::read(&file).unwrap();
+    assert!(mcap::Summary::read(&bytes).unwrap().is_some(), "a finished file");
+    let mut count = std::collections::BTreeMap::<String, u64>::new();
+    for m in mcap::MessageStream::new(&bytes).unwrap() {
+        *count.entry(m.unwrap().channel.topic.clone()).or_default() += 1;
+    }
+    assert_eq!(count.get("/omnitrack/sample").copied(), Some(published), "{count:?}");
+    // The run's last status, published as it stops, is the last sample of all.
+    let statuses = summary["samples_published"]["status"].as_u64().unwrap();
+    assert_eq!(count.get("/omnitrack/status").copied(), Some(statuses), "{count:?}");
 }

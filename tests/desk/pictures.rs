@@ -6,8 +6,8 @@
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use omnitrack::desk::eval::{evaluate, EvalOptions};
 use omnitrack::desk::pictures::{
-    correspondence_states, error_over_time, frame_images, omni_layout, omni_view, plan_view, project_segments,
-    CorrespondenceState, ErrorTrace, OmniOptions, PlanOptions, StateTrace, MODEL_GREEN,
+    correspondence_states, error_over_time, frame_images, omni_layout, omni_view, plan_view, CorrespondenceState,
+    ErrorTrace, OmniOptions, PlanOptions, StateTrace, MODEL_GREEN,
 };
 use omnitrack::desk::render::{Appearance, FrameSpec, Renderer};
 use omnitrack::trajectory::Stamped;
@@ -202,10 +202,11 @@ fn omni_view_draws_the_model_in_green_where_it_projects() {
     let green = |x: u32, y: u32| img.get_pixel(x, y).0 == MODEL_GREEN;
     let (mut checked, mut hit) = (0, 0);
     for (k, &(x0, y0)) in layout.origins.iter().enumerate() {
-        for run in project_segments(&rig, k, &model, &pose, None) {
+        let segments = model.segments.iter().map(|s| (s.a, s.b));
+        for run in omnitrack::rig::project_segments(&rig.sensors[k], &pose.inverse(), segments, 1.0) {
             for p in run.iter().step_by(7) {
                 checked += 1;
-                hit += green(x0 + p.0.round() as u32, y0 + p.1.round() as u32) as usize;
+                hit += green(x0 + p.x.round() as u32, y0 + p.y.round() as u32) as usize;
             }
         }
     }

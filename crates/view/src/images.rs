@@ -12,8 +12,9 @@
 //! its timestamp (a sample whose frame has another time gets no images, counted). A live camera
 //! has no such second reader; its images are not in the view (docs/interfaces.md).
 //!
-//! Green: the model's segments at the pose (sampled along each segment, so that they curve as
-//! the lens curves them; without hidden-line removal). Orange: the detected edges, drawn along
+//! Green: the model's segments at the pose (omnitrack-core's `rig::reproject`, as the desk's
+//! pictures draw them: sampled along each segment, so that they curve as the lens curves them;
+//! without hidden-line removal). Orange: the detected edges, drawn along
 //! their great circles. The detector runs here with the tracker's default settings on one
 //! thread.
 
@@ -23,10 +24,10 @@ use std::thread::JoinHandle;
 use std::time::Duration;
 
 use base64::Engine;
-use nalgebra::{Point2, Point3, Vector3};
+use nalgebra::{Point2, Point3};
 use omnitrack_core::frame::FrameSet;
 use omnitrack_core::geometry::Pose;
-use omnitrack_core::rig::Rig;
+use omnitrack_core::rig::{project_segments, Rig};
 use omnitrack_edges::{EdgeDetector, EdgeParams};
 use omnitrack_io::capture::{FrameSource, Pacing, ReplaySource};
 use omnitrack_io::publish::PoseSample;
@@ -34,8 +35,9 @@ use serde_json::{json, Value};
 
 use crate::messages::{is_tracking, time};
 
-/// Samples along a model segment when it is re-projected.
-const SEGMENT_SAMPLES: usize = 24;
+/// Pixels between the samples of a re-projected model segment: smooth enough at the images'
+/// size in a viewer, and a few dozen points per segment rather than the desk's hundreds.
+const SEGMENT_SPACING_PX: f64 = 6.0;
 /// Samples along a detected edge.
 const EDGE_SAMPLES: usize = 12;
 const MODEL_COLOUR: [f64; 4] = [0.1, 0.9, 0.2, 1.0];
@@ -250,27 +252,18 @@ fn encode_jpeg(rgb: &[u8], width: u32, height: u32, quality: u8) -> Result<Vec<u
 }
 
 /// Line-list pairs (pixels) of the model's segments as `sensor` sees them from the pose
-/// (`t_rig_world`, the inverse of the sample's `T_world_rig`).
+/// (`t_rig_world`, the inverse of the sample's `T_world_rig`): omnitrack-core's projection, the
+/// one the desk's pictures draw, clipped at the image's border.
 fn model_pieces(
     sensor: &omnitrack_core::rig::Sensor,
     segments: &[([f64; 3], [f64; 3])],
     t_rig_world: &Pose,
 ) -> Vec<[Point2<f64>; 2]> {
-    let mut pieces = Vec::new();
-    for (a, b) in segments {
-        let (a, b) = (Vector3::from(*a), Vector3::from(*b));
-        let mut prev: Option<Point2<f64>> = None;
-        for i in 0..=SEGMENT_SAMPLES {
-            let f = i as f64 / SEGMENT_SAMPLES as f64;
-            let p_rig = t_rig_world.transform_point(&Point3::from(a + (b - a) * f));
-            let px = sensor.project_from_rig(&p_rig);
-            if let (Some(p0), Some(p1)) = (prev, px) {
-                pieces.push([p0, p1]);
-            }
-            prev = px;
-        }
-    }
-    pieces
+    let segments = segments.iter().map(|(a, b)| (Point3::from(*a), Point3::from(*b)));
+    project_segments(sensor, t_rig_world, segments, SEGMENT_SPACING_PX)
+        .iter()
+        .flat_map(|run| run.windows(2).map(|w| [w[0], w[1]]))
+        .collect()
 }
 
 /// Line-list pairs (pixels) of detected edges, along their great circles.
@@ -311,7 +304,7 @@ fn points(t: u64, pieces: &[[Point2<f64>; 2]], c: [f64; 4], thickness: f64) -> V
 #[cfg(test)]
 mod tests {
     use super::*;
-    use nalgebra::UnitQuaternion;
+    use nalgebra::{UnitQuaternion, Vector3};
     use omnitrack_core::status::TrackerState;
 
     #[test]

@@ -102,8 +102,10 @@ enum Command {
         count: Option<u64>,
         /// For a parent process that starts the view and then publishes (`omnitrack run
         /// --mcap`): prints `ready` on standard output once subscribed (and the file created),
-        /// so that no sample comes before the view listens, and stops as on SIGINT when
-        /// standard input closes (the parent ended, however abruptly).
+        /// so that no sample comes before the view listens, and stops when standard input
+        /// closes (the parent stops it, or ended however abruptly), and only then: SIGINT and
+        /// SIGTERM are ignored, as they may be meant for the parent (systemd's stop reaches every
+        /// process of the service), which still has samples to publish.
         #[arg(long)]
         ready: bool,
     },
@@ -155,10 +157,14 @@ fn run_cli(cli: Cli) -> Result<(), MainError> {
                 }),
                 count,
             };
-            let stop = stop_on_signals();
-            if ready {
+            let stop = if ready {
+                let stop = Arc::new(AtomicBool::new(false));
+                ignore_stop_signals();
                 stop_at_end_of_input(&stop);
-            }
+                stop
+            } else {
+                stop_on_signals()
+            };
             let s = run(&options, &stop, &mut |addr| {
                 let server = addr.map_or("no server".to_string(), |a| {
                     format!("ws://{a} (Foxglove: Open connection → Foxglove WebSocket)")
@@ -193,6 +199,16 @@ fn run_cli(cli: Cli) -> Result<(), MainError> {
         Command::Manpage(args) => omnitrack_manual::run_manpage(&manual(), &args)?,
     }
     Ok(())
+}
+
+/// SIGINT and SIGTERM do nothing but interrupt a wait (which the loop takes as no sample): a
+/// view started by a parent ends when the parent says so, after its last sample. A handler
+/// that sets a flag nobody reads, rather than `SIG_IGN`, needs no `unsafe`.
+fn ignore_stop_signals() {
+    let ignored = Arc::new(AtomicBool::new(false));
+    for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        let _ = signal_hook::flag::register(signal, Arc::clone(&ignored));
+    }
 }
 
 /// Sets `stop` when standard input reaches its end or fails: a parent that holds the other end

@@ -1,5 +1,6 @@
 //! `omnitrack-view` as a user runs it: bad input is one line and a non-zero exit, never a
-//! panic; what it received before a stop, a `--count` or a SIGKILL is in the MCAP file; the
+//! panic; what it received before a stop, a `--count` or a SIGKILL is in the MCAP file (with
+//! `--ready`, what came before its input closed, stop signals notwithstanding); the
 //! documents name every option and give commands it takes; its manual and completions.
 
 use omnitrack_io::publish::{PosePublisher, PoseSample, TrackerState};
@@ -181,6 +182,49 @@ fn count_and_sigint_end_with_a_whole_file_and_a_kill_loses_at_most_a_second() {
             assert!(!stderr.contains("panicked"));
         }
     }
+}
+
+/// `serve --ready`, as `omnitrack run --mcap` starts it: a SIGTERM or SIGINT that reaches it
+/// (systemd stops a service with SIGTERM to each of its processes, the run's child too) does
+/// not stop it, so samples its parent publishes after one are in the file; its standard input
+/// closing does, with a whole file. A stop used to end it at once.
+#[test]
+fn ready_ignores_stop_signals_and_stops_when_its_input_closes() {
+    let dir = tempfile::tempdir().unwrap();
+    let services = unique("ready");
+    let file = dir.path().join("ready.mcap");
+    let mut child = Command::new(BIN)
+        .args(["serve", "--services", &services, "--no-server", "--ready", "--mcap"])
+        .arg(&file)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    BufReader::new(child.stdout.as_mut().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    assert_eq!(line.trim(), "ready");
+    let publisher = PosePublisher::create(&format!("{services}/pose")).unwrap();
+    publisher.publish(&tracking(0)).unwrap();
+    publisher.publish(&tracking(1)).unwrap();
+    for signal in [libc::SIGTERM, libc::SIGINT] {
+        // SAFETY: a signal to our own child, not yet waited for.
+        unsafe { libc::kill(child.id() as i32, signal) };
+    }
+    std::thread::sleep(Duration::from_millis(300));
+    assert!(child.try_wait().unwrap().is_none(), "a stop signal ended --ready");
+    publisher.publish(&tracking(2)).unwrap();
+    publisher.publish(&tracking(3)).unwrap();
+    drop(child.stdin.take());
+    let status = wait(&mut child, Duration::from_secs(10));
+    let mut stderr = String::new();
+    let _ = std::io::Read::read_to_string(child.stderr.as_mut().unwrap(), &mut stderr);
+    assert!(status.success(), "{stderr}");
+    let (sequences, summary) = samples_in(&file);
+    assert_eq!(sequences, [0, 1, 2, 3], "{stderr}");
+    assert!(summary, "the file is finished");
 }
 
 /// docs/interfaces.md's row of `omnitrack-view serve` names every option the command has.

@@ -2,7 +2,9 @@
 //! --no-server --mcap FILE`, a child process that subscribes like any other consumer. The
 //! tracker itself carries no MCAP code and its frame path only gains a subscriber
 //! (docs/decisions.md, the live view); this module starts the view before the first frame and
-//! stops it after the last one.
+//! stops it after the last one, by closing its standard input: the view (`--ready`) ignores
+//! SIGINT and SIGTERM, so a stop meant for the run that reaches the view too (systemd's, to
+//! every process of the service) cannot end it before the run's last sample.
 
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
@@ -16,8 +18,8 @@ pub const VIEW: &str = "omnitrack-view";
 const READY: &str = "ready";
 /// How long the view may take to load the model and the recording and subscribe.
 const READY_TIMEOUT: Duration = Duration::from_secs(120);
-/// How long the view may take after SIGINT to finish the file (its summary and indexes) before
-/// it is killed.
+/// How long the view may take after its standard input closed to finish the file (its last
+/// samples, summary and indexes) before it is killed.
 const STOP_TIMEOUT: Duration = Duration::from_secs(5);
 
 /// `omnitrack-view` beside the running `omnitrack` (a build's target directory, an install's
@@ -36,8 +38,8 @@ pub fn find_view() -> Result<PathBuf, String> {
         .ok_or_else(|| {
             format!(
                 "--mcap needs the {VIEW} program, which is neither beside this omnitrack nor on PATH: \
-                 build it with `cargo build --release -p {VIEW}` (it lands beside target/release/omnitrack; \
-                 the Debian package does not ship it)"
+                 install the Debian package {VIEW}, or build it with `cargo build --release -p {VIEW}` \
+                 (it lands beside target/release/omnitrack)"
             )
         })
 }
@@ -157,15 +159,16 @@ impl McapRecorder {
                 describe(s)
             ),
             Stopped::Killed => format!(
-                "MCAP file {file} is incomplete: {VIEW} did not finish it within {} s of SIGINT and was killed",
+                "MCAP file {file} is incomplete: {VIEW} did not finish it within {} s of its stop and was killed",
                 STOP_TIMEOUT.as_secs()
             ),
             Stopped::Lost(e) => format!("MCAP file {file} may be incomplete: {VIEW}: {e}"),
         }
     }
 
-    /// SIGINT, as a user stops the view, then at most [`STOP_TIMEOUT`] for it to finish the
-    /// file; a view that ended on its own before is reported as such.
+    /// Closes the view's standard input, which stops it (`--ready`), then gives it at most
+    /// [`STOP_TIMEOUT`] to finish the file; a view that ended on its own before is reported as
+    /// such.
     fn stop(&mut self) -> Stopped {
         let Some(mut child) = self.child.take() else {
             return Stopped::Lost("already stopped".to_string());
@@ -175,7 +178,7 @@ impl McapRecorder {
             Ok(None) => {}
             Err(e) => return Stopped::Lost(e.to_string()),
         }
-        interrupt(&child);
+        drop(child.stdin.take());
         let deadline = Instant::now() + STOP_TIMEOUT;
         loop {
             match child.try_wait() {
@@ -216,22 +219,14 @@ fn describe(s: ExitStatus) -> String {
     }
 }
 
-/// The view in a process group of its own: a Ctrl-C at the terminal reaches the run only,
-/// which publishes its last poses before it stops the view (a view stopped by the same Ctrl-C
-/// could miss them). Should the run end without stopping it (a second Ctrl-C, SIGKILL), the
-/// view's standard input, a pipe whose other end only the run holds, closes, and `--ready`
-/// makes the view stop on that and finish the file.
+/// The view's standard input is a pipe whose other end only the run holds: it closes when the
+/// run stops the view after its last sample, and also when the run ends without doing so (a
+/// second Ctrl-C, SIGKILL); `--ready` makes the view stop on that alone and finish the file. A
+/// stop signal does not: a terminal's Ctrl-C goes to the whole foreground process group and
+/// systemd's SIGTERM to every process of the service, and a view stopped by either could miss
+/// the samples the run publishes after it. The view's own process group keeps the terminal's
+/// signals from it all the same.
 fn detach(command: &mut Command) {
     use std::os::unix::process::CommandExt;
     command.process_group(0).stdin(Stdio::piped());
-}
-
-fn interrupt(child: &Child) {
-    if let Ok(pid) = libc::pid_t::try_from(child.id()) {
-        // SAFETY: a signal to our own child, which has not been waited for, so its pid is
-        // still its own.
-        unsafe {
-            libc::kill(pid, libc::SIGINT);
-        }
-    }
 }

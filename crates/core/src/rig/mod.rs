@@ -2,14 +2,18 @@
 //!
 //! In: the rig TOML of docs/interfaces.md, "Rig file" (`firmware_config/*.toml`, `REC/rig.toml`).
 //! Out: a validated [`Rig`]; every error is one line naming the file, the sensor and the key.
+//! [`view`] says which directions the rig sees, [`reproject`] where model segments land in a
+//! sensor's image.
 //!
 //! The TOML is walked by hand rather than through serde derive so that each message can say which
 //! sensor (by id) a bad key belongs to, which serde's path-less errors cannot.
 
 pub mod control;
+pub mod reproject;
 pub mod view;
 
 pub use control::{CameraControl, Setting, Trigger};
+pub use reproject::project_segments;
 pub use view::ViewMap;
 
 use crate::geometry::{

@@ -23,7 +23,7 @@ mod over_time;
 mod plan;
 
 pub use canvas::error_colour;
-pub use omni::{frame_images, omni_layout, omni_view, project_segments, OmniLayout, OmniOptions, MODEL_GREEN};
+pub use omni::{frame_images, omni_layout, omni_view, OmniLayout, OmniOptions, MODEL_GREEN};
 pub use omnitrack_tracker::CorrespondenceState;
 pub use over_time::{correspondence_states, error_over_time, ErrorTrace, StateTrace};
 pub use plan::{plan_view, PlanOptions};

@@ -1,13 +1,14 @@
 //! [`omni_view`]: one frame's sensor images, the rig and the model at a pose in; a PNG of the
 //! images tiled with the model re-projected through each sensor's lens out (Koch–Teller
-//! Figure 12). [`project_segments`] is that projection on its own, [`omni_layout`] the tiling.
+//! Figure 12), the projection being omnitrack-core's [`project_segments`] (the live view's too);
+//! [`omni_layout`] is the tiling.
 
 use super::canvas::{bold_1x, render_png};
 use super::{picture_error, PictureError};
 use image::RgbImage;
-use nalgebra::Point3;
 use omnitrack_core::frame::FrameSet;
-use omnitrack_core::geometry::{Lens, Pose};
+use omnitrack_core::geometry::Pose;
+use omnitrack_core::rig::project_segments;
 use omnitrack_core::{Model, Rig};
 use plotters::prelude::*;
 use std::path::Path;
@@ -57,76 +58,6 @@ pub fn frame_images(frame: &FrameSet) -> Vec<RgbImage> {
             }
         })
         .collect()
-}
-
-/// Pixels per radian the lens reaches at most (fisheye ≈ f; a pinhole grows towards its edge).
-fn pixels_per_radian(lens: &Lens) -> f64 {
-    let f = lens.fx().max(lens.fy());
-    match lens {
-        Lens::Pinhole(_) | Lens::Radtan(_) => 3.0 * f,
-        _ => 1.5 * f,
-    }
-}
-
-/// The polylines (in the sensor's pixels) of the model segments as one sensor sees them at
-/// `t_world_rig`: each segment sampled every ~2 px or finer, broken where it leaves the image.
-pub fn project_segments(
-    rig: &Rig,
-    sensor: usize,
-    model: &Model,
-    t_world_rig: &Pose,
-    segments: Option<&[usize]>,
-) -> Vec<Vec<(f64, f64)>> {
-    let Some(s) = rig.sensors.get(sensor) else {
-        return Vec::new();
-    };
-    let t_rig_world = t_world_rig.inverse();
-    let centre = s.centre();
-    let density = pixels_per_radian(&s.lens);
-    let jump = 0.25 * s.width.min(s.height) as f64;
-    let all: Vec<usize>;
-    let chosen = match segments {
-        Some(ids) => ids,
-        None => {
-            all = (0..model.segments.len()).collect();
-            &all
-        }
-    };
-    let mut out = Vec::new();
-    for seg in chosen.iter().filter_map(|&i| model.segments.get(i)) {
-        let a = t_rig_world.transform_point(&seg.a);
-        let b = t_rig_world.transform_point(&seg.b);
-        let (ra, rb) = (a - centre, b - centre);
-        let angle = if ra.norm() < 1e-9 || rb.norm() < 1e-9 {
-            std::f64::consts::PI
-        } else {
-            ra.angle(&rb)
-        };
-        // Two samples per pixel of arc, so that curved fisheye images of lines stay smooth.
-        let n = ((angle * density).ceil() as usize).clamp(2, 20_000);
-        let mut run: Vec<(f64, f64)> = Vec::new();
-        for k in 0..=n {
-            let t = k as f64 / n as f64;
-            let p = Point3::from(a.coords * (1.0 - t) + b.coords * t);
-            match s.project_from_rig(&p) {
-                Some(px) => {
-                    let q = (px.x, px.y);
-                    if let Some(last) = run.last() {
-                        if (last.0 - q.0).hypot(last.1 - q.1) > jump {
-                            out.push(std::mem::take(&mut run));
-                        }
-                    }
-                    run.push(q);
-                }
-                None if run.len() > 1 => out.push(std::mem::take(&mut run)),
-                None => run.clear(),
-            }
-        }
-        if run.len() > 1 {
-            out.push(run);
-        }
-    }
-    out
 }
 
 const OMNI_GAP: u32 = 6;
@@ -224,8 +155,23 @@ pub fn omni_view(
     for (img, &(x0, y0)) in images.iter().zip(&layout.origins) {
         image::imageops::replace(&mut canvas, img, i64::from(x0), i64::from(y0));
     }
-    let runs: Vec<Vec<Vec<(f64, f64)>>> = (0..rig.sensors.len())
-        .map(|k| project_segments(rig, k, model, t_world_rig, options.segments.as_deref()))
+    let t_rig_world = t_world_rig.inverse();
+    let all: Vec<usize>;
+    let chosen = match options.segments.as_deref() {
+        Some(ids) => ids,
+        None => {
+            all = (0..model.segments.len()).collect();
+            &all
+        }
+    };
+    // Samples a pixel apart or closer: the fisheye's curves stay smooth at the line's width.
+    let runs: Vec<_> = rig
+        .sensors
+        .iter()
+        .map(|sensor| {
+            let segments = chosen.iter().map(|&i| &model.segments[i]).map(|s| (s.a, s.b));
+            project_segments(sensor, &t_rig_world, segments, 1.0)
+        })
         .collect();
     let [r, g, b] = options.colour;
     let line = RGBColor(r, g, b).stroke_width(options.line_width.max(1));
@@ -242,7 +188,7 @@ pub fn omni_view(
             let tile = root.clone().shrink((x0 as i32, y0 as i32), (w as i32, h as i32));
             for run in sensor_runs {
                 // Pixel centres sit at integers (docs/interfaces.md), as plotters' pixel grid does.
-                let pts: Vec<(i32, i32)> = run.iter().map(|p| (p.0.round() as i32, p.1.round() as i32)).collect();
+                let pts: Vec<(i32, i32)> = run.iter().map(|p| (p.x.round() as i32, p.y.round() as i32)).collect();
                 tile.draw(&PathElement::new(pts, line))?;
             }
             tile.draw(&Rectangle::new(
