@@ -3,7 +3,8 @@
 //! (Koch–Teller Fig. 2), the angular overlap of edge and segment within that plane, and the hue
 //! distance of two signatures (KT §4.2.1, wrapped hue space).
 //!
-//! Everything here works on borrowed slices and fixed-size arrays: nothing allocates.
+//! Everything here works on borrowed slices and fixed-size arrays, and [`EdgeNormals`] is sized
+//! once: nothing allocates after start-up.
 
 use nalgebra::{Point3, Vector3};
 use omnitrack_core::geometry::{Correspondence, Pose};
