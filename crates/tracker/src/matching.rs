@@ -243,8 +243,7 @@ pub fn best_edge_among(
     }
     let mut best: Option<(usize, f64)> = None;
     let mut cos = [0.0; COS_BLOCK];
-    for s in 0..centres.len().min(MAX_SENSORS) {
-        let n = &pred.normals[s];
+    for (s, (centre, n)) in centres.iter().zip(&pred.normals).enumerate() {
         let mut from = normals.start[s];
         let end = normals.start[s + 1];
         while from < end {
@@ -266,7 +265,7 @@ pub fn best_edge_among(
                     continue;
                 }
                 let e = &edges[i];
-                if !gate.signature_matches(e) || overlap(pred, &centres[s], n, e) < gate.min_overlap {
+                if !gate.signature_matches(e) || overlap(pred, centre, n, e) < gate.min_overlap {
                     continue;
                 }
                 best = Some((i, c));

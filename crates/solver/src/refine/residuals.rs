@@ -234,7 +234,7 @@ pub(crate) fn solve6(h: &Matrix6<f64>, g: &Vector6<f64>) -> Option<Vector6<f64>>
         }
         let diag = l[(j, j)];
         // `try_sqrt` of simba: none for a negative or NaN diagonal; nalgebra refuses a zero one.
-        if diag == 0.0 || !(diag >= 0.0) {
+        if diag.is_nan() || diag <= 0.0 {
             return None;
         }
         let denom = diag.sqrt();

@@ -372,7 +372,7 @@ fn median_square<'a>(
     spare[..m].copy_from_slice(&ratios[..m]);
     let (_, pivot, _) = spare[..m].select_nth_unstable_by(rank, f64::total_cmp);
     let pivot = *pivot;
-    if nan || !(pivot <= MEDIAN_RATIO_LIMIT) {
+    if nan || pivot.is_nan() || pivot > MEDIAN_RATIO_LIMIT {
         for (slot, corr) in spare.iter_mut().zip(set) {
             *slot = corr.alpha(pose).powi(2);
         }
