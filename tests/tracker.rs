@@ -1214,67 +1214,106 @@ fn a_volume_too_large_for_one_search_is_swept_over_several_until_every_cell_is_l
 /// own frame or later: its best candidate may not have met the rival that would have refused it.
 /// The same frames without the stop commit the truth; stopped before the search starts, or late
 /// in it (when the part searched may well hold the truth), nothing is committed, and the search
-/// on the worker ends at once rather than after its budget.
+/// on the worker ends at its next check rather than after its budget. The stop comes at a known
+/// point of the search's work ([`SearchProgress::raise_at_work`](omnitrack::tracker::SearchProgress::raise_at_work)),
+/// not after a wall-clock delay, and each search's report is read on its way back from the
+/// worker: the test asks the same of every run, idle or loaded.
 #[test]
 fn a_search_cut_short_by_a_stop_commits_nothing() {
-    use omnitrack::tracker::search_link;
-    use std::sync::atomic::{AtomicBool, Ordering};
-    use std::sync::Arc;
-    use std::time::{Duration, Instant};
+    use omnitrack::tracker::{search_link, InitReport, SearchLink};
+    use std::sync::atomic::AtomicBool;
+    use std::sync::{Arc, Mutex};
     let f = fixture();
     let frames = detected_frames(f, start_frames() + 2);
     let (_, rig, cfg, _, _) = replay(f);
-    // Every pose, on time or late, the stats, and how long it all took.
-    let run = |stop_after: Option<Duration>| {
-        let (link, worker) = search_link();
-        let flag = Arc::new(AtomicBool::new(false));
-        std::thread::scope(|scope| {
+    // Every pose, on time or late, the stats, and each search's report in order. `stop_at`:
+    // none, the flag set before the first frame, or set by the first search itself once it has
+    // spent that much work.
+    #[derive(Clone, Copy)]
+    enum Stop {
+        Never,
+        Before,
+        AtWork(u64),
+    }
+    let run = |stop: Stop| {
+        let (to_worker, worker) = search_link();
+        let (jobs_tx, jobs_rx) = crossbeam::channel::bounded(1);
+        let (done_tx, done_rx) = crossbeam::channel::bounded(1);
+        let reports = Mutex::new(Vec::<InitReport>::new());
+        let flag = Arc::new(AtomicBool::new(matches!(stop, Stop::Before)));
+        let poses_and_stats = std::thread::scope(|scope| {
             scope.spawn(move || worker.run());
+            // Between the tracker and the worker: each job on to it, and back with its report read.
+            let reports = &reports;
+            scope.spawn(move || {
+                while let Ok(job) = jobs_rx.recv() {
+                    if to_worker.jobs.send(job).is_err() {
+                        break;
+                    }
+                    let Ok(job) = to_worker.done.recv() else { break };
+                    reports.lock().unwrap().push(*job.result().1);
+                    if done_tx.send(job).is_err() {
+                        break;
+                    }
+                }
+            });
             let mut tracker = Tracker::new(&rig, &f.model, &f.table, &cfg, Some(hint(f)), 1);
-            tracker.attach_search_worker(link);
+            tracker.attach_search_worker(SearchLink {
+                jobs: jobs_tx,
+                done: done_rx,
+            });
             tracker.stop_searches_on(Arc::clone(&flag));
+            if let Stop::AtWork(units) = stop {
+                tracker.search_progress().raise_at_work(Arc::clone(&flag), units);
+            }
             let mut poses = Vec::new();
-            let started = Instant::now();
-            for (k, (t, edges)) in frames.iter().enumerate() {
+            for (t, edges) in &frames {
                 let r = tracker.process(edges, *t);
                 poses.extend(tracker.late().iter().filter_map(|(_, r)| r.pose));
                 poses.extend(r.pose);
-                if k == 0 {
-                    // The first search is on the worker now.
-                    if let Some(after) = stop_after {
-                        let flag = Arc::clone(&flag);
-                        scope.spawn(move || {
-                            std::thread::sleep(after);
-                            flag.store(true, Ordering::Relaxed);
-                        });
-                    }
-                }
             }
             tracker.finish();
             poses.extend(tracker.late().iter().filter_map(|(_, r)| r.pose));
-            (poses, *tracker.stats(), started.elapsed())
-        })
+            (poses, *tracker.stats())
+        });
+        (poses_and_stats, reports.into_inner().unwrap())
     };
-    let (poses, stats, whole) = run(None);
-    let first = stats.first_search.expect("the first search finished");
+    let ((poses, stats), reports) = run(Stop::Never);
     assert!(!poses.is_empty() && stats.searches_cancelled == 0, "{stats:?}");
-    // At once, then late in the search: a stop that comes after the search is done leaves it
-    // whole (none cut short), and it may commit; an earlier stop is tried then. (Late cuts are
-    // the ones that matter: without the rule, a cut at 0.9 of the search committed 5 poses.)
-    let mut late_cut = false;
-    for after in [Duration::ZERO, first.mul_f64(0.9), first.mul_f64(0.75), first / 2] {
-        if late_cut {
-            break;
+    let whole = reports[0];
+    assert!(!whole.cancelled && !whole.backstop && whole.work > 0, "{whole:?}");
+    // At once, then late in the search and earlier. (Late cuts are the ones that matter:
+    // without the rule, the cut at 0.9 of the search commits 11 poses.)
+    let cuts = [0.9, 0.75, 0.5].map(|share| Stop::AtWork((whole.work as f64 * share) as u64));
+    for stop in std::iter::once(Stop::Before).chain(cuts) {
+        let ((poses, stats), reports) = run(stop);
+        let (name, at) = match stop {
+            Stop::Before => ("before the search".to_string(), 0),
+            Stop::AtWork(w) => (format!("at {w} of {} work units", whole.work), w),
+            Stop::Never => unreachable!(),
+        };
+        let cut = reports[0];
+        eprintln!(
+            "stopped {name}: ended at {} work units, {} searches ({} cut short), whole search {}",
+            cut.work,
+            reports.len(),
+            stats.searches_cancelled,
+            whole.work
+        );
+        assert!(cut.cancelled, "stopped {name}: {cut:?}");
+        assert!(poses.is_empty(), "stopped {name}: {} poses", poses.len());
+        assert_eq!(stats.tracked + stats.late_poses, 0, "stopped {name}: {stats:?}");
+        assert!(stats.searches_cancelled >= 1, "stopped {name}: {stats:?}");
+        // It ended at its next check, not after its budget: the work past the stop is a
+        // step's, a small part of what the whole search went on to do.
+        assert!(
+            cut.work >= at && cut.work - at <= (whole.work - at) / 4,
+            "stopped {name}: the search went on to {} work units",
+            cut.work
+        );
+        // And every search after it, the flag still set, stopped at once as well.
+        for later in &reports[1..] {
+            assert!(later.cancelled, "stopped {name}, a later search: {later:?}");
         }
-        let (poses, stats, took) = run(Some(after));
-        eprintln!("stopped after {after:?}: {took:?} (unstopped {whole:?}), {stats:?}");
-        if stats.searches_cancelled == 0 {
-            continue;
-        }
-        late_cut = after > Duration::ZERO;
-        assert!(poses.is_empty(), "stopped after {after:?}: {} poses", poses.len());
-        assert_eq!(stats.tracked + stats.late_poses, 0, "{stats:?}");
-        assert!(took < whole, "stopped after {after:?}: {took:?}, unstopped {whole:?}");
     }
-    assert!(late_cut, "no stop came while the first search ran");
 }

@@ -3,7 +3,8 @@
 //! (Koch–Teller Fig. 2), the angular overlap of edge and segment within that plane, and the hue
 //! distance of two signatures (KT §4.2.1, wrapped hue space).
 //!
-//! Everything here works on borrowed slices and fixed-size arrays: nothing allocates.
+//! Everything here works on borrowed slices and fixed-size arrays, and [`EdgeNormals`] is sized
+//! once: nothing allocates after start-up.
 
 use nalgebra::{Point3, Vector3};
 use omnitrack_core::geometry::{Correspondence, Pose};
@@ -154,6 +155,123 @@ pub fn best_edge(pred: &Predicted, centres: &[Point3<f64>], edges: &[Edge], gate
             continue;
         }
         best = Some((i, cos));
+    }
+    best.map(|(i, cos)| (i, cos.min(1.0).acos()))
+}
+
+/// A frame's edge plane normals by sensor, their components in arrays of their own (24 bytes an
+/// edge, where an [`Edge`] is a few hundred): what [`best_edge_among`] reads of every edge.
+/// Maintenance matches each of a frame's hundred-odd correspondences against every edge, three
+/// times over; reading whole edges for it took the frame's edges through the cache for each, and
+/// one sensor's normals in a row let the angle test run several edges at a time.
+///
+/// In: a frame's edges ([`EdgeNormals::fill`]). Out: per sensor, its edges' normals and indices
+/// in the edges' order. Sized once; filling it allocates nothing.
+pub struct EdgeNormals {
+    x: Vec<f64>,
+    y: Vec<f64>,
+    z: Vec<f64>,
+    index: Vec<u32>,
+    /// Per sensor, where its edges start in the arrays; one more entry at the end.
+    start: [usize; MAX_SENSORS + 1],
+    /// The edges filled from (their count), or `None` when they could not be held (more than
+    /// the room, a sensor beyond [`MAX_SENSORS`], a normal not finite).
+    held: Option<usize>,
+}
+
+impl EdgeNormals {
+    /// Room for `max_edges` edges.
+    pub fn new(max_edges: usize) -> EdgeNormals {
+        let room = || omnitrack_core::memory::resident(vec![0.0; max_edges]);
+        EdgeNormals {
+            x: room(),
+            y: room(),
+            z: room(),
+            index: omnitrack_core::memory::resident(vec![0; max_edges]),
+            start: [0; MAX_SENSORS + 1],
+            held: None,
+        }
+    }
+
+    /// Holds `edges`' normals by sensor, or nothing when it cannot ([`best_edge_among`] then
+    /// reads the edges themselves).
+    pub fn fill(&mut self, edges: &[Edge]) {
+        self.held = None;
+        let usable = |e: &Edge| (e.sensor as usize) < MAX_SENSORS && e.plane.normal.iter().all(|v| v.is_finite());
+        if edges.len() > self.index.len() || u32::try_from(edges.len()).is_err() || !edges.iter().all(usable) {
+            return;
+        }
+        // A counting sort by sensor, each sensor's edges in their order.
+        let mut count = [0usize; MAX_SENSORS + 1];
+        for e in edges {
+            count[e.sensor as usize + 1] += 1;
+        }
+        for s in 0..MAX_SENSORS {
+            count[s + 1] += count[s];
+        }
+        self.start = count;
+        for (i, e) in edges.iter().enumerate() {
+            let at = &mut count[e.sensor as usize];
+            let n = e.plane.normal;
+            (self.x[*at], self.y[*at], self.z[*at]) = (n.x, n.y, n.z);
+            self.index[*at] = i as u32;
+            *at += 1;
+        }
+        self.held = Some(edges.len());
+    }
+}
+
+/// Edges whose |cos| [`best_edge_among`] computes at once, before testing them.
+const COS_BLOCK: usize = 32;
+
+/// [`best_edge`] with the normals read from `normals`, filled from `edges`: the same answer, bit
+/// for bit. Each |cos| is computed as `Vector3::dot` computes it (the same products, summed in the
+/// same order); a sensor at a time, so the edges are not visited in their order, but the answer
+/// does not depend on it: it is the edge of largest |cos| among those passing the gate, the first
+/// of them in the edges' order on a tie, as the scan in order gives (it skips only edges that
+/// could not replace the one it holds).
+pub fn best_edge_among(
+    pred: &Predicted,
+    centres: &[Point3<f64>],
+    edges: &[Edge],
+    normals: &EdgeNormals,
+    gate: &Gate,
+) -> Option<(usize, f64)> {
+    let finite = pred.normals.iter().all(|n| n.iter().all(|v| v.is_finite())) && gate.cos_alpha.is_finite();
+    if normals.held != Some(edges.len()) || !finite {
+        return best_edge(pred, centres, edges, gate);
+    }
+    let mut best: Option<(usize, f64)> = None;
+    let mut cos = [0.0; COS_BLOCK];
+    for (s, (centre, n)) in centres.iter().zip(&pred.normals).enumerate() {
+        let mut from = normals.start[s];
+        let end = normals.start[s + 1];
+        while from < end {
+            let k = (end - from).min(COS_BLOCK);
+            let (x, y, z) = (
+                &normals.x[from..from + k],
+                &normals.y[from..from + k],
+                &normals.z[from..from + k],
+            );
+            for j in 0..k {
+                cos[j] = (n.x * x[j] + n.y * y[j] + n.z * z[j]).abs();
+            }
+            for (j, &c) in cos[..k].iter().enumerate() {
+                if c < gate.cos_alpha {
+                    continue;
+                }
+                let i = normals.index[from + j] as usize;
+                if best.is_some_and(|(bi, bc)| c < bc || (c == bc && i > bi)) {
+                    continue;
+                }
+                let e = &edges[i];
+                if !gate.signature_matches(e) || overlap(pred, centre, n, e) < gate.min_overlap {
+                    continue;
+                }
+                best = Some((i, c));
+            }
+            from += k;
+        }
     }
     best.map(|(i, cos)| (i, cos.min(1.0).acos()))
 }
@@ -333,5 +451,95 @@ mod tests {
             ..gate
         };
         assert!(best_edge(&pred, &centres, &[edge], &strict).is_none());
+    }
+
+    /// The packed, by-sensor scan answers as the scan of every edge in order does: the same
+    /// edge and α bit for bit, ties (twin edges) going to the first, over random frames of six
+    /// sensors and gates from tight to wide, hue and polarity included.
+    #[test]
+    fn best_edge_among_is_best_edge_bit_for_bit() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand::rngs::SmallRng::seed_from_u64(3);
+        let unit = |rng: &mut rand::rngs::SmallRng| {
+            Vector3::new(
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+            )
+            .normalize()
+        };
+        let centres: Vec<Point3<f64>> = (0..6).map(|k| Point3::new(0.04 * k as f64, 0.01, 0.0)).collect();
+        let pose = Pose::from_parts(
+            Translation3::new(0.5, 1.0, 1.3),
+            UnitQuaternion::from_euler_angles(0.0, 0.0, 0.3),
+        );
+        let mut normals = EdgeNormals::new(256);
+        let (mut found, mut ties) = (0, 0);
+        for trial in 0..400 {
+            let mut edges = Vec::new();
+            for _ in 0..rng.random_range(1..200) {
+                let sensor = rng.random_range(0..6u8);
+                let c = centres[sensor as usize];
+                let (r1, r2) = (unit(&mut rng), unit(&mut rng));
+                let Some(plane) = EdgePlane::from_rays(c, &r1, &r2) else {
+                    continue;
+                };
+                edges.push(Edge {
+                    sensor,
+                    plane,
+                    px: [Point2::origin(); 2],
+                    length_rad: r1.angle(&r2),
+                    strength: 1.0,
+                    hue: sig(rng.random_range(0.0..1.0), f32::NAN),
+                    edgels: 10,
+                    polarity: rng.random_range(-1..=1),
+                    rms_rad: 0.0,
+                    gaps: Default::default(),
+                    n_gaps: 0,
+                    shown: Default::default(),
+                    n_shown: 0,
+                });
+                if rng.random_range(0..5) == 0 {
+                    edges.push(*edges.last().unwrap());
+                }
+            }
+            normals.fill(&edges);
+            for _ in 0..20 {
+                let seg = [
+                    Point3::new(
+                        rng.random_range(-5.0..5.0),
+                        rng.random_range(-5.0..5.0),
+                        rng.random_range(0.0..3.0),
+                    ),
+                    Point3::new(
+                        rng.random_range(-5.0..5.0),
+                        rng.random_range(-5.0..5.0),
+                        rng.random_range(0.0..3.0),
+                    ),
+                ];
+                let pred = Predicted::new(&seg, &pose, &centres);
+                let gate = Gate {
+                    cos_alpha: [1.5f64, 10.0, 60.0][trial % 3].to_radians().cos(),
+                    min_overlap: 0.5 * (trial % 2) as f64,
+                    hue: (trial % 4 == 0).then(|| (sig(rng.random_range(0.0..1.0), f32::NAN), 0.2)),
+                    polarity: (trial % 5 == 0).then(|| unit(&mut rng)),
+                };
+                let want = best_edge(&pred, &centres, &edges, &gate);
+                let got = best_edge_among(&pred, &centres, &edges, &normals, &gate);
+                assert_eq!(
+                    got.map(|(i, a)| (i, a.to_bits())),
+                    want.map(|(i, a)| (i, a.to_bits())),
+                    "trial {trial}"
+                );
+                if let Some((i, _)) = want {
+                    found += 1;
+                    ties += usize::from(edges.get(i + 1).is_some_and(|e| e.plane == edges[i].plane));
+                }
+            }
+        }
+        assert!(
+            found > 1000 && ties > 10,
+            "{found} found, {ties} with a twin after them"
+        );
     }
 }

@@ -14,7 +14,7 @@ mod search;
 use crate::background::{Backlog, SearchJob, SearchLink};
 use crate::correspondence::{CorrespondenceState, CorrespondenceTable, HeldEdge, Track};
 use crate::init::{Candidate, InitOptions, Initialiser, SearchVolume};
-use crate::matching::{best_edge, Gate, Predicted};
+use crate::matching::{best_edge, EdgeNormals, Gate, Predicted};
 use crate::motion_filter::{MotionFilter, MotionNoise};
 use crate::report::{FrameResult, StateCounts, TrackerState, TrackerStats};
 use crate::visibility::VisibilityTable;
@@ -125,6 +125,12 @@ pub struct Tracker<'m> {
     set_track: Vec<usize>,
     /// Per track: the edge matched this frame and its α.
     matched: Vec<Option<(u32, f64)>>,
+    /// Per track: its edge within the inlier angle at a maintenance attempt's pose
+    /// (`consistent_count`), and at the pose solved so far, which the observations reuse.
+    support_at: Vec<Option<(u32, f64)>>,
+    support_solved: Vec<Option<(u32, f64)>>,
+    /// The frame's edge normals packed for matching (`matching::EdgeNormals`).
+    edge_normals: EdgeNormals,
     /// The weights and residuals of the final robust fit (`solver::refine::cauchy`).
     robust_scratch: Vec<f64>,
     rng: SmallRng,
@@ -233,6 +239,9 @@ impl<'m> Tracker<'m> {
             set: resident(Vec::with_capacity(capacity)),
             set_track: resident(Vec::with_capacity(capacity)),
             matched: vec![None; capacity],
+            support_at: resident(vec![None; capacity]),
+            support_solved: resident(vec![None; capacity]),
+            edge_normals: EdgeNormals::new(max_edges),
             robust_scratch: resident(vec![0.0; 2 * capacity]),
             rng: SmallRng::seed_from_u64(seed),
             state: TrackerState::Initialising,

@@ -27,10 +27,8 @@ impl EdgePlane {
     /// The plane through `centre` containing the two rig-frame rays `r1`, `r2` from it, or `None`
     /// if the rays are (nearly) parallel and so span no plane.
     pub fn from_rays(centre: Point3<f64>, r1: &Vector3<f64>, r2: &Vector3<f64>) -> Option<EdgePlane> {
-        let n = r1.cross(r2);
-        let norm = n.norm();
-        (norm > 1e-12 * r1.norm() * r2.norm()).then(|| EdgePlane {
-            normal: Unit::new_unchecked(n / norm),
+        plane_normal(r1, r2).map(|normal| EdgePlane {
+            normal: Unit::new_unchecked(normal),
             centre,
             ends: [Unit::new_normalize(*r1), Unit::new_normalize(*r2)],
         })
@@ -56,6 +54,15 @@ impl EdgePlane {
     }
 }
 
+/// The unit normal `r1 × r2 / |r1 × r2|` of the plane two rays span, or `None` if they are
+/// (nearly) parallel: [`EdgePlane::from_rays`]'s normal, and [`Correspondence::alpha`]'s.
+#[inline]
+fn plane_normal(r1: &Vector3<f64>, r2: &Vector3<f64>) -> Option<Vector3<f64>> {
+    let n = r1.cross(r2);
+    let norm = n.norm();
+    (norm > 1e-12 * r1.norm() * r2.norm()).then(|| n / norm)
+}
+
 /// A model segment (world end points) matched to an observed edge.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Correspondence {
@@ -68,22 +75,43 @@ impl Correspondence {
     /// The plane a camera at `t_world_rig` would see the segment in: through the edge's sensor
     /// centre and both end points. `None` if the segment points at the centre.
     pub fn predicted_plane(&self, t_world_rig: &Pose) -> Option<EdgePlane> {
+        let (r1, r2) = self.predicted_rays(t_world_rig);
+        EdgePlane::from_rays(self.edge.centre, &r1, &r2)
+    }
+
+    /// The rays from the edge's sensor centre to the segment's ends seen from `t_world_rig`.
+    #[inline]
+    fn predicted_rays(&self, t_world_rig: &Pose) -> (Vector3<f64>, Vector3<f64>) {
         let a = t_world_rig.inverse_transform_point(&self.segment[0]);
         let b = t_world_rig.inverse_transform_point(&self.segment[1]);
         let c = self.edge.centre;
-        EdgePlane::from_rays(c, &(a - c), &(b - c))
+        (a - c, b - c)
     }
 
     /// Koch–Teller's α: the angle (rad, in [0, π/2]) between the observed plane and the plane of
     /// the segment seen from `t_world_rig`. A degenerate prediction counts as π/2 (worst).
+    ///
+    /// The predicted plane's normal alone, as [`Self::predicted_plane`] computes it (its end rays,
+    /// two square roots and six divisions, are not needed): the consensus scores every sample by
+    /// α over the rest of the set, the largest part of the tracker's CPU after the fits.
+    #[inline]
     pub fn alpha(&self, t_world_rig: &Pose) -> f64 {
-        match self.predicted_plane(t_world_rig) {
-            Some(p) => {
-                let (n1, n2) = (self.edge.normal, p.normal);
-                n1.cross(&n2).norm().atan2(n1.dot(&n2).abs())
-            }
+        match self.alpha_terms(t_world_rig) {
+            Some((sin, cos)) => sin.atan2(cos),
             None => std::f64::consts::FRAC_PI_2,
         }
+    }
+
+    /// The two numbers [`Self::alpha`] is the arc tangent of, `(|n × m|, |n · m|)` for the
+    /// observed normal n and the predicted m (`None` where α is π/2 for want of a predicted
+    /// plane). Their ratio orders correspondences as α does, without the arc tangent, which is
+    /// most of α's cost (a median needs the arc tangent of one element only).
+    #[inline]
+    pub fn alpha_terms(&self, t_world_rig: &Pose) -> Option<(f64, f64)> {
+        let (r1, r2) = self.predicted_rays(t_world_rig);
+        let n2 = plane_normal(&r1, &r2)?;
+        let n1 = self.edge.normal;
+        Some((n1.cross(&n2).norm(), n1.dot(&n2).abs()))
     }
 
     /// Kumar–Hanson's residuals: the distances (m) of the segment's two end points, moved into the
@@ -165,5 +193,46 @@ mod tests {
     fn parallel_rays_span_no_plane() {
         let r = Vector3::new(1.0, 2.0, 3.0);
         assert!(EdgePlane::from_rays(Point3::origin(), &r, &(2.0 * r)).is_none());
+    }
+
+    /// α from the predicted normal alone is α from the whole predicted plane, bit for bit, for
+    /// planes at any angle and for segments pointing at the centre (π/2).
+    #[test]
+    fn alpha_is_the_predicted_planes_angle_bit_for_bit() {
+        let reference = |c: &Correspondence, p: &Pose| match c.predicted_plane(p) {
+            Some(pl) => c
+                .edge
+                .normal
+                .cross(&pl.normal)
+                .norm()
+                .atan2(c.edge.normal.dot(&pl.normal).abs()),
+            None => std::f64::consts::FRAC_PI_2,
+        };
+        let mut x = 0x2545_f491_4f6c_dd1du64;
+        let mut next = move || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            (x >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        };
+        for _ in 0..5000 {
+            let mut c = exact(
+                [
+                    Point3::new(4.0 * next(), 4.0 * next(), 2.0 * next()),
+                    Point3::new(4.0 * next(), 4.0 * next(), 2.0 * next()),
+                ],
+                Point3::new(0.05 * next(), 0.05 * next(), 0.05 * next()),
+            );
+            c.edge.normal = Unit::new_normalize(Vector3::new(next(), next(), next()));
+            let p = Isometry3::translation(0.3 * next(), 0.3 * next(), 0.1 * next()) * pose();
+            assert_eq!(c.alpha(&p).to_bits(), reference(&c, &p).to_bits());
+        }
+        let through = Correspondence {
+            edge: EdgePlane::from_rays(Point3::origin(), &Vector3::x(), &Vector3::y()).unwrap(),
+            segment: [Point3::new(1.0, 1.0, 1.0), Point3::new(2.0, 2.0, 2.0)],
+        };
+        let at_origin = Pose::identity();
+        assert_eq!(through.alpha(&at_origin), std::f64::consts::FRAC_PI_2);
+        assert_eq!(reference(&through, &at_origin), std::f64::consts::FRAC_PI_2);
     }
 }

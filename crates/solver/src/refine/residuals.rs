@@ -137,7 +137,7 @@ pub(crate) fn accumulate_line_scaled(
             let mut e = 0.0;
             for k in 0..2 {
                 let (r, j, w) = (res.r[k], &res.jacobian[k], scale * res.weight[k]);
-                h.ger(w, j, j, 1.0);
+                add_outer_lower(h, w, j);
                 g.axpy(w * r, j, 1.0);
                 e += w * r * r;
             }
@@ -199,17 +199,71 @@ pub(crate) fn pivot_ok(l_ii: f64, h_ii: f64) -> bool {
     l_ii * l_ii > SINGULAR_PIVOT_RATIO * h_ii
 }
 
+/// `h += w j jᵀ` on the lower triangle and the diagonal only: the normal equations' matrix as
+/// [`solve6`] reads it. Each entry is the one `h.ger(w, j, j, 1.0)` gives (`h + (w jᶜ) jʳ`, the
+/// same operations in the same order), so the solves are bit for bit those of the full update;
+/// the upper triangle, which no solve reads, is left as it was. Half the work of `ger`, and
+/// without its views (the tracker's consensus runs it for every line of every iteration of about
+/// a hundred samples a frame).
+#[inline(always)]
+pub(crate) fn add_outer_lower(h: &mut Matrix6<f64>, w: f64, j: &Vector6<f64>) {
+    for c in 0..6 {
+        let a = w * j[c];
+        for r in c..6 {
+            h[(r, c)] += a * j[r];
+        }
+    }
+}
+
 /// Solves the 6×6 normal equations `h x = −g` by Cholesky, refusing a (numerically) singular `h`.
+/// Reads the lower triangle and the diagonal of `h` only.
+///
+/// The factorisation and the two triangular solves are nalgebra's (`Cholesky::new`, `solve`:
+/// the same operations in the same order, so the same bits), written out for a fixed 6×6: through
+/// nalgebra's generic column views they were a third of the tracker's consensus (a perf profile
+/// of `cargo bench --bench tracking`, docs/decisions.md).
 #[inline]
 pub(crate) fn solve6(h: &Matrix6<f64>, g: &Vector6<f64>) -> Option<Vector6<f64>> {
-    let chol = h.cholesky()?;
-    let l = chol.l_dirty();
+    let mut l = *h;
+    for j in 0..6 {
+        for k in 0..j {
+            let factor = -l[(j, k)];
+            for i in j..6 {
+                l[(i, j)] += factor * l[(i, k)];
+            }
+        }
+        let diag = l[(j, j)];
+        // `try_sqrt` of simba: none for a negative or NaN diagonal; nalgebra refuses a zero one.
+        if diag.is_nan() || diag <= 0.0 {
+            return None;
+        }
+        let denom = diag.sqrt();
+        l[(j, j)] = denom;
+        for i in j + 1..6 {
+            l[(i, j)] /= denom;
+        }
+    }
     for i in 0..6 {
         if !pivot_ok(l[(i, i)], h[(i, i)]) {
             return None;
         }
     }
-    let x = chol.solve(&-g);
+    let mut x = -g;
+    // L y = −g, then Lᵀ x = y (nalgebra's dot starts from zero and adds the products in order).
+    for i in 0..6 {
+        let coeff = x[i] / l[(i, i)];
+        x[i] = coeff;
+        for k in i + 1..6 {
+            x[k] += -coeff * l[(k, i)];
+        }
+    }
+    for i in (0..6).rev() {
+        let mut dot = 0.0;
+        for k in i + 1..6 {
+            dot += l[(k, i)] * x[k];
+        }
+        x[i] = (x[i] - dot) / l[(i, i)];
+    }
     x.iter().all(|v| v.is_finite()).then_some(x)
 }
 
@@ -372,7 +426,7 @@ pub(crate) fn accumulate_point(
 ) {
     if let Some((res, _)) = point_residuals(p, q, s, error) {
         for k in 0..2 {
-            h.ger(res.weight[k], &res.jacobian[k], &res.jacobian[k], 1.0);
+            add_outer_lower(h, res.weight[k], &res.jacobian[k]);
             g.axpy(res.weight[k] * res.r[k], &res.jacobian[k], 1.0);
         }
     }
@@ -417,5 +471,72 @@ mod tests {
         };
         assert!(line_residuals(&through, &q, &s, LineError::E3).is_none());
         assert_eq!(line_error_of(&through, &q, &s, LineError::E3), 2.0);
+    }
+
+    /// nalgebra's solve, as `solve6` was written before: the reference it must equal bit for bit.
+    fn solve6_nalgebra(h: &Matrix6<f64>, g: &Vector6<f64>) -> Option<Vector6<f64>> {
+        let chol = h.cholesky()?;
+        let l = chol.l_dirty();
+        for i in 0..6 {
+            if !pivot_ok(l[(i, i)], h[(i, i)]) {
+                return None;
+            }
+        }
+        let x = chol.solve(&-g);
+        x.iter().all(|v| v.is_finite()).then_some(x)
+    }
+
+    /// The written-out normal equations give nalgebra's answers to the last bit (the tracker's
+    /// poses are compared bit for bit across the change, `cargo bench --bench tracking`): on
+    /// line sets of every error, on few lines (singular), and on a matrix with a zero, a negative
+    /// and a NaN pivot.
+    #[test]
+    fn the_normal_equations_are_solved_bit_for_bit_as_nalgebra_solves_them() {
+        let mut rng = SmallRng::seed_from_u64(11);
+        let v = |rng: &mut SmallRng, r: f64| Vector3::from_fn(|_, _| rng.random_range(-r..r));
+        let bits = |x: Option<Vector6<f64>>| x.map(|x| x.map(f64::to_bits));
+        let mut solved = 0;
+        for trial in 0..2000 {
+            let (q, s) = (UnitQuaternion::from_scaled_axis(v(&mut rng, 3.0)), v(&mut rng, 2.0));
+            let error = [LineError::E1, LineError::E2, LineError::E3][trial % 3];
+            let (mut lower, mut full) = (Matrix6::zeros(), Matrix6::zeros());
+            let (mut g_lower, mut g_full) = (Vector6::zeros(), Vector6::zeros());
+            for _ in 0..1 + trial % 12 {
+                let centre = Point3::from(v(&mut rng, 0.2));
+                let Some(edge) = EdgePlane::from_rays(centre, &v(&mut rng, 1.0), &v(&mut rng, 1.0)) else {
+                    continue;
+                };
+                let segment = [Point3::from(v(&mut rng, 5.0)), Point3::from(v(&mut rng, 5.0))];
+                let c = Correspondence { edge, segment };
+                let w = rng.random_range(0.1..2.0);
+                accumulate_line_scaled(&c, &q, &s, error, w, &mut lower, &mut g_lower);
+                if let Some(res) = line_residuals(&c, &q, &s, error) {
+                    for k in 0..2 {
+                        let wk = w * res.weight[k];
+                        full.ger(wk, &res.jacobian[k], &res.jacobian[k], 1.0);
+                        g_full.axpy(wk * res.r[k], &res.jacobian[k], 1.0);
+                    }
+                }
+            }
+            for c in 0..6 {
+                for r in c..6 {
+                    assert_eq!(lower[(r, c)].to_bits(), full[(r, c)].to_bits());
+                }
+            }
+            assert_eq!(g_lower.map(f64::to_bits), g_full.map(f64::to_bits));
+            let ours = solve6(&lower, &g_lower);
+            assert_eq!(bits(ours), bits(solve6_nalgebra(&full, &g_full)), "trial {trial}");
+            solved += usize::from(ours.is_some());
+        }
+        assert!(
+            solved > 1000,
+            "{solved} of 2000 solved: the test needs well-posed systems"
+        );
+        for bad in [0.0, -1.0, f64::NAN] {
+            let mut h = Matrix6::identity();
+            h[(3, 3)] = bad;
+            assert_eq!(solve6(&h, &Vector6::repeat(1.0)), None);
+            assert_eq!(solve6_nalgebra(&h, &Vector6::repeat(1.0)), None);
+        }
     }
 }

@@ -129,8 +129,10 @@ pub struct ConsensusSampler {
     inliers: Vec<usize>,
     /// The inliers' correspondences, contiguous for the refit (length `capacity`).
     inlier_set: Vec<Correspondence>,
-    /// α² of a pose's correspondences, for [`SampleScore::Median`] (length `capacity`).
+    /// α² of a pose's correspondences, or the ratios that order them, for
+    /// [`SampleScore::Median`] (length `capacity` each).
     squares: Vec<f64>,
+    spare: Vec<f64>,
 }
 
 impl ConsensusSampler {
@@ -163,6 +165,7 @@ impl ConsensusSampler {
             inliers: resident(vec![0; capacity]),
             inlier_set: vec![filler; capacity],
             squares: resident(vec![0.0; capacity]),
+            spare: resident(vec![0.0; capacity]),
         }
     }
 
@@ -251,7 +254,7 @@ impl ConsensusSampler {
                 continue;
             };
             let score = score(
-                &mut self.squares,
+                (&mut self.squares, &mut self.spare),
                 budget.score,
                 order[lambda..].iter().map(|&i| &c[i]),
                 &pose,
@@ -269,8 +272,20 @@ impl ConsensusSampler {
         let mut refitted = false;
         if count >= lambda {
             if let Some(refit) = fit(&self.inlier_set[..count], &best_pose) {
-                let all_best = score(&mut self.squares, budget.score, c.iter(), &best_pose, cap2);
-                let all_refit = score(&mut self.squares, budget.score, c.iter(), &refit, cap2);
+                let all_best = score(
+                    (&mut self.squares, &mut self.spare),
+                    budget.score,
+                    c.iter(),
+                    &best_pose,
+                    cap2,
+                );
+                let all_refit = score(
+                    (&mut self.squares, &mut self.spare),
+                    budget.score,
+                    c.iter(),
+                    &refit,
+                    cap2,
+                );
                 if all_refit <= all_best {
                     pose = refit;
                     refitted = true;
@@ -304,29 +319,78 @@ impl ConsensusSampler {
     }
 }
 
-/// `kind` of score of `pose` over `set`.
+/// `kind` of score of `pose` over `set` (`buffers`: two of the sampler's, as long as `set`).
 fn score<'a>(
-    squares: &mut [f64],
+    buffers: (&mut [f64], &mut [f64]),
     kind: SampleScore,
-    set: impl Iterator<Item = &'a Correspondence>,
+    set: impl Iterator<Item = &'a Correspondence> + Clone,
     pose: &Pose,
     cap2: f64,
 ) -> f64 {
     match kind {
         SampleScore::Truncated => truncated_score(set, pose, cap2),
-        SampleScore::Median => {
-            let mut m = 0;
-            for (slot, corr) in squares.iter_mut().zip(set) {
-                *slot = corr.alpha(pose).powi(2);
-                m += 1;
-            }
-            if m == 0 {
-                return 0.0;
-            }
-            let (_, median, _) = squares[..m].select_nth_unstable_by(m / 2, f64::total_cmp);
-            *median
+        SampleScore::Median => median_square(buffers.0, buffers.1, set, pose),
+    }
+}
+
+/// Ratios (the median's pivot) beyond which [`median_square`] takes every α: within 1e-8 rad
+/// of π/2, where a relative band of [`MEDIAN_BAND`] is too few ulps of α to be safe.
+const MEDIAN_RATIO_LIMIT: f64 = 1e8;
+/// The relative width of [`median_square`]'s band about the pivot ratio.
+const MEDIAN_BAND: f64 = 1e-6;
+
+/// The median α² of `set` at `pose`: the square of the α of rank m/2 (0-based) among the m,
+/// exactly as selecting it among every α² gives it, with an arc tangent for a few of them only.
+///
+/// α = atan2(|n × m|, |n · m|) ([`Correspondence::alpha_terms`]) rises with the ratio of the
+/// two, so the ratios are ranked instead and the element of rank m/2 found; the α of every
+/// element whose ratio lies within a relative [`MEDIAN_BAND`] of it (itself included) is then
+/// computed, and the median is the one of the right rank among those (the elements below the
+/// band counted). Outside the band the ratios differ from the pivot's by a millionth, far more
+/// than the arc tangent's error (under an ulp) and the ratios' rounding can reorder, so no α
+/// outside it can take the median's rank; inside it the α themselves decide, as before. Where
+/// that margin is not assured (a pivot ratio beyond [`MEDIAN_RATIO_LIMIT`], infinite or NaN) every
+/// α is computed, as before. The arc tangent was about half of the consensus's scoring, which
+/// takes the median over the rest of the set for every one of a frame's hundred-odd samples.
+fn median_square<'a>(
+    ratios: &mut [f64],
+    spare: &mut [f64],
+    set: impl Iterator<Item = &'a Correspondence> + Clone,
+    pose: &Pose,
+) -> f64 {
+    let mut m = 0;
+    let mut nan = false;
+    for (slot, corr) in ratios.iter_mut().zip(set.clone()) {
+        *slot = corr.alpha_terms(pose).map_or(f64::INFINITY, |(sin, cos)| sin / cos);
+        nan |= slot.is_nan();
+        m += 1;
+    }
+    if m == 0 {
+        return 0.0;
+    }
+    let rank = m / 2;
+    spare[..m].copy_from_slice(&ratios[..m]);
+    let (_, pivot, _) = spare[..m].select_nth_unstable_by(rank, f64::total_cmp);
+    let pivot = *pivot;
+    if nan || pivot.is_nan() || pivot > MEDIAN_RATIO_LIMIT {
+        for (slot, corr) in spare.iter_mut().zip(set) {
+            *slot = corr.alpha(pose).powi(2);
+        }
+        let (_, median, _) = spare[..m].select_nth_unstable_by(rank, f64::total_cmp);
+        return *median;
+    }
+    let (low, high) = (pivot * (1.0 - MEDIAN_BAND), pivot * (1.0 + MEDIAN_BAND));
+    let (mut below, mut band) = (0, 0);
+    for (ratio, corr) in ratios[..m].iter().zip(set) {
+        if *ratio < low {
+            below += 1;
+        } else if *ratio <= high {
+            spare[band] = corr.alpha(pose).powi(2);
+            band += 1;
         }
     }
+    let (_, median, _) = spare[..band].select_nth_unstable_by(rank - below, f64::total_cmp);
+    *median
 }
 
 /// (1/m) Σ min(α², cap²) over `set` (0 for an empty set).
@@ -340,5 +404,92 @@ fn truncated_score<'a>(set: impl Iterator<Item = &'a Correspondence>, pose: &Pos
         0.0
     } else {
         sum / m as f64
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+    use omnitrack_core::geometry::EdgePlane;
+    use rand::SeedableRng;
+
+    /// The median over every α², as it was taken before [`median_square`].
+    fn plain_median(set: &[Correspondence], pose: &Pose) -> f64 {
+        let mut squares: Vec<f64> = set.iter().map(|c| c.alpha(pose).powi(2)).collect();
+        let m = squares.len();
+        *squares.select_nth_unstable_by(m / 2, f64::total_cmp).1
+    }
+
+    /// The median from the ratios and a band of arc tangents is the plain one bit for bit: on
+    /// sets of every size with inliers and outliers, with twins (equal ratios) and near-twins,
+    /// segments through the centre (π/2), planes at right angles, and every α equal.
+    #[test]
+    fn the_median_from_ratios_is_the_plain_median_bit_for_bit() {
+        let mut rng = SmallRng::seed_from_u64(5);
+        let v = |rng: &mut SmallRng, r: f64| Vector3::from_fn(|_, _| rng.random_range(-r..r));
+        let pose = Isometry3::from_parts(
+            Translation3::new(0.5, -1.0, 1.4),
+            UnitQuaternion::from_euler_angles(0.02, -0.03, 0.7),
+        );
+        let (mut ratios, mut spare) = (vec![0.0; 64], vec![0.0; 64]);
+        for trial in 0..3000 {
+            let n = 1 + trial % 40;
+            let mut set = Vec::with_capacity(n);
+            while set.len() < n {
+                let seg = [Point3::from(v(&mut rng, 6.0)), Point3::from(v(&mut rng, 6.0))];
+                let c = Point3::from(v(&mut rng, 0.05));
+                let a = pose.inverse_transform_point(&seg[0]) - c;
+                let b = pose.inverse_transform_point(&seg[1]) - c;
+                let Some(mut edge) = EdgePlane::from_rays(c, &a, &b) else {
+                    continue;
+                };
+                // Inliers within a degree, outliers anywhere; now and then exactly at right angles.
+                let tilt = match rng.random_range(0..10) {
+                    0..=5 => rng.random_range(0.0..0.02),
+                    6..=8 => rng.random_range(0.0..1.6),
+                    _ => std::f64::consts::FRAC_PI_2,
+                };
+                let axis = nalgebra::Unit::new_normalize(edge.normal.cross(&v(&mut rng, 1.0)));
+                edge.normal = UnitQuaternion::from_axis_angle(&axis, tilt) * edge.normal;
+                set.push(Correspondence { edge, segment: seg });
+                // Twins and near-twins: equal or nearly equal ratios about the median.
+                if rng.random_range(0..4) == 0 && set.len() < n {
+                    let mut twin = *set.last().unwrap();
+                    if rng.random_range(0..2) == 0 {
+                        twin.segment[1] += Vector3::new(1e-13, 0.0, 0.0);
+                    }
+                    set.push(twin);
+                }
+            }
+            if trial % 7 == 0 {
+                // A segment through its sensor's centre: no predicted plane, α = π/2.
+                let c = set[0].edge.centre;
+                let through = pose.transform_point(&c);
+                set[0].segment = [through, through + pose.rotation * Vector3::new(1.0, 2.0, 0.5)];
+            }
+            let got = median_square(&mut ratios, &mut spare, set.iter(), &pose);
+            assert_eq!(
+                got.to_bits(),
+                plain_median(&set, &pose).to_bits(),
+                "trial {trial}, {n} lines"
+            );
+        }
+        // Every α the same (a set of twins): the band holds them all.
+        let one = {
+            let c = Point3::new(0.02, 0.0, 0.0);
+            let seg = [Point3::new(4.0, 1.0, 0.0), Point3::new(4.0, 1.0, 2.5)];
+            let a = pose.inverse_transform_point(&seg[0]) - c;
+            let b = pose.inverse_transform_point(&seg[1]) - c;
+            Correspondence {
+                edge: EdgePlane::from_rays(c, &a, &b)
+                    .unwrap()
+                    .with_normal(nalgebra::Vector3::z_axis()),
+                segment: seg,
+            }
+        };
+        let twins = [one; 9];
+        let got = median_square(&mut ratios, &mut spare, twins.iter(), &pose);
+        assert_eq!(got.to_bits(), plain_median(&twins, &pose).to_bits());
     }
 }

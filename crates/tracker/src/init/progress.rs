@@ -3,13 +3,14 @@
 //!
 //! In: the search's own charges ([`Initialiser::spend`](super::Initialiser), the grid's lanes
 //! and the triplets' lanes as they go), its start and end, and the kind the tracker launched.
-//! Out: a [`SearchSnapshot`] on demand. Atomics only: a search adds to a counter per step (a
-//! step is tens of microseconds or more); nothing is allocated or locked, and the frame path
-//! never reads it.
+//! Out: a [`SearchSnapshot`] on demand; and a stop flag raised at a given amount of work
+//! ([`SearchProgress::raise_at_work`]). Atomics only: a search adds to a counter per step (a
+//! step is tens of microseconds or more); nothing is allocated, a lock is taken only once a
+//! flag's work is reached, and the frame path never reads it.
 
 use omnitrack_core::status::SearchKind;
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicU8, Ordering};
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 /// The progress of one searcher's runs, shared (`Arc`) between the search and whoever watches.
@@ -26,6 +27,9 @@ pub struct SearchProgress {
     budget: AtomicU64,
     /// The volume's diameter in mm, or `u64::MAX` for the whole model.
     diameter_mm: AtomicU64,
+    /// A flag to raise once a run's work reaches `raise_at` (`u64::MAX`: none).
+    raise_at: AtomicU64,
+    raise: Mutex<Option<Arc<AtomicBool>>>,
 }
 
 /// What a search under way has done so far.
@@ -63,6 +67,8 @@ impl Default for SearchProgress {
             work: AtomicU64::new(0),
             budget: AtomicU64::new(0),
             diameter_mm: AtomicU64::new(u64::MAX),
+            raise_at: AtomicU64::new(u64::MAX),
+            raise: Mutex::new(None),
         }
     }
 }
@@ -115,12 +121,35 @@ impl SearchProgress {
     /// The run's work so far, exactly (the searcher's own total).
     pub(crate) fn set_work(&self, work: u64) {
         self.work.store(work, Ordering::Relaxed);
+        self.raise_if_reached(work);
     }
 
     /// Work a lane has done since it last said (lanes run on several threads at once; the
     /// searcher's total overwrites their sum once they are joined).
     pub(crate) fn add_work(&self, units: u64) {
-        self.work.fetch_add(units, Ordering::Relaxed);
+        let work = self.work.fetch_add(units, Ordering::Relaxed).saturating_add(units);
+        self.raise_if_reached(work);
+    }
+
+    /// Sets `flag` (once) as soon as a run of this searcher has spent `units` of work: a stop
+    /// at a known point of a search (a stop flag the searcher was given, set from the search's
+    /// own thread, is seen at its next check), where a flag set from another thread lands
+    /// wherever the search happens to be. What a search cut short at a given point does is then
+    /// the same on every run and under any load, as long as the run has one lane (a bounded
+    /// volume); the whole model's lanes add their work in the threads' order. For tests.
+    pub fn raise_at_work(&self, flag: Arc<AtomicBool>, units: u64) {
+        *self.raise.lock().unwrap_or_else(|e| e.into_inner()) = Some(flag);
+        self.raise_at.store(units, Ordering::Release);
+    }
+
+    fn raise_if_reached(&self, work: u64) {
+        if work < self.raise_at.load(Ordering::Acquire) {
+            return;
+        }
+        self.raise_at.store(u64::MAX, Ordering::Release);
+        if let Some(flag) = self.raise.lock().unwrap_or_else(|e| e.into_inner()).take() {
+            flag.store(true, Ordering::Relaxed);
+        }
     }
 }
 
@@ -147,5 +176,22 @@ mod tests {
         let _running = p.begin(10, Some(3.0));
         let s = p.snapshot().unwrap();
         assert_eq!((s.work_done, s.diameter_m), (0, Some(3.0)));
+    }
+
+    #[test]
+    fn a_flag_is_raised_when_the_work_reaches_its_mark_and_only_then() {
+        let p = Arc::new(SearchProgress::default());
+        let flag = Arc::new(AtomicBool::new(false));
+        p.raise_at_work(Arc::clone(&flag), 300);
+        let _running = p.begin(1000, None);
+        p.add_work(100);
+        p.set_work(299);
+        assert!(!flag.load(Ordering::Relaxed));
+        p.add_work(1);
+        assert!(flag.load(Ordering::Relaxed));
+        // Once: a flag cleared after it was raised stays clear.
+        flag.store(false, Ordering::Relaxed);
+        p.set_work(900);
+        assert!(!flag.load(Ordering::Relaxed));
     }
 }

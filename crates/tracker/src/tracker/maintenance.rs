@@ -39,7 +39,7 @@ use super::Tail;
 use super::Tracker;
 use crate::correspondence::{CorrespondenceState, HeldEdge};
 use crate::init::Candidate;
-use crate::matching::{best_edge, Gate, Predicted};
+use crate::matching::{best_edge_among, Gate, Predicted};
 use crate::motion_filter::{distance2, Fused, GATE_CHI2_6};
 use crate::report::{FrameResult, TrackerEvent, TrackerState};
 use nalgebra::{Isometry3, Matrix6, Point3, Translation3, UnitQuaternion};
@@ -151,7 +151,7 @@ impl Tracker<'_> {
                 hue: Some((held.hue, hue_gate)),
                 polarity: held.bright_normal(),
             };
-            if let Some((e, a)) = best_edge(&pred, &self.centres, edges, &gate) {
+            if let Some((e, a)) = best_edge_among(&pred, &self.centres, edges, &self.edge_normals, &gate) {
                 self.matched[i] = Some((e as u32, a));
                 if t.state == CorrespondenceState::Accepted {
                     self.set.push(Correspondence {
@@ -223,13 +223,16 @@ impl Tracker<'_> {
     }
 
     /// How many held correspondences have an edge within the inlier angle (and hue gate) at
-    /// `pose`: the support a solved pose has before Figure 8 runs.
-    fn consistent_count(&self, edges: &[Edge], pose: &Pose) -> usize {
+    /// `pose`: the support a solved pose has before Figure 8 runs. Each one's edge is kept in
+    /// `support_at` (`None` where there is none, or the track was not looked at): the
+    /// observations of step 4 at the same pose are these.
+    fn consistent_count(&mut self, edges: &[Edge], pose: &Pose) -> usize {
         let m = &self.cfg.maintenance;
         let cos = m.inlier_angle_deg.to_radians().cos();
         let min_len = self.cfg.edges.min_edge_length_deg.to_radians();
         let mut n = 0;
-        for t in self.tracks.tracks() {
+        for (i, t) in self.tracks.tracks().iter().enumerate() {
+            self.support_at[i] = None;
             let Some(held) = t.edge else { continue };
             let seg = &self.model.segments[t.segment as usize];
             let pred = Predicted::new(&[seg.a, seg.b], pose, &self.centres);
@@ -242,7 +245,8 @@ impl Tracker<'_> {
                 hue: Some((held.hue, m.hue_gate as f32)),
                 polarity: held.bright_normal(),
             };
-            if best_edge(&pred, &self.centres, edges, &gate).is_some() {
+            if let Some((e, a)) = best_edge_among(&pred, &self.centres, edges, &self.edge_normals, &gate) {
+                self.support_at[i] = Some((e as u32, a));
                 n += 1;
             }
         }
@@ -257,6 +261,8 @@ impl Tracker<'_> {
         let method = self.cfg.solver.method;
         let inlier_rad = mcfg.inlier_angle_deg.to_radians();
         let min_len = self.cfg.edges.min_edge_length_deg.to_radians();
+
+        self.edge_normals.fill(edges);
 
         // 1. Prediction.
         let forecast = (self.cfg.motion.filter && self.filter.started()).then(|| self.filter.predict(timestamp_ns));
@@ -300,6 +306,7 @@ impl Tracker<'_> {
                     best_support = support;
                     solved = Some(p);
                     prior = start;
+                    std::mem::swap(&mut self.support_at, &mut self.support_solved);
                 }
                 if support >= enough {
                     break;
@@ -312,6 +319,9 @@ impl Tracker<'_> {
         // polished, competes by the search's measure over all of VIS(T), and so does the solve's
         // rotation at the predicted position when the solve turned: in a turn the prediction
         // lags, and the solve often has the turn right but has slid along the structure.
+        // `support_solved` holds the held correspondences' edges at `solved` until another pose
+        // replaces it.
+        let mut solved_support_known = solved.is_some();
         if let Some(p) = solved {
             let moved = (p.translation.vector - predicted.translation.vector).norm();
             let turned = p.rotation.angle_to(&predicted.rotation);
@@ -330,6 +340,7 @@ impl Tracker<'_> {
                 if let Some(c) = best {
                     self.stats.second_opinions += 1;
                     solved = Some(c.pose);
+                    solved_support_known = false;
                     prior = predicted;
                 }
             }
@@ -352,13 +363,18 @@ impl Tracker<'_> {
             let pred = Predicted::new(&ends, &check_pose, &self.centres);
             let observed = if solved.is_some() && pred.length_rad >= min_len {
                 eligible += 1;
-                let gate = Gate {
-                    cos_alpha: tight,
-                    min_overlap: 0.5,
-                    hue: t.edge.map(|h| (h.hue, hue_gate)),
-                    polarity: t.edge.and_then(|h| h.bright_normal()),
-                };
-                best_edge(&pred, &self.centres, edges, &gate)
+                if solved_support_known && t.edge.is_some() {
+                    // `consistent_count` matched it at this pose with this gate already.
+                    self.support_solved[i].map(|(e, a)| (e as usize, a))
+                } else {
+                    let gate = Gate {
+                        cos_alpha: tight,
+                        min_overlap: 0.5,
+                        hue: t.edge.map(|h| (h.hue, hue_gate)),
+                        polarity: t.edge.and_then(|h| h.bright_normal()),
+                    };
+                    best_edge_among(&pred, &self.centres, edges, &self.edge_normals, &gate)
+                }
             } else {
                 None
             };
