@@ -319,9 +319,15 @@ pub(crate) fn detailed(a: &Args, rig: &Rig, label: &str, options: &RecordingOpti
         &format!("detailed-{name}-{}-{label}", rig.name),
         &title,
         &format!(
-            "cargo bench --bench tracker -- --model {} --starts {} --appearance {label}",
+            "cargo bench --bench tracker -- --model {} --starts {} --appearance {label}{}{}",
             model_path.display(),
-            a.starts
+            a.starts,
+            if a.window_s == WINDOW_S {
+                String::new()
+            } else {
+                format!(" --window {}", a.window_s)
+            },
+            a.rows.as_ref().map_or(String::new(), |r| format!(" --rows {r}")),
         ),
         &note,
     ) {
