@@ -126,7 +126,7 @@ mod bench {
 
         let scenario = Scenario::get(scenario_name);
         let obj = scenario.model_obj().unwrap_or_else(|e| fail(&e.to_string()));
-        let cache = Path::new(env!("CARGO_MANIFEST_DIR")).join("target/omnitrack-cache");
+        let cache = omnitrack::desk::recording::cache_root(Path::new(env!("CARGO_MANIFEST_DIR")));
         std::fs::create_dir_all(&cache).unwrap_or_else(|e| fail(&e.to_string()));
         let model_path = cache.join(format!("realism-{}.obj", scenario.name));
         std::fs::write(&model_path, &obj).unwrap_or_else(|e| fail(&e.to_string()));

@@ -97,9 +97,7 @@ mod bench {
     }
 
     fn cache_root() -> PathBuf {
-        std::env::var_os("OMNITRACK_CACHE")
-            .map(PathBuf::from)
-            .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("target/omnitrack-cache"))
+        omnitrack::desk::recording::cache_root(Path::new(env!("CARGO_MANIFEST_DIR")))
     }
 
     /// The resident set read from `/proc/self/statm` through a file opened once and a fixed

@@ -223,9 +223,7 @@ fn args() -> Args {
 }
 
 fn cache_root() -> PathBuf {
-    std::env::var_os("OMNITRACK_CACHE")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("target/omnitrack-cache"))
+    omnitrack::desk::recording::cache_root(Path::new(env!("CARGO_MANIFEST_DIR")))
 }
 
 fn main() {

@@ -158,6 +158,15 @@ pub fn write_recording(
     })
 }
 
+/// Where the benchmarks cache their rendered recordings: `$OMNITRACK_CACHE`, or
+/// `target/omnitrack-cache` under `project` (the repository's root). One place, so that every
+/// bench finds the recordings the others rendered.
+pub fn cache_root(project: &Path) -> PathBuf {
+    std::env::var_os("OMNITRACK_CACHE")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| project.join("target/omnitrack-cache"))
+}
+
 /// A rendered recording of a scenario in a cache directory, made on first use: `root/NAME-FRAMESf-seedSEED-LABEL`.
 /// A recording is reused only when complete (a `complete` marker is written last), so an
 /// interrupted render is redone. `progress(done, total)` is called per rendered frame. Returns
