@@ -493,6 +493,70 @@ fn a_search_commits_no_pose_outside_the_volume_it_searched() {
     assert!(searched >= 1);
 }
 
+/// Issue 47, item 1 (`sweep_volume`, off by default): a volume one search's budget does not
+/// cover is swept by the searches that follow, each going on from the cells the earlier ones looked at (their best candidates
+/// carried along as rivals), until every cell of it has been looked at; only then does the
+/// tracker search it again more broadly. Nothing wrong is committed on the way.
+#[test]
+fn a_volume_too_large_for_one_search_is_swept_by_the_next_searches() {
+    let f = fixture();
+    let (mut source, rig, mut cfg, mut frame, mut detector) = replay(f);
+    // A fifth of the budget: a 10 m volume of the lab takes several searches.
+    cfg.initialisation.time_budget_ms /= 5.0;
+    cfg.initialisation.sweep_volume = true;
+    let volume = SearchVolume {
+        centre: Point3::from(f.truth[0].pose.translation.vector + Vector3::new(3.5, -2.0, 0.0)),
+        diameter_m: Some(10.0),
+    };
+    let mut tracker = Tracker::new(&rig, &f.model, &f.table, &cfg, Some(volume), 1);
+    let mut reports = Vec::new();
+    let mut committed = None;
+    while committed.is_none() && source.next_frame(&mut frame).unwrap() {
+        let ts = frame.timestamp_ns().unwrap();
+        let r = tracker.process(detector.detect(&frame), ts);
+        for (t, r) in tracker.late().iter().map(|(t, r)| (*t, r)).chain([(ts, &r)]) {
+            if let Some(TrackerEvent::Searched(s)) = &r.event {
+                reports.push(*s);
+            }
+            if let (Some(p), None) = (r.pose, committed) {
+                committed = Some(errors(f, t, &p));
+            }
+        }
+    }
+    if let Some((dp, dr)) = committed {
+        assert!(dp < 0.10 && dr < 1.0, "committed {:.1} cm, {dr:.2}° off", dp * 100.0);
+        // The search that committed (its event is the commit) ended a sweep: the searches
+        // had looked at every cell by then.
+        let in_volume = reports.first().map_or(0, |r| r.plan_cells_in_volume) as u64;
+        assert!(tracker.stats().plan_cells_scanned >= in_volume, "{:?}", tracker.stats());
+    }
+    assert!(reports.len() >= 2, "{} searches", reports.len());
+    assert_eq!(
+        reports[0].plan_cells_skipped, 0,
+        "the first search starts at the centre"
+    );
+    assert!(
+        reports[0].swept_to_m.is_some(),
+        "one search covered the volume: the test needs a larger one"
+    );
+    // Each search of the first sweep skips at least what the one before it looked at, up to
+    // the last, which reaches the volume's end.
+    let mut looked_at = 0;
+    for (k, r) in reports.iter().enumerate() {
+        assert!(r.plan_cells_skipped + 8 >= looked_at, "search {k} went back: {r:?}");
+        looked_at = r.plan_cells_skipped + r.plan_cells_scanned;
+        if r.swept_to_m.is_none() {
+            assert_eq!(looked_at, r.plan_cells_in_volume, "{r:?}");
+            return;
+        }
+    }
+    assert!(
+        committed.is_some(),
+        "neither a commit nor a whole sweep in {} searches",
+        reports.len()
+    );
+}
+
 /// Whether a search's candidates hold the truth (within 10 cm and 1°).
 fn finds_truth(found: &[omnitrack::tracker::Candidate], truth: &omnitrack::Pose) -> bool {
     found.iter().any(|c| {

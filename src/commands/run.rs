@@ -275,10 +275,18 @@ impl RunSink {
                     Some(d) => format!("a {d:.1} m volume"),
                     None => "the whole model".to_string(),
                 };
+                // A sweep's later searches leave the cells the earlier ones looked at: the count
+                // is of the whole sweep so far, and a sweep that goes on says so.
+                let looked_at = (rep.plan_cells_skipped + rep.plan_cells_scanned).min(rep.plan_cells_in_volume);
+                let goes_on = if rep.swept_to_m.is_some() {
+                    ", the next search goes on with the rest"
+                } else {
+                    ""
+                };
                 eprintln!(
-                    "omnitrack: frame {}: in {volume}, looked at {} of {} cells (positions scored under the vanishing directions), searched {} of {} (segment-edge triplets) in {:.0} ms",
+                    "omnitrack: frame {}: in {volume}, looked at {} of {} cells (positions scored under the vanishing directions{goes_on}), searched {} of {} (segment-edge triplets) in {:.0} ms",
                     r.sequence,
-                    rep.plan_cells_scanned,
+                    looked_at,
                     rep.plan_cells_in_volume,
                     rep.cells_searched,
                     rep.cells_in_volume,

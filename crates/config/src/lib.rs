@@ -59,6 +59,12 @@ pub struct InitialisationConfig {
     pub max_dihedral_range_deg: f64,
     /// The whole-model search's work budget (reference milliseconds, as `time_budget_ms`).
     pub whole_model_time_budget_ms: f64,
+    /// A search whose budget runs out before it has looked at every cell of its volume decides
+    /// nothing; the next goes on from the nearest cell it left, the best candidates so far
+    /// carried along as rivals, and the search that ends the sweep decides (issue 47, item 1).
+    /// Off by default: measured, it refuses wrong commits on FZK-Haus but adds one on ZInD and
+    /// delays the first pose (docs/decisions.md, 2026-11-30).
+    pub sweep_volume: bool,
     pub clear_winner_ratio: f64,
     pub accept_explained_fraction: f64,
     /// A candidate must also explain this share of the frame's edges (by angle).
@@ -234,6 +240,7 @@ impl Default for InitialisationConfig {
             dihedral_tolerance_deg: 1.0,
             max_dihedral_range_deg: 10.0,
             whole_model_time_budget_ms: 10000.0,
+            sweep_volume: false,
             clear_winner_ratio: 0.8,
             accept_explained_fraction: 0.4,
             accept_support_fraction: 0.15,

@@ -104,6 +104,7 @@ impl<'m> SearchJob<'m> {
         self.init.set_breadth(breadth.0, breadth.1, breadth.2);
         self.init.set_yaw_twins(yaw_twins);
         self.init.set_rotation_prior(rotation_prior);
+        self.init.set_sweep_from(0.0);
         self.rng = Some(rng);
         self.found.clear();
         self.report = InitReport::default();
@@ -114,6 +115,13 @@ impl<'m> SearchJob<'m> {
     /// A flag that stops the job's search too ([`Initialiser::add_cancel`]).
     pub(crate) fn add_cancel(&mut self, flag: &std::sync::Arc<std::sync::atomic::AtomicBool>) {
         self.init.add_cancel(flag);
+    }
+
+    /// The search continues a sweep of its volume: the cells nearer its centre than `m` (in
+    /// plan) were looked at by earlier searches and are left ([`Initialiser::set_sweep_from`]).
+    /// Call after [`Self::prepare`], which starts every search at the centre.
+    pub(crate) fn set_sweep_from(&mut self, m: f64) {
+        self.init.set_sweep_from(m);
     }
 
     /// Poses to polish on the job's edges once the search is done.

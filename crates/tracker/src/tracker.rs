@@ -150,6 +150,14 @@ pub struct Tracker<'m> {
     probation: Probation,
     /// Post-loss searches double their volume after each widened attempt fails.
     volume_level: u32,
+    /// A sweep under way (module `search`): the searches so far looked at the volume's cells
+    /// nearer its centre than this (m, in plan) and found nothing to commit; the next one goes
+    /// on from here. 0: the next search starts at the centre.
+    sweep_from_m: f64,
+    /// The best candidates of the sweep's earlier searches: polished again on each later
+    /// search's frame, they stay its rivals (a part of a volume must not commit what the rest
+    /// of it would have refused) and may win there.
+    carried: [Option<Pose>; crate::background::STARTS],
     confirming: [Confirming; 4],
     confirm_count: usize,
     search_attempts: u32,
@@ -259,6 +267,8 @@ impl<'m> Tracker<'m> {
             last_good_time: 0,
             probation: Probation::default(),
             volume_level: 0,
+            sweep_from_m: 0.0,
+            carried: [None; crate::background::STARTS],
             confirming: [Confirming {
                 pose: Pose::identity(),
                 merit_sum: 0.0,
@@ -428,6 +438,8 @@ impl<'m> Tracker<'m> {
         self.last_good = Some(*pose);
         self.last_good_time = timestamp_ns;
         self.volume_level = 0;
+        self.sweep_from_m = 0.0;
+        self.carried = [None; crate::background::STARTS];
         let gate = Gate::geometric(self.cfg.maintenance.inlier_angle_deg.to_radians());
         let min_len = self.cfg.edges.min_edge_length_deg.to_radians();
         self.tracks.clear();

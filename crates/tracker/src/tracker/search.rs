@@ -9,7 +9,7 @@
 //! ([`Tracker::stop_searches_on`]).
 
 use super::{Confirming, PendingSearch, Tracker};
-use crate::background::SearchJob;
+use crate::background::{SearchJob, STARTS};
 use crate::init::{self, Candidate, SearchVolume};
 use crate::report::{FrameResult, SearchKind, TrackerEvent, TrackerState, Weighed};
 use nalgebra::Point3;
@@ -35,6 +35,9 @@ fn acceptable(cfg: &TrackerConfig, c: &Candidate) -> bool {
 const BASIN_M: f64 = 0.6;
 const BASIN_RAD: f64 = 0.175;
 
+/// A search's own candidates and the sweep's carried ones, judged together.
+const POOL: usize = init::MAX_CANDIDATES + STARTS;
+
 /// A committed pose may lie this far outside the search volume (m): the truth at the volume's
 /// edge polishes a few centimetres either way.
 const VOLUME_SLACK_M: f64 = 0.1;
@@ -44,6 +47,36 @@ fn within(volume: &SearchVolume, pose: &Pose) -> bool {
     volume
         .diameter_m
         .is_none_or(|d| (pose.translation.vector - volume.centre.coords).norm() <= 0.5 * d + VOLUME_SLACK_M)
+}
+
+/// Keeps the sweep's best distinct candidates so far (by merit, the carried ones as
+/// polished on this frame among them) to be polished again on the next search's frame.
+fn carry<'c>(carried: &mut [Option<Pose>; STARTS], candidates: impl Iterator<Item = &'c Candidate>) {
+    let mut best: [Option<Candidate>; STARTS] = [None; STARTS];
+    for c in candidates {
+        if best
+            .iter()
+            .flatten()
+            .any(|b| init::same_pose(&b.pose, &c.pose, BASIN_M, BASIN_RAD))
+        {
+            continue;
+        }
+        // Into the list, best merit first, the worst falling off its end.
+        let mut item = Some(*c);
+        for slot in best.iter_mut() {
+            match (slot.as_ref(), item.as_ref()) {
+                (None, _) => {
+                    *slot = item.take();
+                    break;
+                }
+                (Some(b), Some(i)) if i.merit() > b.merit() => std::mem::swap(slot, &mut item),
+                _ => {}
+            }
+        }
+    }
+    for (slot, c) in carried.iter_mut().zip(best) {
+        *slot = c.map(|c| c.pose);
+    }
 }
 
 impl<'m> Tracker<'m> {
@@ -103,6 +136,10 @@ impl<'m> Tracker<'m> {
         let yaw_twins = turn_limit.is_none_or(|(_, limit)| limit >= std::f64::consts::PI);
         let rng = SmallRng::seed_from_u64(self.rng.random());
         job.prepare(edges, volume, budget, breadth, yaw_twins, turn_limit, rng);
+        if self.cfg.initialisation.sweep_volume {
+            job.set_sweep_from(self.sweep_from_m);
+            job.set_starts(self.carried);
+        }
         let pending = PendingSearch {
             started_ns: timestamp_ns,
             due_ns: timestamp_ns.saturating_add(u64::try_from(budget.as_nanos()).unwrap_or(u64::MAX)),
@@ -259,8 +296,16 @@ impl<'m> Tracker<'m> {
             started_ns,
             ..
         } = pending;
-        let (candidates, report) = job.result();
+        let (found, report) = job.result();
         let report = *report;
+        // A sweep's later search judges its own candidates together with the earlier
+        // searches' best, polished again on this frame (`carried`).
+        let mut pool = [None; POOL];
+        for (slot, c) in pool.iter_mut().zip(found.iter().chain(job.polished().iter().flatten())) {
+            *slot = Some(*c);
+        }
+        let candidates = &pool[..];
+        let candidates = || candidates.iter().flatten();
         if report.cancelled {
             // Cut short by a stop: nothing of it is judged, and the search state stays as it
             // was (the tracker is going away).
@@ -282,8 +327,7 @@ impl<'m> Tracker<'m> {
         // is better than a wrong one.
         let ratio = self.cfg.initialisation.clear_winner_ratio;
         let clear = |c: &Candidate| {
-            candidates
-                .iter()
+            candidates()
                 .filter(|o| !init::same_pose(&o.pose, &c.pose, BASIN_M, BASIN_RAD))
                 .all(|o| o.merit() <= ratio * c.merit())
         };
@@ -292,16 +336,37 @@ impl<'m> Tracker<'m> {
         let inside = |c: &Candidate| within(&volume, &c.pose);
         let accepted =
             |c: &&Candidate| acceptable(&self.cfg, c) && plausible(c) && c.explained >= floor && inside(c) && clear(c);
-        // A failed search is repeated once more broadly on the same volume; if that fails
+        // With `sweep_volume`, a search that ran out of budget before it looked at every cell
+        // of its volume decides nothing: the next one goes on from the nearest cell it left (a sweep), its
+        // best candidates carried along, at the same breadth and volume; only the search that
+        // ends the sweep judges, with every part's best as rivals. (Judged part by part, a
+        // sweep of the lab committed a pose 1.6 m off, the next doorway along, before it had
+        // reached the truth: a part of a volume does not hold the rivals that refuse it.)
+        //
+        // A failed search over the whole volume is repeated once more broadly; if that fails
         // too, the volume doubles and the breadth is normal again (widening a large volume
         // only lets the time budget cover fewer cells).
-        let failed = !candidates.iter().any(|c| accepted(&c));
-        if failed && self.widen {
-            self.volume_level += 1;
+        let sweep = self.cfg.initialisation.sweep_volume;
+        let sweeping = sweep && report.swept_to_m.is_some_and(|m| m > self.sweep_from_m);
+        let failed = sweeping || !candidates().any(|c| accepted(&c));
+        if failed && sweep {
+            carry(&mut self.carried, candidates());
         }
-        self.widen = failed && !self.widen;
+        if sweeping {
+            self.sweep_from_m = report.swept_to_m.unwrap_or(0.0);
+        } else {
+            self.sweep_from_m = 0.0;
+            if failed && self.widen {
+                self.volume_level += 1;
+            }
+            self.widen = failed && !self.widen;
+        }
         let mut n = 0;
-        for c in candidates.iter().filter(accepted).take(self.confirming.len()) {
+        for c in candidates()
+            .filter(accepted)
+            .filter(|_| !sweeping)
+            .take(self.confirming.len())
+        {
             self.confirming[n] = Confirming {
                 pose: c.pose,
                 merit_sum: c.merit(),
