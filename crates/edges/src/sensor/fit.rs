@@ -236,7 +236,10 @@ impl Workspace {
                     // +1 keeps the value positive, so truncation rounds. The pixel is on the
                     // image when the truncated value is in 1..=w (1..=h): when the value is in
                     // [1, w + 1), which the float compares decide without the saturating cast's
-                    // extra work (NaN fails them too), and which makes the cast exact.
+                    // extra work (NaN fails them too), and which makes the cast exact. (w + 1
+                    // and h + 1 are exact in f32 below 2²⁴ px; a wider image, which f32
+                    // positions cannot address pixel by pixel anyway, could differ at its far
+                    // border.)
                     let (x, y) = (x + 1.5, y + 1.5);
                     let i = if x >= 1.0 && y >= 1.0 && x < wf && y < hf {
                         // SAFETY: x and y are finite, in [1, 2²⁶ + 1): i32 holds their
