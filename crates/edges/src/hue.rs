@@ -99,9 +99,10 @@ pub(crate) struct HueStats {
 /// Converts RGB to a hue index in [0, HUE_STEPS) when the pixel is bright and saturated enough.
 #[derive(Debug, Clone)]
 pub(crate) struct HueTable {
-    cos: Box<[f32]>,
-    sin: Box<[f32]>,
-    /// Minimum max(r, g, b) in grey levels.
+    /// (cos, sin) of every step: one load a pixel, and a fixed size, so that an index below
+    /// `HUE_STEPS` needs no bounds check.
+    unit: Box<[[f32; 2]; HUE_STEPS]>,
+    /// Minimum max(r, g, b) in grey levels, at least 1.
     min_value: u16,
     /// Minimum saturation (max − min) / max, × 1024.
     min_sat_1024: u32,
@@ -112,9 +113,8 @@ impl HueTable {
         let tau = std::f64::consts::TAU;
         let angle = |k: usize| tau * k as f64 / HUE_STEPS as f64;
         HueTable {
-            cos: (0..HUE_STEPS).map(|k| angle(k).cos() as f32).collect(),
-            sin: (0..HUE_STEPS).map(|k| angle(k).sin() as f32).collect(),
-            min_value: (min_value.clamp(0.0, 1.0) * 255.0).ceil() as u16,
+            unit: Box::new(std::array::from_fn(|k| [angle(k).cos() as f32, angle(k).sin() as f32])),
+            min_value: ((min_value.clamp(0.0, 1.0) * 255.0).ceil() as u16).max(1),
             min_sat_1024: (min_saturation.clamp(0.0, 1.0) * 1024.0).ceil() as u32,
         }
     }
@@ -126,8 +126,7 @@ impl HueTable {
         let max = r.max(g).max(b);
         let min = r.min(g).min(b);
         let delta = max - min;
-        if (max as u16) < self.min_value.max(1) || delta == 0 || (delta as u32) * 1024 < self.min_sat_1024 * max as u32
-        {
+        if (max as u16) < self.min_value || delta == 0 || (delta as u32) * 1024 < self.min_sat_1024 * max as u32 {
             return None;
         }
         // Sector formula of HSV; h6 in [-1, 5).
@@ -148,8 +147,9 @@ impl HueTable {
         acc.total += 1;
         if let Some(k) = self.index(rgb) {
             acc.kept += 1;
-            acc.cos += self.cos[k];
-            acc.sin += self.sin[k];
+            let [c, s] = self.unit[k];
+            acc.cos += c;
+            acc.sin += s;
         }
     }
 }

@@ -160,19 +160,24 @@ impl Workspace {
         for k in 0..self.pos.len() {
             let [x, y] = self.pos[k];
             let Some(r) = self.ray_at(x, y) else { continue };
-            let m0 = self.emag[k];
             self.pos[kept] = self.pos[k];
             self.grad[kept] = self.grad[k];
-            self.emag[kept] = m0;
+            self.emag[kept] = self.emag[k];
             kept += 1;
             self.ray.push(r);
-            let p = *self.prefix.last().unwrap_or(&[0.0; 7]);
-            let o = weighted_outer(&r, edgel_weight(m0));
-            self.prefix.push(std::array::from_fn(|k| p[k] + o[k]));
         }
         self.pos.truncate(kept);
         self.grad.truncate(kept);
         self.emag.truncate(kept);
+        // The running sums apart from the rays: each ray (a square root and divisions) is then
+        // independent of the one before, and the processor overlaps them, where one loop made
+        // every ray wait behind the previous edgel's sums.
+        let mut p = [0.0; 7];
+        for (r, &m0) in self.ray.iter().zip(&self.emag) {
+            let o = weighted_outer(r, edgel_weight(m0));
+            p = std::array::from_fn(|k| p[k] + o[k]);
+            self.prefix.push(p);
+        }
     }
 
     /// Bilinear interpolation of the ray table, normalised.

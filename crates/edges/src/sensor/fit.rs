@@ -224,22 +224,34 @@ impl Workspace {
             let s = if side >= 0.0 { 1.0 } else { -1.0 } / gn;
             let (dx, dy) = (g[0] * s, g[1] * s); // unit, pointing to the left side
             let p = self.pos[k];
+            // A rig's image has at most `MAX_SENSOR_PIXELS` (2²⁶) pixels, so a strip pixel's
+            // byte offset fits i32.
+            let w = self.w as i32;
+            let (wf, hf) = ((self.w + 1) as f32, (self.h + 1) as f32);
             for t in 0..self.strip_px {
                 let d = self.params.hue_strip_offset_px + t as f32;
-                for sign in [1.0f32, -1.0] {
-                    // +1 keeps the value positive, so truncation rounds. To i32, which is
-                    // cheaper than to usize and decides the same: whatever either cast makes of
-                    // a value below 1, above i32's range or NaN is off the image.
-                    let x = (p[0] + sign * d * dx + 1.5) as i32;
-                    let y = (p[1] + sign * d * dy + 1.5) as i32;
-                    if x < 1 || y < 1 || x as usize > self.w || y as usize > self.h {
-                        strip.push(OUTSIDE);
-                        continue;
-                    }
-                    let (x, y) = (x as usize, y as usize);
-                    let i = ((y - 1) * self.w + x - 1) * 3;
-                    prefetch(rgb, i);
-                    strip.push(i as u32);
+                // The right side's p − d·(dx, dy) is p + (−d)·(dx, dy) to the bit.
+                let (ox, oy) = (d * dx, d * dy);
+                for (x, y) in [(p[0] + ox, p[1] + oy), (p[0] - ox, p[1] - oy)] {
+                    // +1 keeps the value positive, so truncation rounds. The pixel is on the
+                    // image when the truncated value is in 1..=w (1..=h): when the value is in
+                    // [1, w + 1), which the float compares decide without the saturating cast's
+                    // extra work (NaN fails them too), and which makes the cast exact. (w + 1
+                    // and h + 1 are exact in f32 below 2²⁴ px; a wider image, which f32
+                    // positions cannot address pixel by pixel anyway, could differ at its far
+                    // border.)
+                    let (x, y) = (x + 1.5, y + 1.5);
+                    let i = if x >= 1.0 && y >= 1.0 && x < wf && y < hf {
+                        // SAFETY: x and y are finite, in [1, 2²⁶ + 1): i32 holds their
+                        // truncations.
+                        let (x, y): (i32, i32) = unsafe { (x.to_int_unchecked(), y.to_int_unchecked()) };
+                        let i = ((y - 1) * w + x - 1) * 3;
+                        prefetch(rgb, i as usize);
+                        i as u32
+                    } else {
+                        OUTSIDE
+                    };
+                    strip.push(i);
                 }
             }
         }
@@ -247,7 +259,9 @@ impl Workspace {
             for (&i, acc) in pair.iter().zip([&mut lacc, &mut racc]) {
                 if i != OUTSIDE {
                     let i = i as usize;
-                    self.hue.accumulate(acc, [rgb[i], rgb[i + 1], rgb[i + 2]]);
+                    if let Some(&[r, g, b]) = rgb.get(i..i + 3) {
+                        self.hue.accumulate(acc, [r, g, b]);
+                    }
                 }
             }
         }
@@ -296,12 +310,18 @@ const OUTSIDE: u32 = u32::MAX;
 #[inline(always)]
 fn prefetch(bytes: &[u8], i: usize) {
     #[cfg(target_arch = "x86_64")]
-    if i + 2 < bytes.len() {
-        // SAFETY: the addresses are inside `bytes`; a prefetch only hints the cache.
-        unsafe {
-            use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
-            _mm_prefetch::<_MM_HINT_T0>(bytes.as_ptr().add(i).cast::<i8>());
-            _mm_prefetch::<_MM_HINT_T0>(bytes.as_ptr().add(i + 2).cast::<i8>());
+    {
+        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+        // A prefetch of any address is a hint that cannot fault, so the address is not
+        // checked against the slice (wrapping arithmetic: no out-of-bounds pointer is made).
+        let at = bytes.as_ptr().wrapping_add(i);
+        // SAFETY: see above.
+        unsafe { _mm_prefetch::<_MM_HINT_T0>(at.cast::<i8>()) };
+        // The second line only where the pixel straddles two (2 pixels in 64): a prefetch is
+        // an instruction of its own, and there are some 35,000 strip pixels a `lab` image.
+        if (at as usize & 63) >= 62 {
+            // SAFETY: see above.
+            unsafe { _mm_prefetch::<_MM_HINT_T0>(at.wrapping_add(2).cast::<i8>()) };
         }
     }
     #[cfg(not(target_arch = "x86_64"))]
