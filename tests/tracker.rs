@@ -494,9 +494,10 @@ fn a_search_commits_no_pose_outside_the_volume_it_searched() {
 }
 
 /// Issue 47, item 1 (`sweep_volume`, off by default): a volume one search's budget does not
-/// cover is swept by the searches that follow, each going on from the cells the earlier ones looked at (their best candidates
-/// carried along as rivals), until every cell of it has been looked at; only then does the
-/// tracker search it again more broadly. Nothing wrong is committed on the way.
+/// cover is swept by the searches that follow, each going on from the cells the earlier ones
+/// looked at (their best candidates carried along as rivals), and nothing is committed before
+/// every cell has been looked at. Judged part by part, this sweep committed a pose 1.65 m off
+/// on its third search.
 #[test]
 fn a_volume_too_large_for_one_search_is_swept_by_the_next_searches() {
     let f = fixture();

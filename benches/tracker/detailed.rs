@@ -26,7 +26,7 @@ use omnitrack::edges::EdgeDetector;
 use omnitrack::frame::FrameSet;
 use omnitrack::geometry::Pose;
 use omnitrack::runtime::load_or_build_table;
-use omnitrack::tracker::{SearchVolume, Tracker, TrackerEvent};
+use omnitrack::tracker::{SearchVolume, Tracker};
 use omnitrack::trajectory::Stamped;
 use omnitrack::{Model, Rig};
 use std::path::Path;
@@ -67,8 +67,6 @@ struct Row {
     none: usize,
     first_pose_ms: Vec<f64>,
     cells: Vec<(usize, usize)>,
-    /// Starts whose search volume was looked at in full (a sweep ended) within the window.
-    covered: usize,
 }
 
 /// The `--model` mode (module doc).
@@ -202,7 +200,6 @@ pub(crate) fn detailed(a: &Args, rig: &Rig, label: &str, options: &RecordingOpti
             row.counted += 1;
             let started = Instant::now();
             let (mut first, mut committed_at, mut last, mut wrong) = (None, None, None, false);
-            let mut covered = false;
             let off = |p: &Pose| {
                 (
                     (p.translation.vector - truth_pose.translation.vector).norm(),
@@ -215,14 +212,6 @@ pub(crate) fn detailed(a: &Args, rig: &Rig, label: &str, options: &RecordingOpti
                 }
                 let ts = t.timestamp_ns + f as u64 * interval_ns;
                 let r = tracker.process(&edges, ts);
-                // A search (alone or ending a sweep) that left no cell of its volume unlooked
-                // at. A search whose event is a commit is not seen here.
-                covered |= tracker
-                    .late()
-                    .iter()
-                    .map(|(_, l)| l)
-                    .chain([&r])
-                    .any(|l| matches!(&l.event, Some(TrackerEvent::Searched(s)) if s.swept_to_m.is_none()));
                 let mut poses: Vec<Pose> = tracker.late().iter().filter_map(|(_, l)| l.pose).collect();
                 poses.extend(r.pose);
                 for p in poses {
@@ -248,7 +237,6 @@ pub(crate) fn detailed(a: &Args, rig: &Rig, label: &str, options: &RecordingOpti
             let stats = tracker.stats();
             let cells = (stats.plan_cells_scanned as usize, stats.plan_cells_in_volume as usize);
             row.cells.push(cells);
-            row.covered += usize::from(covered);
             let verdict = match last {
                 None => {
                     row.none += 1;
@@ -289,7 +277,7 @@ pub(crate) fn detailed(a: &Args, rig: &Rig, label: &str, options: &RecordingOpti
         rows.iter().map(|r| r.counted).max().unwrap_or(0),
     );
     let mut table = String::from(
-        "| search | within 10 cm / 2° | within 30 cm / 5° | wrong commits | no pose | volume looked at in full | cells looked at (all searches) | first pose p50 / max (ms) |\n| --- | --- | --- | --- | --- | --- | --- | --- |",
+        "| search | within 10 cm / 2° | within 30 cm / 5° | wrong commits | no pose | cells looked at (all searches) | first pose p50 / max (ms) |\n| --- | --- | --- | --- | --- | --- | --- |",
     );
     for (row, (row_name, radius)) in rows.iter_mut().zip(volumes) {
         if !wanted(radius) {
@@ -298,12 +286,11 @@ pub(crate) fn detailed(a: &Args, rig: &Rig, label: &str, options: &RecordingOpti
         row.first_pose_ms.sort_by(f64::total_cmp);
         let (looked, of) = row.cells.iter().fold((0, 0), |s, c| (s.0 + c.0, s.1 + c.1));
         table.push_str(&format!(
-            "\n| {row_name} | {} of {n} | {} | {} | {} | {} of {n} | {looked} of {of} | {:.0} / {:.0} |",
+            "\n| {row_name} | {} of {n} | {} | {} | {} | {looked} of {of} | {:.0} / {:.0} |",
             row.within_10,
             row.within_30,
             row.wrong,
             row.none,
-            row.covered,
             percentile(&row.first_pose_ms, 0.5),
             row.first_pose_ms.last().copied().unwrap_or(f64::NAN),
             n = row.counted,

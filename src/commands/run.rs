@@ -137,7 +137,10 @@ pub fn run(a: Args) -> CommandResult {
     let source = open_pipeline_source(&a.source, rig.as_ref(), &options)?;
     let (table, origin) = load_or_build_table(&a.model, &model, a.visibility.as_deref(), &cfg)?;
     eprintln!("omnitrack: {origin}");
-    let mut sink = RunSink::new(a.trajectory.as_deref().map(TumSink::create).transpose()?);
+    let mut sink = RunSink::new(
+        a.trajectory.as_deref().map(TumSink::create).transpose()?,
+        cfg.initialisation.sweep_volume,
+    );
     let publish = (!a.no_publish).then_some(());
     let opts = PipelineOptions {
         run: RunOptions {
@@ -241,12 +244,16 @@ pub struct RunSink {
     searches: u64,
     empty: u64,
     widened: u64,
+    /// `initialisation.sweep_volume`: a search that left cells is followed by one that goes
+    /// on with them.
+    sweeps: bool,
 }
 
 impl RunSink {
-    fn new(tum: Option<omnitrack::runtime::pipeline::TumSink>) -> RunSink {
+    fn new(tum: Option<omnitrack::runtime::pipeline::TumSink>, sweeps: bool) -> RunSink {
         RunSink {
             tum,
+            sweeps,
             on_time: 0,
             late: 0,
             first_frame_ns: None,
@@ -276,9 +283,10 @@ impl RunSink {
                     None => "the whole model".to_string(),
                 };
                 // A sweep's later searches leave the cells the earlier ones looked at: the count
-                // is of the whole sweep so far, and a sweep that goes on says so.
+                // is of the whole sweep so far, and a sweep that goes on says so (without
+                // `sweep_volume` nothing is skipped and the next search starts afresh).
                 let looked_at = (rep.plan_cells_skipped + rep.plan_cells_scanned).min(rep.plan_cells_in_volume);
-                let goes_on = if rep.swept_to_m.is_some() {
+                let goes_on = if self.sweeps && rep.swept_to_m.is_some() {
                     ", the next search goes on with the rest"
                 } else {
                     ""

@@ -35,9 +35,6 @@ fn acceptable(cfg: &TrackerConfig, c: &Candidate) -> bool {
 const BASIN_M: f64 = 0.6;
 const BASIN_RAD: f64 = 0.175;
 
-/// A search's own candidates and the sweep's carried ones, judged together.
-const POOL: usize = init::MAX_CANDIDATES + STARTS;
-
 /// A committed pose may lie this far outside the search volume (m): the truth at the volume's
 /// edge polishes a few centimetres either way.
 const VOLUME_SLACK_M: f64 = 0.1;
@@ -299,13 +296,9 @@ impl<'m> Tracker<'m> {
         let (found, report) = job.result();
         let report = *report;
         // A sweep's later search judges its own candidates together with the earlier
-        // searches' best, polished again on this frame (`carried`).
-        let mut pool = [None; POOL];
-        for (slot, c) in pool.iter_mut().zip(found.iter().chain(job.polished().iter().flatten())) {
-            *slot = Some(*c);
-        }
-        let candidates = &pool[..];
-        let candidates = || candidates.iter().flatten();
+        // searches' best, polished again on this frame (`carried`; none without a sweep).
+        let polished = job.polished();
+        let candidates = || found.iter().chain(polished.iter().flatten());
         if report.cancelled {
             // Cut short by a stop: nothing of it is judged, and the search state stays as it
             // was (the tracker is going away).
