@@ -558,6 +558,45 @@ fn a_volume_too_large_for_one_search_is_swept_by_the_next_searches() {
     );
 }
 
+/// With `grid_blank` the grid's coarse merit also loses the share of predicted points with no
+/// edge near (module `near_edges`): it never gains; at the truth of a rendered frame, where
+/// the lines in view are edges, it keeps most of its merit; the truth turned a quarter round
+/// in place draws lines across plain surfaces and loses more; and the search still finds the
+/// truth.
+#[test]
+fn the_grid_ranked_with_the_blank_share_keeps_the_truth_and_marks_its_twin_down() {
+    use nalgebra::UnitQuaternion;
+    use rand::SeedableRng;
+    let f = fixture();
+    let (rig, mut cfg, edges, truth) = first_frame(f);
+    let turn = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), std::f64::consts::FRAC_PI_2);
+    let twin = omnitrack::Pose::from_parts(truth.translation, turn * truth.rotation);
+    let merits = |cfg: &TrackerConfig| {
+        let mut init = lab_initialiser(f, &rig, cfg);
+        let mut rng = rand::rngs::SmallRng::seed_from_u64(5);
+        let found = finds_truth(init.run(&edges, &hint(f), &mut rng).0, &truth);
+        (
+            init.grid_merit(&truth).expect("segments in sight of the truth"),
+            init.grid_merit(&twin).expect("segments in sight of the twin"),
+            found,
+        )
+    };
+    let (plain_truth, plain_twin, _) = merits(&cfg);
+    cfg.initialisation.grid_blank = true;
+    let (truth_m, twin_m, found) = merits(&cfg);
+    let (kept_truth, kept_twin) = (truth_m / plain_truth, twin_m / plain_twin);
+    assert!(
+        kept_truth <= 1.0 + 1e-12 && kept_twin <= 1.0 + 1e-12,
+        "{kept_truth} {kept_twin}"
+    );
+    assert!(kept_truth >= 0.8, "the truth kept {kept_truth:.3} of its merit");
+    assert!(
+        kept_twin < kept_truth - 0.1,
+        "the twin kept {kept_twin:.3} of its merit, the truth {kept_truth:.3}"
+    );
+    assert!(found, "the search with the blank share lost the truth");
+}
+
 /// Whether a search's candidates hold the truth (within 10 cm and 1°).
 fn finds_truth(found: &[omnitrack::tracker::Candidate], truth: &omnitrack::Pose) -> bool {
     found.iter().any(|c| {

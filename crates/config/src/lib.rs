@@ -65,6 +65,12 @@ pub struct InitialisationConfig {
     /// Off by default: measured, it refuses wrong commits on FZK-Haus but adds one on ZInD and
     /// delays the first pose (docs/decisions.md, 2026-11-30).
     pub sweep_volume: bool,
+    /// The grid's coarse merit also loses the share of blank points (`blank_radius_deg`), as
+    /// the final merit does, by a per-frame map of the directions near an edge (issue 47,
+    /// item 1: recall). Off by default: measured, it turns wrong commits on FZK-Haus and the
+    /// ZInD 3 m row into right poses or none, but finds a twin that outscores the truth in
+    /// ZInD's pantry without a hint (docs/decisions.md, 2026-11-30).
+    pub grid_blank: bool,
     pub clear_winner_ratio: f64,
     pub accept_explained_fraction: f64,
     /// A candidate must also explain this share of the frame's edges (by angle).
@@ -241,6 +247,7 @@ impl Default for InitialisationConfig {
             max_dihedral_range_deg: 10.0,
             whole_model_time_budget_ms: 10000.0,
             sweep_volume: false,
+            grid_blank: false,
             clear_winner_ratio: 0.8,
             accept_explained_fraction: 0.4,
             accept_support_fraction: 0.15,

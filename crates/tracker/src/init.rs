@@ -58,8 +58,9 @@
 //! building: four, a quarter turn apart), within a degree of the truth on all 32. Under each,
 //! the translation is three numbers: positions on a grid over the volume (plan and height steps
 //! of 0.25 m, heights in the band above the floor beneath) are scored by *coverage*, the share
-//! of the long segments in sight from them along which the frame's longest edges run, climbed in
-//! finer steps and polished. The grid covers every cell of the visibility table's grid that
+//! of the long segments in sight from them along which the frame's longest edges run (with
+//! `grid_blank`, times the share of their points not blank, as in the final merit: module
+//! `near_edges`), climbed in finer steps and polished. The grid covers every cell of the visibility table's grid that
 //! meets the volume, whether or not its node is valid: a closet or a hallway narrower than the
 //! node spacing often has its node inside a wall. This runs first; the triplets get what is
 //! left of the time budget.
@@ -148,10 +149,11 @@ use super::floor::Floors;
 use super::matching::Predicted;
 use super::vanishing::{VanishingDirections, MAX_ROTATIONS};
 use super::vote::{TranslationVote, PEAKS};
-use crate::visibility::at_pose::PoseVisibility;
+use crate::visibility::at_pose::{PoseVisibility, SeenSegment};
 use crate::visibility::VisibilityTable;
 use grid_scan::{GridLane, MeritScratch};
 use nalgebra::{Point3, UnitQuaternion, Vector3};
+use near_edges::NearEdges;
 use omnitrack_core::geometry::{Correspondence, Pose};
 use omnitrack_core::memory::resident;
 use omnitrack_core::model::Model;
@@ -165,6 +167,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 mod grid_scan;
+mod near_edges;
 mod progress;
 mod run;
 mod scoring;
@@ -353,8 +356,10 @@ pub struct Initialiser<'m> {
     cancel: Vec<Arc<AtomicBool>>,
     /// The segments in sight from a grid position: (angle they span in sight, index), and the
     /// longest kept.
-    grid_order: Vec<(f64, u32)>,
-    grid_segs: Vec<u32>,
+    grid_order: Vec<(f64, SeenSegment)>,
+    grid_segs: Vec<SeenSegment>,
+    /// The directions near this frame's edges, per sensor: the coarse merit's blank test.
+    near: NearEdges,
     /// This frame's rotations from vanishing directions.
     vanishing_rot: [UnitQuaternion<f64>; MAX_ROTATIONS],
     vanishing_count: usize,
@@ -436,6 +441,7 @@ impl<'m> Initialiser<'m> {
             cancel: Vec::new(),
             grid_order: resident(Vec::with_capacity(max_set)),
             grid_segs: resident(Vec::with_capacity(max_set)),
+            near: NearEdges::new(rig.sensors.len()),
             vanishing_rot: [UnitQuaternion::identity(); MAX_ROTATIONS],
             vanishing_count: 0,
             climbed: 0,

@@ -74,6 +74,8 @@ pub mod init;
 pub mod matching;
 pub mod motion_filter;
 mod report;
+#[cfg(test)]
+mod test_edges;
 mod tracker;
 mod vanishing;
 pub mod visibility;

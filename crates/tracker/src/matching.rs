@@ -420,19 +420,9 @@ mod tests {
         let mid = |t: f64| a * (1.0 - t) + b * t;
         let plane = EdgePlane::from_rays(c, &mid(0.25), &mid(0.75)).unwrap();
         let edge = Edge {
-            sensor: 1,
-            plane,
-            px: [Point2::origin(); 2],
             length_rad: 0.3,
-            strength: 1.0,
             hue: sig(0.1, 0.5),
-            edgels: 10,
-            polarity: 0,
-            rms_rad: 0.0,
-            gaps: Default::default(),
-            n_gaps: 0,
-            shown: Default::default(),
-            n_shown: 0,
+            ..crate::test_edges::edge_on(1, plane, 10)
         };
         let pred = Predicted::new(&seg, &pose, &centres);
         let gate = Gate {

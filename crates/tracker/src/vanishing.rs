@@ -366,10 +366,9 @@ fn find_peaks(hist: &[f64], out: &mut [usize]) -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use nalgebra::{Point2, Point3, Translation3, Unit};
+    use nalgebra::{Point3, Translation3, Unit};
     use omnitrack_core::geometry::{EdgePlane, Pose};
     use omnitrack_core::model::{ModelStats, Segment};
-    use omnitrack_edges::HueSignature;
 
     /// A box room 6 × 4 × 2.5 m turned by 20° about the vertical: its twelve edges.
     fn room() -> Model {
@@ -408,25 +407,12 @@ mod tests {
             .iter()
             .map(|s| {
                 let (a, b) = ((inv * s.a).coords.normalize(), (inv * s.b).coords.normalize());
-                Edge {
-                    sensor: 0,
-                    plane: EdgePlane {
-                        normal: Unit::new_normalize(a.cross(&b)),
-                        centre: Point3::origin(),
-                        ends: [Unit::new_normalize(a), Unit::new_normalize(b)],
-                    },
-                    px: [Point2::origin(); 2],
-                    length_rad: a.angle(&b),
-                    strength: 1.0,
-                    hue: HueSignature::NONE,
-                    edgels: 10,
-                    polarity: 0,
-                    rms_rad: 0.0,
-                    gaps: Default::default(),
-                    n_gaps: 0,
-                    shown: Default::default(),
-                    n_shown: 0,
-                }
+                let plane = EdgePlane {
+                    normal: Unit::new_normalize(a.cross(&b)),
+                    centre: Point3::origin(),
+                    ends: [Unit::new_normalize(a), Unit::new_normalize(b)],
+                };
+                crate::test_edges::edge_on(0, plane, 10)
             })
             .collect()
     }

@@ -250,10 +250,9 @@ impl TranslationVote {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use nalgebra::{Point2, Unit};
+    use nalgebra::Unit;
     use omnitrack_core::geometry::EdgePlane;
     use omnitrack_core::model::{ModelStats, Segment};
-    use omnitrack_edges::HueSignature;
 
     /// Upright posts (floor to 2.5 m) at irregular plan positions.
     fn posts() -> Model {
@@ -293,26 +292,12 @@ mod tests {
             .iter()
             .map(|s| {
                 let (a, b) = ((inv * s.a).coords.normalize(), (inv * s.b).coords.normalize());
-                let n = Unit::new_normalize(a.cross(&b));
-                Edge {
-                    sensor: 0,
-                    plane: EdgePlane {
-                        normal: n,
-                        centre: Point3::origin(),
-                        ends: [Unit::new_normalize(a), Unit::new_normalize(b)],
-                    },
-                    px: [Point2::origin(); 2],
-                    length_rad: a.angle(&b),
-                    strength: 1.0,
-                    hue: HueSignature::NONE,
-                    edgels: 100,
-                    polarity: 0,
-                    rms_rad: 0.0,
-                    gaps: Default::default(),
-                    n_gaps: 0,
-                    shown: Default::default(),
-                    n_shown: 0,
-                }
+                let plane = EdgePlane {
+                    normal: Unit::new_normalize(a.cross(&b)),
+                    centre: Point3::origin(),
+                    ends: [Unit::new_normalize(a), Unit::new_normalize(b)],
+                };
+                crate::test_edges::edge_on(0, plane, 100)
             })
             .collect()
     }

@@ -67,30 +67,7 @@ impl ViewMap {
     /// Whether some sensor images the direction `d` (rig frame, any length but zero).
     #[inline]
     pub fn sees(&self, d: &Vector3<f64>) -> bool {
-        let (ax, ay, az) = (d.x.abs(), d.y.abs(), d.z.abs());
-        // The face of the largest component, and the other two divided by it.
-        let (face, u, v) = if ax >= ay && ax >= az {
-            if d.x > 0.0 {
-                (0, -d.y / ax, -d.z / ax)
-            } else {
-                (1, d.y / ax, -d.z / ax)
-            }
-        } else if ay >= az {
-            if d.y > 0.0 {
-                (2, d.x / ay, -d.z / ay)
-            } else {
-                (3, -d.x / ay, -d.z / ay)
-            }
-        } else if d.z > 0.0 {
-            (4, d.y / az, d.x / az)
-        } else if d.z < 0.0 {
-            (5, d.y / az, -d.x / az)
-        } else {
-            return false;
-        };
-        let n = FACE_CELLS;
-        let cell = |t: f64| (((t + 1.0) * 0.5 * n as f64) as usize).min(n - 1);
-        self.seen[(face * n + cell(v)) * n + cell(u)]
+        cube_cell(d, FACE_CELLS).is_some_and(|c| self.seen[c])
     }
 
     /// Share of the sphere of directions that some sensor images, in [0, 1].
@@ -99,8 +76,39 @@ impl ViewMap {
     }
 }
 
+/// The cell of direction `d` (any length; `None` for zero) in a cube map of `n`² cells per face:
+/// faces +x, −x, +y, −y, +z, −z in that order, each row-major, so the index is below 6`n`².
+/// Shared by every cube map of directions (this one, the search's map of directions near an
+/// edge), so that they agree on which direction lands in which cell.
+#[inline]
+pub fn cube_cell(d: &Vector3<f64>, n: usize) -> Option<usize> {
+    let (ax, ay, az) = (d.x.abs(), d.y.abs(), d.z.abs());
+    // The face of the largest component, and the other two divided by it.
+    let (face, u, v) = if ax >= ay && ax >= az && ax > 0.0 {
+        if d.x > 0.0 {
+            (0, -d.y / ax, -d.z / ax)
+        } else {
+            (1, d.y / ax, -d.z / ax)
+        }
+    } else if ay >= az && ay > 0.0 {
+        if d.y > 0.0 {
+            (2, d.x / ay, -d.z / ay)
+        } else {
+            (3, -d.x / ay, -d.z / ay)
+        }
+    } else if d.z > 0.0 {
+        (4, d.y / az, d.x / az)
+    } else if d.z < 0.0 {
+        (5, d.y / az, -d.x / az)
+    } else {
+        return None;
+    };
+    let cell = |t: f64| (((t + 1.0) * 0.5 * n as f64) as usize).min(n - 1);
+    Some((face * n + cell(v)) * n + cell(u))
+}
+
 /// The direction through (u, v) ∈ [−1, 1]² of a cube face; the inverse of the face choice in
-/// [`ViewMap::sees`].
+/// [`cube_cell`].
 fn face_direction(face: usize, u: f64, v: f64) -> Vector3<f64> {
     match face {
         0 => Vector3::new(1.0, -u, -v),

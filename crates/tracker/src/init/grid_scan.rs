@@ -31,7 +31,7 @@ use crate::edge_index::EdgeIndex;
 use crate::matching::best_edge_and_cover;
 use crate::matching::{Gate, Predicted, SegmentArc};
 use crate::vanishing::MAX_ROTATIONS;
-use crate::visibility::at_pose::SightBuffers;
+use crate::visibility::at_pose::{sample_point, SeenSegment, SightBuffers, SAMPLES};
 use nalgebra::{Point3, Translation3};
 use omnitrack_core::geometry::Pose;
 use omnitrack_core::memory::resident;
@@ -45,6 +45,8 @@ pub(super) struct MeritScratch {
     explained: [bool; VOTE_EDGES],
     /// The predicted segments, kept in debug builds only for the check against all pairs.
     predicted: Vec<Predicted>,
+    /// Which of the segments scored were long enough to count (indices into them).
+    counted: Vec<u32>,
     /// Calls so far (debug builds check some against all pairs).
     calls: u64,
 }
@@ -55,6 +57,7 @@ impl MeritScratch {
         MeritScratch {
             explained: [false; VOTE_EDGES],
             predicted: Vec::with_capacity(if cfg!(debug_assertions) { segments } else { 0 }),
+            counted: resident(Vec::with_capacity(segments)),
             calls: 0,
         }
     }
@@ -69,8 +72,8 @@ impl Default for MeritScratch {
 /// One lane of the scan: its buffers, its best positions and its account.
 pub(super) struct GridLane {
     sight: SightBuffers,
-    order: Vec<(f64, u32)>,
-    segs: Vec<u32>,
+    order: Vec<(f64, SeenSegment)>,
+    segs: Vec<SeenSegment>,
     merit: MeritScratch,
     /// Per rotation, the lane's best positions (score, position).
     best: [GridBest; MAX_ROTATIONS],
@@ -311,7 +314,14 @@ impl Initialiser<'_> {
             }
             for ri in 0..self.vanishing_count {
                 let pose = Pose::from_parts(Translation3::from(p.coords), self.vanishing_rot[ri]);
-                let (merit, charge) = self.merit_with(&mut lane.merit, &pose, &lane.segs, &grid.gate, grid.min_len);
+                // Below the least of a full list, a position cannot enter it.
+                let best = &lane.best[ri];
+                let floor = match best.is_full() {
+                    true => best.iter().map(|b| b.0).fold(f64::INFINITY, f64::min),
+                    false => f64::NEG_INFINITY,
+                };
+                let (merit, charge) =
+                    self.merit_with(&mut lane.merit, &pose, &lane.segs, &grid.gate, grid.min_len, floor);
                 lane.spend(charge);
                 if let Some(score) = merit {
                     keep_best_apart(&mut lane.best[ri], (score, p));
@@ -336,8 +346,11 @@ impl Initialiser<'_> {
     /// `segments`, those at least `min_len` long at `pose`, the share the frame's longest edges
     /// cover within `gate` (each up to [`FULL_COVER`]), times the share (by angle) of those
     /// edges (the [`VOTE_EDGES`] longest) that one of them explains within `gate`. `None` if
-    /// fewer than six segments are that long. Only reads the initialiser (the lanes share it);
-    /// returns the work to charge.
+    /// fewer than six segments are that long. With `grid_blank`, times one minus the share of
+    /// their points in sight and in view that are blank, as in the final merit (module
+    /// `near_edges`); that factor can only lower the merit, so it is worked out only where the
+    /// merit without it beats `floor` (`None` otherwise). Only reads the initialiser (the
+    /// lanes share it); returns the work to charge.
     ///
     /// The support is over all the vote's edges rather than the few dozen longest, as the final
     /// [`Candidate::support`](super::Candidate::support) is over all edges: measured on the ZInD
@@ -347,20 +360,25 @@ impl Initialiser<'_> {
         &self,
         m: &mut MeritScratch,
         pose: &Pose,
-        segments: &[u32],
+        segments: &[SeenSegment],
         gate: &Gate,
         min_len: f64,
+        floor: f64,
     ) -> (Option<f64>, u64) {
         let (mut explained, mut counted) = (0.0, 0usize);
         m.explained[..self.vote_edges.len()].fill(false);
         m.predicted.clear();
-        for &s in segments {
-            let seg = &self.model.segments[s as usize];
+        m.counted.clear();
+        for (i, seen) in segments.iter().enumerate() {
+            let seg = &self.model.segments[seen.segment as usize];
             let pred = Predicted::new(&[seg.a, seg.b], pose, &self.centres);
             if pred.length_rad < min_len {
                 continue;
             }
             counted += 1;
+            if m.counted.len() < m.counted.capacity() {
+                m.counted.push(i as u32);
+            }
             let cover = cover_near(
                 &pred,
                 &self.centres,
@@ -385,8 +403,8 @@ impl Initialiser<'_> {
         #[cfg(debug_assertions)]
         if let Some(support) = support.filter(|_| m.calls % 16 == 1 && m.predicted.len() == counted) {
             let mut all = 0.0;
-            for &s in segments {
-                let seg = &self.model.segments[s as usize];
+            for seen in segments {
+                let seg = &self.model.segments[seen.segment as usize];
                 let pred = Predicted::new(&[seg.a, seg.b], pose, &self.centres);
                 if pred.length_rad >= min_len {
                     if let (Some(_), cover) = best_edge_and_cover(&pred, &self.centres, &self.vote_edges, gate) {
@@ -404,15 +422,59 @@ impl Initialiser<'_> {
                 "support {support} by the index, {plain} by all pairs"
             );
         }
-        let charge = segments.len() as u64 * self.vote_edges.len() as u64 / 100 * work::MERIT_PER_SEGMENT_100_EDGES;
-        (support.map(|support| explained / counted as f64 * support), charge)
+        let mut charge = segments.len() as u64 * self.vote_edges.len() as u64 / 100 * work::MERIT_PER_SEGMENT_100_EDGES;
+        // The blank share can only lower the merit, so it is looked at only where the merit
+        // without it would beat `floor`.
+        let Some(bound) = support.map(|support| explained / counted as f64 * support) else {
+            return (None, charge);
+        };
+        if bound <= floor {
+            return (None, charge);
+        }
+        if !self.opts.grid_blank || self.opts.blank_radius_rad <= 0.0 {
+            return (Some(bound), charge);
+        }
+        let (blank, points) = self.blank_points(pose, segments, &m.counted);
+        charge += points as u64 / work::BLANK_POINTS_PER_UNIT;
+        let open = if points == 0 {
+            1.0
+        } else {
+            1.0 - blank as f64 / points as f64
+        };
+        (Some(bound * open), charge)
+    }
+
+    /// [`Candidate::blank`](super::Candidate::blank)'s test on the points in sight (the masks
+    /// of `segments`) and in view of those of `segments` at `counted`, by the frame's map of
+    /// directions near an edge: (blank points, points).
+    fn blank_points(&self, pose: &Pose, segments: &[SeenSegment], counted: &[u32]) -> (usize, usize) {
+        let (mut blank, mut points) = (0, 0);
+        for &i in counted {
+            let seen = &segments[i as usize];
+            let seg = &self.model.segments[seen.segment as usize];
+            for k in (0..SAMPLES).filter(|k| seen.mask & (1 << k) != 0) {
+                let p = pose.inverse_transform_point(&sample_point(&seg.a, &seg.b, k)).coords;
+                if self.view.sees(&p) {
+                    points += 1;
+                    blank += usize::from(!self.near.near_point(&p, &self.centres));
+                }
+            }
+        }
+        (blank, points)
     }
 
     /// [`Self::merit_with`] in the initialiser's own scratch, charged: for the climbs and for
     /// diagnosis, on the calling thread.
-    pub(super) fn coarse_merit(&mut self, pose: &Pose, segments: &[u32], gate: &Gate, min_len: f64) -> Option<f64> {
+    pub(super) fn coarse_merit(
+        &mut self,
+        pose: &Pose,
+        segments: &[SeenSegment],
+        gate: &Gate,
+        min_len: f64,
+        floor: f64,
+    ) -> Option<f64> {
         let mut m = std::mem::take(&mut self.merit);
-        let (merit, charge) = self.merit_with(&mut m, pose, segments, gate, min_len);
+        let (merit, charge) = self.merit_with(&mut m, pose, segments, gate, min_len, floor);
         self.merit = m;
         self.spend(charge);
         merit

@@ -27,6 +27,13 @@ impl Initialiser<'_> {
         self.candidates.clear();
         self.pool.clear();
         self.prepare_edges(edges);
+        let near_radius = if self.opts.grid_blank {
+            self.opts.blank_radius_rad
+        } else {
+            0.0
+        };
+        self.near.build(edges, near_radius);
+        self.spend(self.near.marks() / work::NEAR_MARKS_PER_UNIT);
         self.select_cells(volume);
         // A volume that holds no valid node (a hint outside the building, in a wall, or in a
         // part of the model with no room to stand) is widened about its centre to the nearest

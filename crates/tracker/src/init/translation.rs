@@ -177,15 +177,18 @@ impl Initialiser<'_> {
         let segs = std::mem::take(&mut self.grid_segs);
         for (step, gate_rad) in CLIMB {
             let gate = Gate::geometric(gate_rad);
-            let score = |me: &mut Self, p: &Pose| me.coarse_merit(p, &segs, &gate, min_len).unwrap_or(0.0);
-            let mut best = score(self, &pose);
+            // A step is taken only to a better score: one that cannot beat `floor` is not
+            // worked out in full.
+            let score =
+                |me: &mut Self, p: &Pose, floor: f64| me.coarse_merit(p, &segs, &gate, min_len, floor).unwrap_or(0.0);
+            let mut best = score(self, &pose, f64::NEG_INFINITY);
             for _ in 0..4 {
                 let mut moved = false;
                 for axis in 0..3 {
                     for sign in [-1.0, 1.0] {
                         let mut p = pose;
                         p.translation.vector[axis] += sign * step;
-                        let s = score(self, &p);
+                        let s = score(self, &p, best);
                         if s > best {
                             (best, pose, moved) = (s, p, true);
                         }
@@ -218,7 +221,7 @@ impl Initialiser<'_> {
         let gate = Gate::geometric(GRID_GATE_RAD);
         self.longest_in_sight(&Point3::from(pose.translation.vector), GRID_SEGMENTS);
         let segs = std::mem::take(&mut self.grid_segs);
-        let merit = self.coarse_merit(pose, &segs, &gate, 3.0 * self.opts.min_length_rad);
+        let merit = self.coarse_merit(pose, &segs, &gate, 3.0 * self.opts.min_length_rad, f64::NEG_INFINITY);
         self.grid_segs = segs;
         merit
     }
@@ -232,7 +235,7 @@ impl Initialiser<'_> {
             let seen = self.at_pose.at(self.model, self.table, at);
             for s in seen {
                 if self.grid_segs.len() < self.grid_segs.capacity() {
-                    self.grid_segs.push(s.segment);
+                    self.grid_segs.push(*s);
                 }
             }
         } else {

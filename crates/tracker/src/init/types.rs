@@ -47,6 +47,8 @@ pub struct InitOptions {
     pub height_above_floor_m: [f64; 2],
     /// [`Candidate::blank`]'s radius (rad; 0 = off).
     pub blank_radius_rad: f64,
+    /// The grid's coarse merit loses the blank share too (`initialisation.grid_blank`).
+    pub grid_blank: bool,
 }
 
 impl InitOptions {
@@ -71,6 +73,7 @@ impl InitOptions {
             max_tilt_rad: cfg.motion.max_tilt_deg.to_radians(),
             height_above_floor_m: cfg.motion.height_above_floor_m,
             blank_radius_rad: i.blank_radius_deg.to_radians(),
+            grid_blank: i.grid_blank,
         }
     }
 }

@@ -12,6 +12,13 @@
 /// (charged 111). With the support scored in a second pass, `pano_29`'s search from 3 m
 /// took 1.34 s on the clock for its 0.95 s of work; in one pass, 0.71 s.
 pub const MERIT_PER_SEGMENT_100_EDGES: u64 = 1;
+/// The coarse merit's blank test (`grid_blank`): points looked up per work unit, each a
+/// transform, the view's cell and up to one cell per sensor in the map of directions near an
+/// edge (70–75 ns per point on ZInD `pano_13`, `pano_14`, `pano_29` from 3 m).
+pub const BLANK_POINTS_PER_UNIT: u64 = 14;
+/// That map (module `near_edges`): cells marked per work unit (6.6 ns per cell on the same
+/// panoramas; 590,000–820,000 cells, 4–5 ms, for 630–820 edges).
+pub const NEAR_MARKS_PER_UNIT: u64 = 150;
 /// The segments in sight from a position (ray cast against the model), at least.
 pub const SIGHT: u64 = 400;
 /// A polish (gathers and refits at three gates, the simplex, the scores), at least.

@@ -175,7 +175,7 @@ impl PoseVisibility {
         table: &VisibilityTable,
         at: &Point3<f64>,
         keep: usize,
-        out: &mut Vec<(f64, u32)>,
+        out: &mut Vec<(f64, SeenSegment)>,
     ) {
         widest(&self.bvh, &mut self.own, model, table, at, keep, out);
     }
@@ -189,7 +189,7 @@ impl PoseVisibility {
         table: &VisibilityTable,
         at: &Point3<f64>,
         keep: usize,
-        out: &mut Vec<(f64, u32)>,
+        out: &mut Vec<(f64, SeenSegment)>,
     ) {
         widest(&self.bvh, buffers, model, table, at, keep, out);
     }
@@ -234,7 +234,7 @@ fn widest(
     table: &VisibilityTable,
     at: &Point3<f64>,
     keep: usize,
-    out: &mut Vec<(f64, u32)>,
+    out: &mut Vec<(f64, SeenSegment)>,
 ) {
     out.clear();
     if keep == 0 {
@@ -259,15 +259,20 @@ fn widest(
             continue;
         }
         let angle = bound * f64::from(mask.count_ones()) / SAMPLES as f64;
+        let seen = SeenSegment {
+            segment: s,
+            fraction: mask.count_ones() as f32 / SAMPLES as f32,
+            mask,
+        };
         if out.len() < keep {
             if out.len() < out.capacity() {
-                out.push((angle, s));
+                out.push((angle, seen));
             }
             if out.len() == keep {
                 least = least_of(out);
             }
         } else if angle > least.0 {
-            out[least.1] = (angle, s);
+            out[least.1] = (angle, seen);
             least = least_of(out);
         }
     }
@@ -281,7 +286,7 @@ pub fn spanned_angle(at: &Point3<f64>, a: &Point3<f64>, b: &Point3<f64>) -> f64 
 }
 
 /// The least of `kept` (angle, index into `kept`).
-fn least_of(kept: &[(f64, u32)]) -> (f64, usize) {
+fn least_of(kept: &[(f64, SeenSegment)]) -> (f64, usize) {
     kept.iter()
         .enumerate()
         .fold((f64::INFINITY, 0), |m, (i, k)| if k.0 < m.0 { (k.0, i) } else { m })
