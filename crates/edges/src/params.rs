@@ -45,9 +45,9 @@ pub struct EdgeParams {
     /// Distance (px) from the edge to the first pixel of each hue strip.
     pub hue_strip_offset_px: f32,
     /// At most this many positions along an edge piece are sampled for hue (evenly spread; a
-    /// merged edge sums its pieces'). 16: at 48 the strips were a sixth of the edge stage's
-    /// CPU, and 16 leave every tracking table as it was within its seed-to-seed spread, the
-    /// ZInD panoramas' counts the same (docs/decisions.md, 2026-11-30).
+    /// merged edge sums its pieces'). 16 would save a sixth of the edge stage's CPU, but the
+    /// noisier signatures let maintenance lose its hold where 48 keep it (docs/decisions.md,
+    /// 2026-11-30).
     pub hue_samples_per_edge: usize,
     /// Threads working on a frame, the calling thread included (0: available cores, at most 2).
     pub threads: usize,
@@ -93,7 +93,7 @@ impl Default for EdgeParams {
             merge_min_support: 0.0,
             merge_gap_evidence: 0.0,
             hue_strip_offset_px: 2.0,
-            hue_samples_per_edge: 16,
+            hue_samples_per_edge: 48,
             threads: 0,
             two_line_excess: 0.3,
             piece_nfa: true,

@@ -360,11 +360,8 @@ fn hue_strips_wrap_around_red() {
             (e.hue.left_mean, e.hue.left_var, e.hue.left_kept),
         )
     };
-    // The strips are read at 16 places along the edge, so the checkerboard's two hues need not
-    // come out in equal numbers: the mean may sit a little off red (0.994 at 16 places), but
-    // never near 0.5.
     assert!(
-        circ_dist(red.0, 0.0) < 0.01,
+        circ_dist(red.0, 0.0) < 0.005,
         "red side mean {} (must wrap to ~0, not 0.5)",
         red.0
     );
