@@ -61,7 +61,7 @@ const SMALLEST_SAMPLE: usize = 4;
 /// every other fit runs to `solver.convergence_rad` (1e-10). A sample's pose is only ranked by
 /// the median α² over the rest of the set, and the frame's pose is the final fit's, started
 /// from the winner: 10⁻⁶ rad is a 26,000th of the 1.5° inlier angle, and the iterations
-/// below it were a sixth of the frame path's CPU on `lab` (docs/decisions.md, 2026-11-30).
+/// below it were a seventh of the frame path's CPU on `lab` (docs/decisions.md, 2026-11-30).
 const SAMPLE_CONVERGENCE_RAD: f64 = 1e-6;
 
 /// A solved pose this far (5 cm, or 0.035 rad ≈ 2°) from the constant-velocity prediction,
