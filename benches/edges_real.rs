@@ -19,6 +19,8 @@
 //!   `merge_gap_rad`, `merge_min_support`, `merge_gap_evidence`, `two_line_excess`), for sweeps.
 //! - `--piece-nfa 0|1`, `--piece-trim 0|1`: the a-contrario test of the pieces shown, and their
 //!   trimming (`EdgeParams::piece_nfa`, `piece_trim`; both on by default).
+//! - `--hue-samples N`: `EdgeParams::hue_samples_per_edge`, the places along a piece whose hue
+//!   strips are read.
 //!
 //! Besides the times it prints the mean phase times and counters per image
 //! (`EdgeDetector::sensor_stats`: pixel pass, chains, merging and selection), and a digest of
@@ -43,7 +45,7 @@ mod bench {
     const USAGE: &str = "usage: cargo bench --bench edges_real -- --images DIR --out DIR \
 [--intrinsics fx,fy,cx,cy] [--passes N] [--max-edges N] [--min-length-deg D] [--threshold G] \
 [--merge-deg A] [--gap-deg A] [--min-support F] [--gap-evidence F] [--two-line X] [--piece-nfa 0|1] \
-[--piece-trim 0|1]";
+[--piece-trim 0|1] [--hue-samples N]";
 
     fn fail(msg: &str) -> ! {
         eprintln!("edges_real bench: {msg}");
@@ -175,6 +177,9 @@ intrinsics = [{fx:?}, {fy:?}, {cx:?}, {cy:?}]\nrotation_wxyz = [1.0, 0.0, 0.0, 0
         }
         if let Some(x) = number("--piece-trim") {
             params.piece_trim = x != 0.0;
+        }
+        if let Some(x) = number("--hue-samples") {
+            params.hue_samples_per_edge = x as usize;
         }
         let mut detectors: HashMap<(u32, u32), (EdgeDetector, Rig)> = HashMap::new();
         for (_, si) in &images {

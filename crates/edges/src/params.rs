@@ -44,7 +44,10 @@ pub struct EdgeParams {
     pub merge_gap_evidence: f64,
     /// Distance (px) from the edge to the first pixel of each hue strip.
     pub hue_strip_offset_px: f32,
-    /// At most this many positions along an edge are sampled for hue (evenly spread).
+    /// At most this many positions along an edge piece are sampled for hue (evenly spread; a
+    /// merged edge sums its pieces'). 16 would save a sixth of the edge stage's CPU, but the
+    /// noisier signatures let maintenance lose its hold where 48 keep it (docs/decisions.md,
+    /// 2026-11-30).
     pub hue_samples_per_edge: usize,
     /// Threads working on a frame, the calling thread included (0: available cores, at most 2).
     pub threads: usize,

@@ -56,6 +56,14 @@ const SUSPECT_MARGIN: f64 = 1.2;
 /// The smallest consensus sample: four lines over-determine a pose (three fix it, KH §4).
 const SMALLEST_SAMPLE: usize = 4;
 
+/// R_and_T on a consensus sample (and the consensus's refit of the winner's inliers) stops once
+/// an iteration moves the pose by less than this (rad, and m over the lines' mean distance);
+/// every other fit runs to `solver.convergence_rad` (1e-10). A sample's pose is only ranked by
+/// the median α² over the rest of the set, and the frame's pose is the final fit's, started
+/// from the winner: 10⁻⁶ rad is a 26,000th of the 1.5° inlier angle, and the iterations
+/// below it were a seventh of the frame path's CPU on `lab` (docs/decisions.md, 2026-11-30).
+const SAMPLE_CONVERGENCE_RAD: f64 = 1e-6;
+
 /// A solved pose this far (5 cm, or 0.035 rad ≈ 2°) from the constant-velocity prediction,
 /// beyond what smooth motion leaves between them, is checked against the polished prediction.
 const SECOND_OPINION_M: f64 = 0.05;
@@ -201,8 +209,11 @@ impl Tracker<'_> {
                 inlier_alpha_rad: inlier_rad,
                 score: mcfg.consensus_score,
             };
-            let solver = &self.solver;
-            let mut f = |c: &[Correspondence], start: &Pose| fit(upright, method, solver, c, start);
+            let solver = omnitrack_solver::SolverOptions {
+                convergence_rad: self.solver.convergence_rad.max(SAMPLE_CONVERGENCE_RAD),
+                ..self.solver.clone()
+            };
+            let mut f = |c: &[Correspondence], start: &Pose| fit(upright, method, &solver, c, start);
             match self
                 .sampler
                 .run_sized(lambda, &self.set, predicted, &budget, &mut self.rng, &mut f)
