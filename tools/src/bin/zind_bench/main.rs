@@ -236,10 +236,18 @@ fn run(cli: &Cli) -> Result<(), String> {
             for (pano, dir) in panos.iter().zip(&recordings) {
                 let k = tour_index(pano);
                 let truth = pano.t_world_rig();
-                // With no hinted row, the whole house is searched.
-                let volume = SearchVolume {
-                    centre: hint_centre(&truth, cli.hint_offset_m, cli.seed, k),
-                    diameter_m: radius.map(|r| 2.0 * r),
+                // With no hinted row, the whole house is searched, from the centre the tracker
+                // gives a search without a hint (the model's origin): the whole model's cells
+                // are scanned nearest that centre first, and the budget may end before the last.
+                let volume = match radius {
+                    Some(r) => SearchVolume {
+                        centre: hint_centre(&truth, cli.hint_offset_m, cli.seed, k),
+                        diameter_m: Some(2.0 * r),
+                    },
+                    None => SearchVolume {
+                        centre: Point3::origin(),
+                        diameter_m: None,
+                    },
                 };
                 let rank = diagnose(dir, &pano.id, &model, &table, &cfg, volume, cli.seed, &truth)?;
                 found += rank.is_some() as usize;
