@@ -849,8 +849,8 @@ fn the_widest_segments_in_sight_are_those_of_brute_force_for_a_fraction_of_the_r
                 continue;
             }
             let before = sight.rays_cast();
-            let mut all: Vec<f64> = sight
-                .at(&model, &table, &at)
+            let seen = sight.at(&model, &table, &at).to_vec();
+            let mut all: Vec<f64> = seen
                 .iter()
                 .map(|s| {
                     let seg = &model.segments[s.segment as usize];
@@ -864,6 +864,10 @@ fn the_widest_segments_in_sight_are_those_of_brute_force_for_a_fraction_of_the_r
                 sight.widest(&model, &table, &at, keep, &mut kept);
                 if keep == 12 {
                     rays_ranked += sight.rays_cast() - before;
+                }
+                // Each kept segment with the points in sight that `at` gives it.
+                for (_, k) in &kept {
+                    assert!(seen.contains(k), "at {at:?}: {k:?} is not as `at` sees it");
                 }
                 let mut got: Vec<f64> = kept.iter().map(|k| k.0).collect();
                 got.sort_by(|a, b| b.total_cmp(a));

@@ -60,9 +60,9 @@
 //! of 0.25 m, heights in the band above the floor beneath) are scored by *coverage*, the share
 //! of the long segments in sight from them along which the frame's longest edges run (with
 //! `grid_blank`, times the share of their points not blank, as in the final merit: module
-//! `near_edges`), climbed in finer steps and polished. The grid covers every cell of the visibility table's grid that
-//! meets the volume, whether or not its node is valid: a closet or a hallway narrower than the
-//! node spacing often has its node inside a wall. This runs first; the triplets get what is
+//! `near_edges`), climbed in finer steps and polished. The grid covers every cell of the
+//! visibility table's grid that meets the volume, whether or not its node is valid: a closet or
+//! a hallway narrower than the node spacing often has its node inside a wall. This runs first; the triplets get what is
 //! left of the time budget.
 //!
 //! **The budget is work, not time** (issue 24): every step charges the work it does in *work
@@ -127,9 +127,9 @@
 //! - [`InitReport::plan_cells_scanned`] says how many of the volume's cells the scan looked
 //!   at before its share of the budget was spent, and [`InitReport::swept_to_m`] how far out;
 //!   [`Initialiser::set_sweep_from`] lets a later search continue from there, so that searches
-//!   over several frames cover a volume one budget does not. The tracker does not sweep yet:
-//!   deciding only once a sweep had covered the volume added a wrong commit on the ZInD tour
-//!   (docs/decisions.md).
+//!   over several frames cover a volume one budget does not. The tracker sweeps only with
+//!   `initialisation.sweep_volume`, off by default: deciding only once a sweep had covered the
+//!   volume added a wrong commit on the ZInD tour (docs/decisions.md).
 //!
 //! **The whole model** (start-up without a hint, over a thousand cells in `lab`) deals its cells
 //! to [`LANES`] lanes, each with its own per-cell buffers, its share of the work budget and a
@@ -354,8 +354,8 @@ pub struct Initialiser<'m> {
     /// Set by the owner to stop a search early (module `background`: a tracker shutting down,
     /// or its pipeline stopping, does not wait for a search nobody will read).
     cancel: Vec<Arc<AtomicBool>>,
-    /// The segments in sight from a grid position: (angle they span in sight, index), and the
-    /// longest kept.
+    /// The segments in sight from a grid position: (angle they span in sight, the segment with
+    /// its points in sight), and the longest kept.
     grid_order: Vec<(f64, SeenSegment)>,
     grid_segs: Vec<SeenSegment>,
     /// The directions near this frame's edges, per sensor: the coarse merit's blank test.

@@ -158,9 +158,10 @@ impl PoseVisibility {
     }
 
     /// The `keep` segments seen from `at` that span the largest angle in sight (the angle the
-    /// segment spans from `at` × the share of it in sight), as (that angle, index) pairs in no
-    /// particular order, into `out` (cleared first). The same segments and angles as ranking
-    /// all of [`Self::at`] by that angle and keeping the `keep` largest, ties apart.
+    /// segment spans from `at` × the share of it in sight), as (that angle, the segment as
+    /// [`Self::at`] sees it: its points in sight) pairs in no particular order, into `out`
+    /// (cleared first). The same segments, points and angles as ranking all of [`Self::at`] by
+    /// that angle and keeping the `keep` largest, ties apart.
     ///
     /// **Why ranked.** The cost of [`Self::at`] follows the model's detail: every candidate
     /// segment costs [`SAMPLES`] rays, and a storey of an architect's model offers thousands
