@@ -36,6 +36,51 @@ pub struct EdgeConfig {
     pub min_hue_value: f64,
 }
 
+/// Which searches' grids rank their positions by the final merit's blank share too, by a
+/// per-frame map of the directions near an edge (issue 47, item 1: recall;
+/// `initialisation.grid_blank`, written `"off"`, `"volumes"` or `"everywhere"`; `false` and
+/// `true` are read as `"off"` and `"everywhere"`).
+///
+/// `Volumes` by default: in a bounded volume (a hint, a relocalisation, the volume round a lost
+/// pose) it turned wrong commits on FZK-Haus from 3 m (3 → 1) and ZInD from 3 m (1 → 0) into
+/// right poses or none; over the whole model it finds, with the truth, twins from every room,
+/// and one (a pantry's, ZInD) outscores the truth on the one frame there is
+/// (docs/decisions.md, 2026-11-30).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum GridBlank {
+    /// No search: the grid ranks by explained × support.
+    Off,
+    /// Searches of a bounded volume; the whole model's search without it.
+    Volumes,
+    /// Every search, the whole model's too.
+    Everywhere,
+}
+
+impl<'de> Deserialize<'de> for GridBlank {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct Named;
+        impl serde::de::Visitor<'_> for Named {
+            type Value = GridBlank;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("\"off\", \"volumes\" or \"everywhere\" (or false / true)")
+            }
+            fn visit_bool<E: serde::de::Error>(self, v: bool) -> Result<GridBlank, E> {
+                Ok(if v { GridBlank::Everywhere } else { GridBlank::Off })
+            }
+            fn visit_str<E: serde::de::Error>(self, v: &str) -> Result<GridBlank, E> {
+                match v {
+                    "off" => Ok(GridBlank::Off),
+                    "volumes" => Ok(GridBlank::Volumes),
+                    "everywhere" => Ok(GridBlank::Everywhere),
+                    _ => Err(E::invalid_value(serde::de::Unexpected::Str(v), &self)),
+                }
+            }
+        }
+        d.deserialize_any(Named)
+    }
+}
+
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct InitialisationConfig {
@@ -65,12 +110,9 @@ pub struct InitialisationConfig {
     /// Off by default: measured, it refuses wrong commits on FZK-Haus but adds one on ZInD and
     /// delays the first pose (docs/decisions.md, 2026-11-30).
     pub sweep_volume: bool,
-    /// The grid's coarse merit also loses the share of blank points (`blank_radius_deg`), as
-    /// the final merit does, by a per-frame map of the directions near an edge (issue 47,
-    /// item 1: recall). Off by default: measured, it turns wrong commits on FZK-Haus and the
-    /// ZInD 3 m row into right poses or none, but finds a twin that outscores the truth in
-    /// ZInD's pantry without a hint (docs/decisions.md, 2026-11-30).
-    pub grid_blank: bool,
+    /// Which searches' grids rank their positions by the share of blank points too
+    /// (`blank_radius_deg`), as the final merit does ([`GridBlank`]).
+    pub grid_blank: GridBlank,
     pub clear_winner_ratio: f64,
     pub accept_explained_fraction: f64,
     /// A candidate must also explain this share of the frame's edges (by angle).
@@ -247,7 +289,7 @@ impl Default for InitialisationConfig {
             max_dihedral_range_deg: 10.0,
             whole_model_time_budget_ms: 10000.0,
             sweep_volume: false,
-            grid_blank: false,
+            grid_blank: GridBlank::Volumes,
             clear_winner_ratio: 0.8,
             accept_explained_fraction: 0.4,
             accept_support_fraction: 0.15,

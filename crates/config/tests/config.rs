@@ -1,7 +1,7 @@
 //! tracker.toml: the shipped file carries exactly the papers' defaults, and mistakes are refused
 //! with the key named.
 
-use omnitrack_config::{SolverMethod, TrackerConfig};
+use omnitrack_config::{GridBlank, SolverMethod, TrackerConfig};
 use std::path::Path;
 
 #[test]
@@ -68,6 +68,11 @@ fn bad_values_name_the_key() {
             "key 'solver.initial_rotation_samples': must be 12, 24 or 60",
         ),
         ("[solver]\nmethod = \"newton\"\n", "unknown variant `newton`"),
+        (
+            "[initialisation]\ngrid_blank = \"hinted\"\n",
+            "invalid value: string \"hinted\", expected \"off\", \"volumes\" or \"everywhere\"",
+        ),
+        ("[initialisation]\ngrid_blank = 1\n", "grid_blank = 1"),
         ("[visibility]\nnode_spacing_m = -1\n", "key 'visibility.node_spacing_m'"),
         ("[visibility]\nnode_spacing_m = \"one\"\n", "invalid type"),
         (
@@ -142,4 +147,22 @@ fn solver_options_of_the_shipped_config_are_the_solver_defaults_but_for_the_meas
         },
         omnitrack_solver::SolverOptions::default()
     );
+}
+
+/// `grid_blank` names the searches it ranks: its three words, and the flags of the files
+/// written before it had them (`true` was every search).
+#[test]
+fn grid_blank_reads_its_words_and_the_older_flags() {
+    let read = |value: &str| {
+        TrackerConfig::from_toml_str(&format!("[initialisation]\ngrid_blank = {value}\n"), "tracker.toml")
+            .unwrap()
+            .initialisation
+            .grid_blank
+    };
+    assert_eq!(read("\"off\""), GridBlank::Off);
+    assert_eq!(read("\"volumes\""), GridBlank::Volumes);
+    assert_eq!(read("\"everywhere\""), GridBlank::Everywhere);
+    assert_eq!(read("false"), GridBlank::Off);
+    assert_eq!(read("true"), GridBlank::Everywhere);
+    assert_eq!(TrackerConfig::default().initialisation.grid_blank, GridBlank::Volumes);
 }

@@ -58,9 +58,9 @@
 //! building: four, a quarter turn apart), within a degree of the truth on all 32. Under each,
 //! the translation is three numbers: positions on a grid over the volume (plan and height steps
 //! of 0.25 m, heights in the band above the floor beneath) are scored by *coverage*, the share
-//! of the long segments in sight from them along which the frame's longest edges run (with
-//! `grid_blank`, times the share of their points not blank, as in the final merit: module
-//! `near_edges`), climbed in finer steps and polished. The grid covers every cell of the
+//! of the long segments in sight from them along which the frame's longest edges run (in a
+//! bounded volume, times the share of their points not blank, as in the final merit:
+//! `grid_blank`, module `near_edges`), climbed in finer steps and polished. The grid covers every cell of the
 //! visibility table's grid that meets the volume, whether or not its node is valid: a closet or
 //! a hallway narrower than the node spacing often has its node inside a wall. This runs first; the triplets get what is
 //! left of the time budget.
@@ -327,6 +327,8 @@ pub struct Initialiser<'m> {
     /// The grid scan's lanes (module `grid_scan`): one for a bounded volume, [`LANES`] for the
     /// whole model.
     grid_lanes: Vec<GridLane>,
+    /// Whether this search's grid ranks by the blank share too (`opts.grid_blank` for its volume).
+    grid_blank: bool,
     /// At most this many threads run the whole model's lanes (`None`: one per core).
     threads: Option<usize>,
     /// Rotation hypotheses from vanishing directions (module `vanishing`).
@@ -425,6 +427,7 @@ impl<'m> Initialiser<'m> {
             vote_index: EdgeIndex::new(VOTE_EDGES, rig.sensors.len().min(crate::matching::MAX_SENSORS)),
             merit: MeritScratch::new(max_set),
             grid_lanes: (0..LANES).map(|_| GridLane::new(model)).collect(),
+            grid_blank: false,
             threads: None,
             vanishing: VanishingDirections::new(model, max_edges),
             floors,

@@ -431,7 +431,7 @@ impl Initialiser<'_> {
         if bound <= floor {
             return (None, charge);
         }
-        if !self.opts.grid_blank || self.opts.blank_radius_rad <= 0.0 {
+        if !self.grid_blank || self.opts.blank_radius_rad <= 0.0 {
             return (Some(bound), charge);
         }
         let (blank, points) = self.blank_points(pose, segments, &m.counted);

@@ -10,8 +10,8 @@
 //! truth against 0.400 for the best kept position. The final merit has the blank term that
 //! tells them apart, but it costs points × edges plane tests, a millisecond or two per pose,
 //! where the grid scores thousands. With this map the grid can rank by the same three factors
-//! (`initialisation.grid_blank`; measured and why it is off by default: docs/decisions.md,
-//! 2026-11-30).
+//! (`initialisation.grid_blank`: in a bounded volume's search by default, not the whole
+//! model's; measured, and why: docs/decisions.md, 2026-11-30).
 //!
 //! **How.** One cube map of directions per sensor (from that sensor's centre: sensors of a
 //! backpack rig may stand decimetres apart), [`FACE_CELLS`]² cells per face, one bit per cell.

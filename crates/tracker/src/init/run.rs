@@ -9,6 +9,7 @@
 //! and an [`InitReport`].
 
 use super::*;
+use omnitrack_config::GridBlank;
 
 impl Initialiser<'_> {
     /// The grid search under the rotations of the vanishing directions, INIT-SEGMENT-EDGE over
@@ -27,7 +28,12 @@ impl Initialiser<'_> {
         self.candidates.clear();
         self.pool.clear();
         self.prepare_edges(edges);
-        let near_radius = if self.opts.grid_blank {
+        self.grid_blank = match self.opts.grid_blank {
+            GridBlank::Off => false,
+            GridBlank::Volumes => volume.diameter_m.is_some(),
+            GridBlank::Everywhere => true,
+        };
+        let near_radius = if self.grid_blank {
             self.opts.blank_radius_rad
         } else {
             0.0

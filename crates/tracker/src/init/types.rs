@@ -5,7 +5,7 @@
 //! In: the tracker's configuration. Out: plain data.
 
 use nalgebra::Point3;
-use omnitrack_config::TrackerConfig;
+use omnitrack_config::{GridBlank, TrackerConfig};
 use omnitrack_core::geometry::Pose;
 use omnitrack_core::status::SearchState;
 use std::time::Duration;
@@ -47,8 +47,8 @@ pub struct InitOptions {
     pub height_above_floor_m: [f64; 2],
     /// [`Candidate::blank`]'s radius (rad; 0 = off).
     pub blank_radius_rad: f64,
-    /// The grid's coarse merit loses the blank share too (`initialisation.grid_blank`).
-    pub grid_blank: bool,
+    /// Which searches' grids rank by the blank share too (`initialisation.grid_blank`).
+    pub grid_blank: GridBlank,
 }
 
 impl InitOptions {
