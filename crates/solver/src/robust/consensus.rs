@@ -71,6 +71,10 @@ pub struct SamplingBudget {
     pub score: SampleScore,
 }
 
+/// A refinement for [`ConsensusSampler::run`]: `fit(set, lines, start)`, `set[k]` being
+/// correspondence `lines[k]` of the run's.
+pub type SampleFit<'f> = dyn FnMut(&[Correspondence], &[usize], &Pose) -> Option<Pose> + 'f;
+
 /// Why sampling stopped.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum StopReason {
@@ -182,9 +186,10 @@ impl ConsensusSampler {
         self.max_samples
     }
 
-    /// Runs KT's sampling on `c` from `guess` (module doc). `fit(set, start)` refines a pose on
-    /// `set` from `start` (`None`: no usable pose); it is called once per sample (from `guess`)
-    /// and once for the refit (from the best sample's pose, skipped when there are fewer than λ
+    /// Runs KT's sampling on `c` from `guess` (module doc). `fit(set, lines, start)` refines a
+    /// pose on `set` from `start` (`None`: no usable pose), `set[k]` being `c[lines[k]]` (so that a
+    /// fit can use what it worked out per correspondence of `c` beforehand); it is called once
+    /// per sample (from `guess`) and once for the refit (from the best sample's pose, skipped when there are fewer than λ
     /// inliers). The refit is kept unless its truncated score over all of `c` is worse than the
     /// best sample's.
     ///
@@ -196,7 +201,7 @@ impl ConsensusSampler {
         guess: &Pose,
         budget: &SamplingBudget,
         rng: &mut SmallRng,
-        fit: &mut dyn FnMut(&[Correspondence], &Pose) -> Option<Pose>,
+        fit: &mut SampleFit<'_>,
     ) -> Result<ConsensusOutcome, ConsensusError> {
         self.run_sized(self.lambda, c, guess, budget, rng, fit)
     }
@@ -211,7 +216,7 @@ impl ConsensusSampler {
         guess: &Pose,
         budget: &SamplingBudget,
         rng: &mut SmallRng,
-        fit: &mut dyn FnMut(&[Correspondence], &Pose) -> Option<Pose>,
+        fit: &mut SampleFit<'_>,
     ) -> Result<ConsensusOutcome, ConsensusError> {
         let started = Instant::now();
         let n = c.len();
@@ -250,7 +255,7 @@ impl ConsensusSampler {
             for (s, &i) in self.sample.iter_mut().zip(order[..lambda].iter()) {
                 *s = c[i];
             }
-            let Some(pose) = fit(&self.sample[..lambda], guess) else {
+            let Some(pose) = fit(&self.sample[..lambda], &order[..lambda], guess) else {
                 continue;
             };
             let score = score(
@@ -271,7 +276,7 @@ impl ConsensusSampler {
         let mut pose = best_pose;
         let mut refitted = false;
         if count >= lambda {
-            if let Some(refit) = fit(&self.inlier_set[..count], &best_pose) {
+            if let Some(refit) = fit(&self.inlier_set[..count], &self.inliers[..count], &best_pose) {
                 let all_best = score(
                     (&mut self.squares, &mut self.spare),
                     budget.score,
