@@ -197,9 +197,9 @@ pub fn r_and_t_refine(c: &[Correspondence], guess: &Pose, o: &SolverOptions) -> 
 /// [`r_and_t_refine`] for fits of many subsets of one set of lines from one start (the tracker's
 /// consensus samples, every one from the predicted pose): each line's first step there (its rows
 /// of the normal equations and its distance) is worked out once, in [`Self::prepare`], and a fit
-/// adds its lines' instead of computing them again. Those were about a third of a sample's fit
-/// (its distances and the first of its few iterations). The answers are `r_and_t_refine`'s bit
-/// for bit: the same numbers summed in the same order.
+/// adds its lines' instead of computing them again (its distances and the first of its few
+/// iterations: 5 % of the tracker's frame path, docs/decisions.md). The answers are
+/// `r_and_t_refine`'s bit for bit: the same numbers summed in the same order.
 ///
 /// Sized at construction; nothing allocates afterwards.
 #[derive(Debug, Clone)]
