@@ -202,13 +202,13 @@ pub mod robust;
 
 pub use refine::cauchy::r_and_t_cauchy;
 pub use refine::covariance::{covariance, covariance_mixed};
-pub use refine::kumar_hanson::{r_and_t, r_and_t_refine, r_and_t_refine_weighted, r_then_t};
+pub use refine::kumar_hanson::{r_and_t, r_and_t_refine, r_and_t_refine_weighted, r_then_t, SharedStart};
 pub use refine::points::r_and_t_mixed;
 pub use refine::residuals::{line_residuals, point_residuals, LineResiduals, PointObservation};
 pub use refine::simplex::{minimise_xi, minimise_xi_upright, xi_solve, SimplexOptions};
 pub use refine::upright::refine_upright;
 pub use robust::consensus::{
-    ConsensusError, ConsensusOutcome, ConsensusSampler, SampleScore, SamplingBudget, StopReason,
+    ConsensusError, ConsensusOutcome, ConsensusSampler, SampleFit, SampleScore, SamplingBudget, StopReason,
 };
 pub use robust::lms::{med_r_and_t, med_r_and_t_landmarks};
 pub use robust::sampling::sample_count;

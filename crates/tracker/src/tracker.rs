@@ -25,7 +25,7 @@ use omnitrack_core::memory::resident;
 use omnitrack_core::model::Model;
 use omnitrack_core::rig::Rig;
 use omnitrack_edges::Edge;
-use omnitrack_solver::{ConsensusSampler, SolverOptions};
+use omnitrack_solver::{ConsensusSampler, SharedStart, SolverOptions};
 use rand::rngs::SmallRng;
 use rand::SeedableRng;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -120,6 +120,8 @@ pub struct Tracker<'m> {
     init: Initialiser<'m>,
     tracks: CorrespondenceTable,
     sampler: ConsensusSampler,
+    /// The consensus samples' fits' shared first step from the prediction (`SharedStart`).
+    shared_start: SharedStart,
     /// S̄ for the solver and, per entry, its track.
     set: Vec<Correspondence>,
     set_track: Vec<usize>,
@@ -244,6 +246,7 @@ impl<'m> Tracker<'m> {
             init,
             tracks: CorrespondenceTable::new(capacity),
             sampler: ConsensusSampler::new(capacity, lambda, m.max_samples as u64),
+            shared_start: SharedStart::new(capacity),
             set: resident(Vec::with_capacity(capacity)),
             set_track: resident(Vec::with_capacity(capacity)),
             matched: vec![None; capacity],

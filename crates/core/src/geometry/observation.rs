@@ -114,6 +114,29 @@ impl Correspondence {
         Some((n1.cross(&n2).norm(), n1.dot(&n2).abs()))
     }
 
+    /// tan² α, the square of [`Self::alpha_terms`]' ratio to within a few 10⁻¹⁶ rad of the angle
+    /// (not bit for bit: the predicted normal is not normalised, and no square root is taken);
+    /// infinite where α is π/2 for want of a predicted plane. For ranking many correspondences by α where only a few need α itself (a median):
+    /// one division instead of four square roots and four divisions.
+    #[inline]
+    pub fn alpha_tan2(&self, t_world_rig: &Pose) -> f64 {
+        let (r1, r2) = self.predicted_rays(t_world_rig);
+        let (r1sq, r2sq) = (r1.norm_squared(), r2.norm_squared());
+        let n = r1.cross(&r2);
+        // `plane_normal`'s test |n| > 1e-12 |r1| |r2|, squared, with a factor of 2 to spare for
+        // the rounding of both forms, and only for lengths whose squares and products stay normal
+        // numbers; near the test's edge, for NaN or extreme lengths, `alpha_terms` decides.
+        let lengths = 1e-140..=1e140;
+        if lengths.contains(&r1sq) && lengths.contains(&r2sq) && n.norm_squared() > 2e-24 * r1sq * r2sq {
+            let n1 = self.edge.normal;
+            let cos = n1.dot(&n);
+            n1.cross(&n).norm_squared() / (cos * cos)
+        } else {
+            self.alpha_terms(t_world_rig)
+                .map_or(f64::INFINITY, |(sin, cos)| (sin / cos).powi(2))
+        }
+    }
+
     /// Kumar–Hanson's residuals: the distances (m) of the segment's two end points, moved into the
     /// rig frame by `t_world_rig`, from the observed plane (the terms of E1, eq. 10).
     pub fn endpoint_distances(&self, t_world_rig: &Pose) -> [f64; 2] {
@@ -193,6 +216,44 @@ mod tests {
     fn parallel_rays_span_no_plane() {
         let r = Vector3::new(1.0, 2.0, 3.0);
         assert!(EdgePlane::from_rays(Point3::origin(), &r, &(2.0 * r)).is_none());
+    }
+
+    /// tan² α without the normalisation is `alpha_terms`' ratio squared, to 10⁻¹⁵ rad of angle,
+    /// for planes at any angle (exact ones too), and infinite for segments pointing at the centre.
+    #[test]
+    fn alpha_tan2_is_the_tangent_of_alpha_squared() {
+        let mut x = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = move || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            (x >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        };
+        for i in 0..5000 {
+            let mut c = exact(
+                [
+                    Point3::new(4.0 * next(), 4.0 * next(), 2.0 * next()),
+                    Point3::new(4.0 * next(), 4.0 * next(), 2.0 * next()),
+                ],
+                Point3::new(0.05 * next(), 0.05 * next(), 0.05 * next()),
+            );
+            if i % 3 > 0 {
+                c.edge.normal = Unit::new_normalize(Vector3::new(next(), next(), next()));
+            }
+            let p = Isometry3::translation(0.3 * next(), 0.3 * next(), 0.1 * next()) * pose();
+            let (sin, cos) = c.alpha_terms(&p).unwrap();
+            let tan = sin / cos;
+            let got = c.alpha_tan2(&p).sqrt();
+            assert!(
+                (got.atan() - tan.atan()).abs() <= 1e-15,
+                "{i}: {got} against tan α {tan}"
+            );
+        }
+        let through = Correspondence {
+            edge: EdgePlane::from_rays(Point3::origin(), &Vector3::x(), &Vector3::y()).unwrap(),
+            segment: [Point3::new(1.0, 1.0, 1.0), Point3::new(2.0, 2.0, 2.0)],
+        };
+        assert_eq!(through.alpha_tan2(&Pose::identity()), f64::INFINITY);
     }
 
     /// α from the predicted normal alone is α from the whole predicted plane, bit for bit, for

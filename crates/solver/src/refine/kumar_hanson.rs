@@ -16,12 +16,13 @@
 use super::covariance::covariance;
 use super::horn::rotation_samples;
 use super::residuals::{
-    accumulate_line, accumulate_line_scaled, all_finite, iterate, line_error, mean_distance, pivot_ok, pose_of,
-    unknowns_of, Refined,
+    accumulate_line, accumulate_line_scaled, all_finite, iterate, line_distance, line_error, mean_distance,
+    mean_of_distances, pivot_ok, pose_of, unknowns_of, LineRows, Refined,
 };
 use crate::{LineError, Solution, SolveError, SolverOptions};
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use omnitrack_core::geometry::{xi, Correspondence, Pose};
+use omnitrack_core::memory::resident;
 
 fn check_input(c: &[Correspondence], guess: Option<&Pose>) -> Result<(), SolveError> {
     if c.len() < 3 {
@@ -191,6 +192,86 @@ pub fn r_and_t_refine(c: &[Correspondence], guess: &Pose, o: &SolverOptions) -> 
     }
     let (q, s) = unknowns_of(guess);
     refine(c, q, s, o).ok().map(|r| pose_of(&r.q, &r.s))
+}
+
+/// [`r_and_t_refine`] for fits of many subsets of one set of lines from one start (the tracker's
+/// consensus samples, every one from the predicted pose): each line's first step there (its rows
+/// of the normal equations and its distance) is worked out once, in [`Self::prepare`], and a fit
+/// adds its lines' instead of computing them again (its distances and the first of its few
+/// iterations: 5 % of the tracker's frame path, docs/decisions.md). The answers are
+/// `r_and_t_refine`'s bit for bit: the same numbers summed in the same order.
+///
+/// Sized at construction; nothing allocates afterwards.
+#[derive(Debug, Clone)]
+pub struct SharedStart {
+    /// Per line of the prepared set: its rows at the start, and its [`line_distance`] there.
+    lines: Vec<(LineRows, f64)>,
+    /// The prepared start, its unknowns and the error the rows are of; `None` before a
+    /// [`Self::prepare`] or after one whose set exceeded the capacity.
+    start: Option<(Pose, UnitQuaternion<f64>, Vector3<f64>, LineError)>,
+}
+
+impl SharedStart {
+    /// Room for sets of up to `capacity` lines.
+    pub fn new(capacity: usize) -> Self {
+        Self {
+            lines: resident(vec![(LineRows::NONE, 0.0); capacity]),
+            start: None,
+        }
+    }
+
+    /// Works out every line of `c` at `start` under `error`. A set beyond the capacity prepares
+    /// nothing, and [`Self::refine`] then computes every fit in full.
+    pub fn prepare(&mut self, c: &[Correspondence], start: &Pose, error: LineError) {
+        self.start = None;
+        if c.len() > self.lines.len() {
+            return;
+        }
+        let (q, s) = unknowns_of(start);
+        for (slot, l) in self.lines.iter_mut().zip(c) {
+            *slot = (LineRows::at(l, &q, &s, error), line_distance(l, &q, &s));
+        }
+        self.start = Some((*start, q, s, error));
+    }
+
+    /// [`r_and_t_refine`] of `c` from `guess`, where `c[k]` is line `lines[k]` of the set last
+    /// prepared: from its rows when `guess` is (bit for bit) the prepared start and `o.error` its
+    /// error, in full otherwise.
+    pub fn refine(&self, c: &[Correspondence], lines: &[usize], guess: &Pose, o: &SolverOptions) -> Option<Pose> {
+        let prepared = self
+            .start
+            .filter(|(start, _, _, error)| *error == o.error && lines.len() == c.len() && same_bits(start, guess));
+        let Some((_, q, s, error)) = prepared else {
+            return r_and_t_refine(c, guess, o);
+        };
+        if c.len() < 3 {
+            return None;
+        }
+        let scale = mean_of_distances(lines.iter().map(|&i| self.lines[i].1).sum(), c.len());
+        let mut first = true;
+        iterate(q, s, scale, o.max_iterations, o.convergence_rad, |q, s, h, g| {
+            if std::mem::take(&mut first) {
+                for &i in lines {
+                    self.lines[i].0.add_to(h, g);
+                }
+            } else {
+                for l in c {
+                    accumulate_line(l, q, s, error, h, g);
+                }
+            }
+        })
+        .ok()
+        .map(|r| pose_of(&r.q, &r.s))
+    }
+}
+
+/// Whether two poses are the same numbers (not merely equal: 0 and −0 differ).
+fn same_bits(a: &Pose, b: &Pose) -> bool {
+    let bits = |p: &Pose| {
+        let (t, q) = (p.translation.vector, p.rotation.coords);
+        [t.x, t.y, t.z, q.x, q.y, q.z, q.w].map(f64::to_bits)
+    };
+    bits(a) == bits(b)
 }
 
 /// R_and_T's iteration (§3.1) from `(q, s)` over `c` with `o.error`; no covariance, no ξ.

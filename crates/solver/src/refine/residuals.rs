@@ -147,6 +147,77 @@ pub(crate) fn accumulate_line_scaled(
     }
 }
 
+/// One line's rows of the normal equations at one `(q, s)`, as the products
+/// [`accumulate_line`] adds there: fits of many subsets of a set from one start (the tracker's
+/// consensus samples) add them instead of working every line's first step out again.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct LineRows {
+    /// Per end point, `(w jᶜ) jʳ` in [`add_outer_lower`]'s order (column by column, from the
+    /// diagonal down).
+    h: [[f64; 21]; 2],
+    /// Per end point, `(w r) j`: what `g.axpy(w r, j, 1)` adds.
+    g: [[f64; 6]; 2],
+    /// False for an E3 line whose predicted plane is undefined (it adds no rows).
+    rows: bool,
+}
+
+impl LineRows {
+    pub(crate) const NONE: LineRows = LineRows {
+        h: [[0.0; 21]; 2],
+        g: [[0.0; 6]; 2],
+        rows: false,
+    };
+
+    /// `c`'s rows at `(q, s)` under `error`, as [`accumulate_line`] computes them.
+    pub(crate) fn at(c: &Correspondence, q: &UnitQuaternion<f64>, s: &Vector3<f64>, error: LineError) -> LineRows {
+        let Some(res) = line_residuals(c, q, s, error) else {
+            return LineRows::NONE;
+        };
+        let mut rows = LineRows {
+            rows: true,
+            ..LineRows::NONE
+        };
+        for k in 0..2 {
+            // `accumulate_line`'s weight is `1.0 * weight`, the weight itself.
+            let (r, j, w) = (res.r[k], &res.jacobian[k], res.weight[k]);
+            let mut i = 0;
+            for c in 0..6 {
+                let a = w * j[c];
+                for r in c..6 {
+                    rows.h[k][i] = a * j[r];
+                    i += 1;
+                }
+            }
+            let wr = w * r;
+            for (gi, ji) in rows.g[k].iter_mut().zip(j.iter()) {
+                *gi = wr * ji;
+            }
+        }
+        rows
+    }
+
+    /// Adds the rows to `h` and `g` as [`accumulate_line`] would at their `(q, s)`: the same
+    /// sums in the same order, so the same bits (axpy's `p · 1 + 1 · g` is `g + p` exactly).
+    #[inline]
+    pub(crate) fn add_to(&self, h: &mut Matrix6<f64>, g: &mut Vector6<f64>) {
+        if !self.rows {
+            return;
+        }
+        for k in 0..2 {
+            let mut i = 0;
+            for c in 0..6 {
+                for r in c..6 {
+                    h[(r, c)] += self.h[k][i];
+                    i += 1;
+                }
+            }
+            for (gi, p) in g.iter_mut().zip(self.g[k].iter()) {
+                *gi += p;
+            }
+        }
+    }
+}
+
 /// The objective of `error` over `c` at `(q, s)` (no normal equations).
 pub(crate) fn line_error(c: &[Correspondence], q: &UnitQuaternion<f64>, s: &Vector3<f64>, error: LineError) -> f64 {
     c.iter().map(|l| line_error_of(l, q, s, error)).sum()
@@ -314,16 +385,22 @@ where
 /// Mean distance of the segment end points from their sensor centres at `(q, s)`: the lever arm
 /// that turns a translation step into its rad-equivalent.
 pub(crate) fn mean_distance(c: &[Correspondence], q: &UnitQuaternion<f64>, s: &Vector3<f64>) -> f64 {
-    let sum: f64 = c
+    mean_of_distances(c.iter().map(|l| line_distance(l, q, s)).sum(), c.len())
+}
+
+/// One line's share of [`mean_distance`]'s sum: its two end points' distances from its centre.
+#[inline]
+pub(crate) fn line_distance(l: &Correspondence, q: &UnitQuaternion<f64>, s: &Vector3<f64>) -> f64 {
+    l.segment
         .iter()
-        .map(|l| {
-            l.segment
-                .iter()
-                .map(|p| (q * p.coords + s - l.edge.centre.coords).norm())
-                .sum::<f64>()
-        })
-        .sum();
-    let d = sum / (2 * c.len()).max(1) as f64;
+        .map(|p| (q * p.coords + s - l.edge.centre.coords).norm())
+        .sum::<f64>()
+}
+
+/// [`mean_distance`] of `lines` lines from the sum of their [`line_distance`]s.
+#[inline]
+pub(crate) fn mean_of_distances(sum: f64, lines: usize) -> f64 {
+    let d = sum / (2 * lines).max(1) as f64;
     if d.is_finite() && d > 1e-9 {
         d
     } else {

@@ -71,6 +71,10 @@ pub struct SamplingBudget {
     pub score: SampleScore,
 }
 
+/// A refinement for [`ConsensusSampler::run`]: `fit(set, lines, start)`, `set[k]` being
+/// correspondence `lines[k]` of the run's.
+pub type SampleFit<'f> = dyn FnMut(&[Correspondence], &[usize], &Pose) -> Option<Pose> + 'f;
+
 /// Why sampling stopped.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum StopReason {
@@ -182,9 +186,10 @@ impl ConsensusSampler {
         self.max_samples
     }
 
-    /// Runs KT's sampling on `c` from `guess` (module doc). `fit(set, start)` refines a pose on
-    /// `set` from `start` (`None`: no usable pose); it is called once per sample (from `guess`)
-    /// and once for the refit (from the best sample's pose, skipped when there are fewer than λ
+    /// Runs KT's sampling on `c` from `guess` (module doc). `fit(set, lines, start)` refines a
+    /// pose on `set` from `start` (`None`: no usable pose), `set[k]` being `c[lines[k]]` (so that a
+    /// fit can use what it worked out per correspondence of `c` beforehand); it is called once
+    /// per sample (from `guess`) and once for the refit (from the best sample's pose, skipped when there are fewer than λ
     /// inliers). The refit is kept unless its truncated score over all of `c` is worse than the
     /// best sample's.
     ///
@@ -196,7 +201,7 @@ impl ConsensusSampler {
         guess: &Pose,
         budget: &SamplingBudget,
         rng: &mut SmallRng,
-        fit: &mut dyn FnMut(&[Correspondence], &Pose) -> Option<Pose>,
+        fit: &mut SampleFit<'_>,
     ) -> Result<ConsensusOutcome, ConsensusError> {
         self.run_sized(self.lambda, c, guess, budget, rng, fit)
     }
@@ -211,7 +216,7 @@ impl ConsensusSampler {
         guess: &Pose,
         budget: &SamplingBudget,
         rng: &mut SmallRng,
-        fit: &mut dyn FnMut(&[Correspondence], &Pose) -> Option<Pose>,
+        fit: &mut SampleFit<'_>,
     ) -> Result<ConsensusOutcome, ConsensusError> {
         let started = Instant::now();
         let n = c.len();
@@ -233,6 +238,9 @@ impl ConsensusSampler {
         }
 
         let mut best: Option<(Pose, f64)> = None;
+        // tan² α beyond which a correspondence's α surely exceeds the best sample's median
+        // (`median_square`): a sample with half of its rest (rounded up) beyond it cannot win.
+        let mut beaten = f64::INFINITY;
         let mut samples = 0u64;
         let stop = loop {
             if samples >= max_samples.max(1) {
@@ -250,18 +258,22 @@ impl ConsensusSampler {
             for (s, &i) in self.sample.iter_mut().zip(order[..lambda].iter()) {
                 *s = c[i];
             }
-            let Some(pose) = fit(&self.sample[..lambda], guess) else {
+            let Some(pose) = fit(&self.sample[..lambda], &order[..lambda], guess) else {
                 continue;
             };
-            let score = score(
+            let Some(scored) = score(
                 (&mut self.squares, &mut self.spare),
                 budget.score,
                 order[lambda..].iter().map(|&i| &c[i]),
                 &pose,
                 cap2,
-            );
-            if score.is_finite() && best.as_ref().is_none_or(|(_, b)| score < *b) {
-                best = Some((pose, score));
+                beaten,
+            ) else {
+                continue;
+            };
+            if scored.score.is_finite() && best.as_ref().is_none_or(|(_, b)| scored.score < *b) {
+                best = Some((pose, scored.score));
+                beaten = scored.exceeded;
             }
         };
         let (best_pose, best_sample_score) = best.ok_or(SolveError::NoSolution)?;
@@ -271,21 +283,20 @@ impl ConsensusSampler {
         let mut pose = best_pose;
         let mut refitted = false;
         if count >= lambda {
-            if let Some(refit) = fit(&self.inlier_set[..count], &best_pose) {
-                let all_best = score(
-                    (&mut self.squares, &mut self.spare),
-                    budget.score,
-                    c.iter(),
-                    &best_pose,
-                    cap2,
-                );
-                let all_refit = score(
-                    (&mut self.squares, &mut self.spare),
-                    budget.score,
-                    c.iter(),
-                    &refit,
-                    cap2,
-                );
+            if let Some(refit) = fit(&self.inlier_set[..count], &self.inliers[..count], &best_pose) {
+                let mut over_all = |pose: &Pose| {
+                    let all = score(
+                        (&mut self.squares, &mut self.spare),
+                        budget.score,
+                        c.iter(),
+                        pose,
+                        cap2,
+                        f64::INFINITY,
+                    );
+                    all.map_or(f64::INFINITY, |s| s.score)
+                };
+                let all_best = over_all(&best_pose);
+                let all_refit = over_all(&refit);
                 if all_refit <= all_best {
                     pose = refit;
                     refitted = true;
@@ -319,78 +330,125 @@ impl ConsensusSampler {
     }
 }
 
-/// `kind` of score of `pose` over `set` (`buffers`: two of the sampler's, as long as `set`).
+/// A sample's score, and for a median the tan² α beyond which a correspondence's α surely
+/// exceeds it (infinite where that is not known).
+#[derive(Debug, Clone, Copy)]
+struct Scored {
+    score: f64,
+    exceeded: f64,
+}
+
+/// `kind` of score of `pose` over `set` (`buffers`: two of the sampler's, as long as `set`), or
+/// `None` for a median that cannot be below the best so far: half of `set` (rounded up) has a
+/// tan² α beyond `beaten` (that best's [`Scored::exceeded`]).
 fn score<'a>(
     buffers: (&mut [f64], &mut [f64]),
     kind: SampleScore,
-    set: impl Iterator<Item = &'a Correspondence> + Clone,
+    set: impl ExactSizeIterator<Item = &'a Correspondence> + Clone,
     pose: &Pose,
     cap2: f64,
-) -> f64 {
+    beaten: f64,
+) -> Option<Scored> {
     match kind {
-        SampleScore::Truncated => truncated_score(set, pose, cap2),
-        SampleScore::Median => median_square(buffers.0, buffers.1, set, pose),
+        SampleScore::Truncated => Some(Scored {
+            score: truncated_score(set, pose, cap2),
+            exceeded: f64::INFINITY,
+        }),
+        SampleScore::Median => median_square(buffers.0, buffers.1, set, pose, beaten),
     }
 }
 
-/// Ratios (the median's pivot) beyond which [`median_square`] takes every α: within 1e-8 rad
-/// of π/2, where a relative band of [`MEDIAN_BAND`] is too few ulps of α to be safe.
-const MEDIAN_RATIO_LIMIT: f64 = 1e8;
-/// The relative width of [`median_square`]'s band about the pivot ratio.
+/// Pivots (tan² α of the median's rank) beyond which [`median_square`] takes every α: within
+/// 1e-8 rad of π/2, where a relative band of [`MEDIAN_BAND`] is too few ulps of α to be safe.
+const MEDIAN_TAN2_LIMIT: f64 = 1e16;
+/// The relative width of [`median_square`]'s band about the pivot's tan α ...
 const MEDIAN_BAND: f64 = 1e-6;
+/// ... and its least half-width: [`Correspondence::alpha_tan2`] and α's own terms agree to a few
+/// 10⁻¹⁶ rad of angle, more than a relative band holds where α is tiny.
+const MEDIAN_BAND_FLOOR: f64 = 1e-12;
 
 /// The median α² of `set` at `pose`: the square of the α of rank m/2 (0-based) among the m,
-/// exactly as selecting it among every α² gives it, with an arc tangent for a few of them only.
+/// exactly as selecting it among every α² gives it, with an arc tangent for a few of them only;
+/// `None`, early, once half of `set` (rounded up) has a tan² α beyond `beaten`.
 ///
-/// α = atan2(|n × m|, |n · m|) ([`Correspondence::alpha_terms`]) rises with the ratio of the
-/// two, so the ratios are ranked instead and the element of rank m/2 found; the α of every
-/// element whose ratio lies within a relative [`MEDIAN_BAND`] of it (itself included) is then
-/// computed, and the median is the one of the right rank among those (the elements below the
-/// band counted). Outside the band the ratios differ from the pivot's by a millionth, far more
-/// than the arc tangent's error (under an ulp) and the ratios' rounding can reorder, so no α
-/// outside it can take the median's rank; inside it the α themselves decide, as before. Where
-/// that margin is not assured (a pivot ratio beyond [`MEDIAN_RATIO_LIMIT`], infinite or NaN) every
-/// α is computed, as before. The arc tangent was about half of the consensus's scoring, which
-/// takes the median over the rest of the set for every one of a frame's hundred-odd samples.
+/// α rises with tan α, so the correspondences are ranked by tan² α
+/// ([`Correspondence::alpha_tan2`], without the arc tangent, square roots or the normalisation
+/// of α's own) and the element of rank m/2 found; the α of every element whose tan α lies
+/// within a relative [`MEDIAN_BAND`] (and at least [`MEDIAN_BAND_FLOOR`]) of it, itself
+/// included, is then computed, and the median is the one of the right rank among those (the
+/// elements below the band counted). Outside the band the tangents differ from the pivot's by a
+/// millionth, far more than the arc tangent's error (under an ulp) and the tangents' rounding can
+/// reorder, so no α outside it can take the median's rank; inside it the α themselves decide,
+/// as before. Where that margin is not assured (a pivot beyond [`MEDIAN_TAN2_LIMIT`], infinite or
+/// NaN) every α is computed, as before. The arc tangent was about half of the consensus's
+/// scoring, which takes the median over the rest of the set for every one of a frame's
+/// hundred-odd samples.
+///
+/// The same margin past the band's top bounds the median from above: an element whose tan² α
+/// is beyond [`Scored::exceeded`] has a larger α than the median. Once m − m/2 of another
+/// sample's m are beyond the best median's bound, at most m/2 can be below it, so that sample's
+/// median (rank m/2) is at least the best's and cannot replace it (the sampler keeps strictly
+/// lower scores), whatever the rest holds: its scoring stops there.
 fn median_square<'a>(
-    ratios: &mut [f64],
+    keys: &mut [f64],
     spare: &mut [f64],
-    set: impl Iterator<Item = &'a Correspondence> + Clone,
+    set: impl ExactSizeIterator<Item = &'a Correspondence> + Clone,
     pose: &Pose,
-) -> f64 {
-    let mut m = 0;
-    let mut nan = false;
-    for (slot, corr) in ratios.iter_mut().zip(set.clone()) {
-        *slot = corr.alpha_terms(pose).map_or(f64::INFINITY, |(sin, cos)| sin / cos);
-        nan |= slot.is_nan();
-        m += 1;
+    beaten: f64,
+) -> Option<Scored> {
+    let m = set.len();
+    let rank = m / 2;
+    let (mut nan, mut above) = (false, 0);
+    for (slot, corr) in keys.iter_mut().zip(set.clone()) {
+        let key = corr.alpha_tan2(pose);
+        *slot = key;
+        nan |= key.is_nan();
+        if key > beaten {
+            above += 1;
+            if above == m - rank {
+                return None;
+            }
+        }
     }
     if m == 0 {
-        return 0.0;
+        return Some(Scored {
+            score: 0.0,
+            exceeded: f64::INFINITY,
+        });
     }
-    let rank = m / 2;
-    spare[..m].copy_from_slice(&ratios[..m]);
+    spare[..m].copy_from_slice(&keys[..m]);
     let (_, pivot, _) = spare[..m].select_nth_unstable_by(rank, f64::total_cmp);
     let pivot = *pivot;
-    if nan || pivot.is_nan() || pivot > MEDIAN_RATIO_LIMIT {
+    if nan || pivot.is_nan() || pivot > MEDIAN_TAN2_LIMIT {
         for (slot, corr) in spare.iter_mut().zip(set) {
             *slot = corr.alpha(pose).powi(2);
         }
         let (_, median, _) = spare[..m].select_nth_unstable_by(rank, f64::total_cmp);
-        return *median;
+        return Some(Scored {
+            score: *median,
+            exceeded: f64::INFINITY,
+        });
     }
-    let (low, high) = (pivot * (1.0 - MEDIAN_BAND), pivot * (1.0 + MEDIAN_BAND));
+    let tan = pivot.sqrt();
+    let low = tan * (1.0 - MEDIAN_BAND) - MEDIAN_BAND_FLOOR;
+    let high = tan * (1.0 + MEDIAN_BAND) + MEDIAN_BAND_FLOOR;
+    let low2 = if low > 0.0 { low * low } else { f64::NEG_INFINITY };
+    let high2 = high * high;
     let (mut below, mut band) = (0, 0);
-    for (ratio, corr) in ratios[..m].iter().zip(set) {
-        if *ratio < low {
+    for (key, corr) in keys[..m].iter().zip(set) {
+        if *key < low2 {
             below += 1;
-        } else if *ratio <= high {
+        } else if *key <= high2 {
             spare[band] = corr.alpha(pose).powi(2);
             band += 1;
         }
     }
     let (_, median, _) = spare[..band].select_nth_unstable_by(rank - below, f64::total_cmp);
-    *median
+    let exceeded = high * (1.0 + MEDIAN_BAND) + MEDIAN_BAND_FLOOR;
+    Some(Scored {
+        score: *median,
+        exceeded: exceeded * exceeded,
+    })
 }
 
 /// (1/m) Σ min(α², cap²) over `set` (0 for an empty set).
@@ -421,11 +479,13 @@ mod tests {
         *squares.select_nth_unstable_by(m / 2, f64::total_cmp).1
     }
 
-    /// The median from the ratios and a band of arc tangents is the plain one bit for bit: on
-    /// sets of every size with inliers and outliers, with twins (equal ratios) and near-twins,
-    /// segments through the centre (π/2), planes at right angles, and every α equal.
+    /// The median from the tangents and a band of arc tangents is the plain one bit for bit: on
+    /// sets of every size with inliers and outliers, exact and nearly exact lines (α of 10⁻¹⁶ to
+    /// 10⁻¹⁰), twins (equal tangents) and near-twins, segments through the centre (π/2), planes
+    /// at right angles, and every α equal. A scoring stopped early by the last set's bound is
+    /// one whose plain median is no lower than the last set's.
     #[test]
-    fn the_median_from_ratios_is_the_plain_median_bit_for_bit() {
+    fn the_median_from_tangents_is_the_plain_median_bit_for_bit() {
         let mut rng = SmallRng::seed_from_u64(5);
         let v = |rng: &mut SmallRng, r: f64| Vector3::from_fn(|_, _| rng.random_range(-r..r));
         let pose = Isometry3::from_parts(
@@ -433,6 +493,11 @@ mod tests {
             UnitQuaternion::from_euler_angles(0.02, -0.03, 0.7),
         );
         let (mut ratios, mut spare) = (vec![0.0; 64], vec![0.0; 64]);
+        let mut last = Scored {
+            score: f64::INFINITY,
+            exceeded: f64::INFINITY,
+        };
+        let mut stopped = 0;
         for trial in 0..3000 {
             let n = 1 + trial % 40;
             let mut set = Vec::with_capacity(n);
@@ -445,9 +510,11 @@ mod tests {
                     continue;
                 };
                 // Inliers within a degree, outliers anywhere; now and then exactly at right angles.
-                let tilt = match rng.random_range(0..10) {
+                let tilt = match rng.random_range(0..12) {
                     0..=5 => rng.random_range(0.0..0.02),
                     6..=8 => rng.random_range(0.0..1.6),
+                    9 => 0.0,
+                    10 => rng.random_range(0.0..1e-10),
                     _ => std::f64::consts::FRAC_PI_2,
                 };
                 let axis = nalgebra::Unit::new_normalize(edge.normal.cross(&v(&mut rng, 1.0)));
@@ -468,13 +535,23 @@ mod tests {
                 let through = pose.transform_point(&c);
                 set[0].segment = [through, through + pose.rotation * Vector3::new(1.0, 2.0, 0.5)];
             }
-            let got = median_square(&mut ratios, &mut spare, set.iter(), &pose);
-            assert_eq!(
-                got.to_bits(),
-                plain_median(&set, &pose).to_bits(),
-                "trial {trial}, {n} lines"
-            );
+            let plain = plain_median(&set, &pose);
+            let got = median_square(&mut ratios, &mut spare, set.iter(), &pose, f64::INFINITY).unwrap();
+            assert_eq!(got.score.to_bits(), plain.to_bits(), "trial {trial}, {n} lines");
+            match median_square(&mut ratios, &mut spare, set.iter(), &pose, last.exceeded) {
+                Some(early) => assert_eq!(early.score.to_bits(), plain.to_bits(), "trial {trial}, bounded"),
+                None => {
+                    stopped += 1;
+                    assert!(
+                        !plain.is_finite() || plain >= last.score,
+                        "trial {trial}: {plain} < {}",
+                        last.score
+                    );
+                }
+            }
+            last = got;
         }
+        assert!(stopped > 300, "{stopped} of 3000 stopped early");
         // Every α the same (a set of twins): the band holds them all.
         let one = {
             let c = Point3::new(0.02, 0.0, 0.0);
@@ -489,7 +566,7 @@ mod tests {
             }
         };
         let twins = [one; 9];
-        let got = median_square(&mut ratios, &mut spare, twins.iter(), &pose);
-        assert_eq!(got.to_bits(), plain_median(&twins, &pose).to_bits());
+        let got = median_square(&mut ratios, &mut spare, twins.iter(), &pose, f64::INFINITY).unwrap();
+        assert_eq!(got.score.to_bits(), plain_median(&twins, &pose).to_bits());
     }
 }

@@ -6,8 +6,8 @@ use nalgebra::{Isometry3, Point3, Translation3, Unit, UnitQuaternion, Vector3};
 use omnitrack_core::geometry::{Correspondence, EdgePlane, Pose};
 use omnitrack_core::Rig;
 use omnitrack_solver::{
-    minimise_xi, minimise_xi_upright, sample_count, xi_solve, ConsensusError, ConsensusSampler, SampleScore,
-    SamplingBudget, SimplexOptions, SolveError, SolverOptions, StopReason,
+    minimise_xi, minimise_xi_upright, r_and_t_refine, sample_count, xi_solve, ConsensusError, ConsensusSampler,
+    LineError, SampleScore, SamplingBudget, SharedStart, SimplexOptions, SolveError, SolverOptions, StopReason,
 };
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
@@ -273,12 +273,12 @@ fn budget(max_samples: u64, time_budget: Duration) -> SamplingBudget {
     }
 }
 
-fn simplex_fit() -> impl FnMut(&[Correspondence], &Pose) -> Option<Pose> {
+fn simplex_fit() -> impl FnMut(&[Correspondence], &[usize], &Pose) -> Option<Pose> {
     let opts = SimplexOptions {
         x_tolerance: 1e-6,
         ..Default::default()
     };
-    move |set: &[Correspondence], start: &Pose| Some(minimise_xi(set, start, &opts).0)
+    move |set: &[Correspondence], _: &[usize], start: &Pose| Some(minimise_xi(set, start, &opts).0)
 }
 
 /// Eq. 2 with 95 % success means about 1 run in 20 draws no outlier-free sample and fails: in a
@@ -409,6 +409,106 @@ fn consensus_stops_on_its_time_budget() {
         )
         .unwrap();
     assert_eq!((out.stop, out.samples), (StopReason::SampleCount, 5));
+}
+
+/// The bits of a pose, for comparing fits exactly.
+fn bits(p: &Pose) -> [u64; 7] {
+    let (t, q) = (p.translation.vector, p.rotation.coords);
+    [t.x, t.y, t.z, q.x, q.y, q.z, q.w].map(f64::to_bits)
+}
+
+/// A fit from the shared first step is R_and_T's from scratch, bit for bit: for every line
+/// error, on samples with and without outliers, from the prepared start and from another one,
+/// and through the consensus sampler (sample fits and the refit).
+#[test]
+fn shared_start_fits_are_r_and_t_refine_bit_for_bit() {
+    let mut rng = SmallRng::seed_from_u64(14);
+    let (c, _) = cluttered(&mut rng);
+    let mut shared = SharedStart::new(40);
+    for error in [LineError::E1, LineError::E2, LineError::E3] {
+        let o = SolverOptions {
+            error,
+            convergence_rad: 1e-6,
+            ..SolverOptions::default()
+        };
+        let guess = offset(&mut rng, &truth(), 2f64.to_radians(), 0.1);
+        shared.prepare(&c, &guess, error);
+        for trial in 0..300 {
+            let n = 3 + trial % 12;
+            let mut lines: Vec<usize> = (0..c.len()).collect();
+            for i in 0..n {
+                let j = rng.random_range(i..c.len());
+                lines.swap(i, j);
+            }
+            lines.truncate(n);
+            let set: Vec<Correspondence> = lines.iter().map(|&i| c[i]).collect();
+            let elsewhere = offset(&mut rng, &guess, 0.01, 0.01);
+            for start in [guess, elsewhere] {
+                let want = r_and_t_refine(&set, &start, &o);
+                let got = shared.refine(&set, &lines, &start, &o);
+                assert_eq!(
+                    got.map(|p| bits(&p)),
+                    want.map(|p| bits(&p)),
+                    "{error:?}, trial {trial}"
+                );
+            }
+        }
+        let o_other = SolverOptions {
+            error: if error == LineError::E1 {
+                LineError::E2
+            } else {
+                LineError::E1
+            },
+            ..o.clone()
+        };
+        let want = r_and_t_refine(&c[..10], &guess, &o_other);
+        let got = shared.refine(&c[..10], &(0..10).collect::<Vec<_>>(), &guess, &o_other);
+        assert_eq!(
+            got.map(|p| bits(&p)),
+            want.map(|p| bits(&p)),
+            "{error:?} rows, another error"
+        );
+
+        let b = SamplingBudget {
+            score: SampleScore::Median,
+            ..budget(60, Duration::from_secs(600))
+        };
+        let mut sampler = ConsensusSampler::new(40, LAMBDA, 1000);
+        let seed = rng.random();
+        let plain = sampler
+            .run(
+                &c,
+                &guess,
+                &b,
+                &mut SmallRng::seed_from_u64(seed),
+                &mut |set, _, start| r_and_t_refine(set, start, &o),
+            )
+            .unwrap();
+        let from_shared = sampler
+            .run(
+                &c,
+                &guess,
+                &b,
+                &mut SmallRng::seed_from_u64(seed),
+                &mut |set, lines, start| shared.refine(set, lines, start, &o),
+            )
+            .unwrap();
+        assert_eq!(bits(&from_shared.pose), bits(&plain.pose), "{error:?} consensus");
+        assert_eq!(
+            (from_shared.samples, from_shared.inlier_count),
+            (plain.samples, plain.inlier_count)
+        );
+    }
+    // A set beyond the capacity prepares nothing; its fits are computed in full.
+    let mut small = SharedStart::new(8);
+    small.prepare(&c, &truth(), LineError::E2);
+    let o = SolverOptions {
+        error: LineError::E2,
+        ..SolverOptions::default()
+    };
+    let want = r_and_t_refine(&c[..10], &truth(), &o);
+    let got = small.refine(&c[..10], &(0..10).collect::<Vec<_>>(), &truth(), &o);
+    assert_eq!(got.map(|p| bits(&p)), want.map(|p| bits(&p)));
 }
 
 #[test]

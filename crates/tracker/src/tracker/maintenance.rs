@@ -213,7 +213,16 @@ impl Tracker<'_> {
                 convergence_rad: self.solver.convergence_rad.max(SAMPLE_CONVERGENCE_RAD),
                 ..self.solver.clone()
             };
-            let mut f = |c: &[Correspondence], start: &Pose| fit(upright, method, &solver, c, start);
+            // Every sample's fit starts from the prediction: where the fit is R_and_T's, each
+            // line's first step there is worked out once for all of them (`SharedStart`).
+            let shared = (!upright && method != SolverMethod::Xi).then(|| {
+                self.shared_start.prepare(&self.set, predicted, solver.error);
+                &self.shared_start
+            });
+            let mut f = |c: &[Correspondence], lines: &[usize], start: &Pose| match shared {
+                Some(shared) => shared.refine(c, lines, start, &solver),
+                None => fit(upright, method, &solver, c, start),
+            };
             match self
                 .sampler
                 .run_sized(lambda, &self.set, predicted, &budget, &mut self.rng, &mut f)
