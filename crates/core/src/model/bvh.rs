@@ -376,6 +376,10 @@ fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
 
 /// Barycentric slack so that rays through a shared edge never slip between its two triangles.
 const EDGE_SLACK: f32 = 1e-6;
+/// A hit this far (barycentric) inside a triangle's edges is one no box holding the triangle
+/// can miss by rounding ([`TriangleBvh::occludes_inside`]); rays nearer an edge are left to a
+/// traversal.
+pub const OCCLUDER_MARGIN: f32 = 1e-3;
 
 impl Triangle {
     pub fn new(p0: [f32; 3], p1: [f32; 3], p2: [f32; 3]) -> Triangle {
@@ -404,6 +408,20 @@ impl Triangle {
     /// Möller–Trumbore, two-sided: the hit distance in `(t_min, t_max)`.
     #[inline]
     pub fn intersect(&self, ray: &Ray, t_min: f32, t_max: f32) -> Option<f32> {
+        self.intersect_within(ray, t_min, t_max, EDGE_SLACK)
+    }
+
+    /// [`Self::intersect`] where the hit must lie at least `margin` (barycentric) inside every
+    /// edge: such a hit lies well inside the triangle's box and every box holding it, so a
+    /// traversal of a BVH that holds the triangle finds it too.
+    #[inline]
+    pub fn intersect_inside(&self, ray: &Ray, t_min: f32, t_max: f32, margin: f32) -> Option<f32> {
+        self.intersect_within(ray, t_min, t_max, -margin)
+    }
+
+    /// Möller–Trumbore with the barycentric bounds widened by `slack` (narrowed when negative).
+    #[inline]
+    fn intersect_within(&self, ray: &Ray, t_min: f32, t_max: f32, slack: f32) -> Option<f32> {
         let p = cross(ray.dir, self.e2);
         let det = dot(self.e1, p);
         if det == 0.0 || !det.is_finite() {
@@ -412,12 +430,12 @@ impl Triangle {
         let inv = 1.0 / det;
         let s = sub(ray.origin, self.p0);
         let u = dot(s, p) * inv;
-        if !(-EDGE_SLACK..=1.0 + EDGE_SLACK).contains(&u) {
+        if !(-slack..=1.0 + slack).contains(&u) {
             return None;
         }
         let q = cross(s, self.e1);
         let v = dot(ray.dir, q) * inv;
-        if v < -EDGE_SLACK || u + v > 1.0 + EDGE_SLACK {
+        if v < -slack || u + v > 1.0 + slack {
             return None;
         }
         let t = dot(self.e2, q) * inv;
@@ -466,9 +484,33 @@ impl TriangleBvh {
     /// Whether any triangle is hit in `(t_min, t_max)`.
     #[inline]
     pub fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool {
+        self.occluder(ray, t_min, t_max).is_some()
+    }
+
+    /// The slot of a triangle hit in `(t_min, t_max)`, if any: the first one found, not the
+    /// closest. A caller casting many rays past the same wall tries it first
+    /// ([`Self::occludes_inside`]).
+    #[inline]
+    pub fn occluder(&self, ray: &Ray, t_min: f32, t_max: f32) -> Option<u32> {
+        let mut found = None;
         self.bvh.any(ray, t_max, |slot| {
-            self.triangles[slot as usize].intersect(ray, t_min, t_max).is_some()
-        })
+            let hit = self.triangles[slot as usize].intersect(ray, t_min, t_max).is_some();
+            if hit {
+                found = Some(slot);
+            }
+            hit
+        });
+        found
+    }
+
+    /// Whether the triangle in `slot` is hit in `(t_min, t_max)` at least
+    /// [`OCCLUDER_MARGIN`] inside its edges ([`Triangle::intersect_inside`]): then
+    /// [`Self::occluded`] holds too, without a traversal. `false` says nothing.
+    #[inline]
+    pub fn occludes_inside(&self, slot: u32, ray: &Ray, t_min: f32, t_max: f32) -> bool {
+        self.triangles
+            .get(slot as usize)
+            .is_some_and(|t| t.intersect_inside(ray, t_min, t_max, OCCLUDER_MARGIN).is_some())
     }
 
     /// Closest hit in `(t_min, t_max)`: (payload, t).
