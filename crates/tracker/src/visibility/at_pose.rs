@@ -52,7 +52,7 @@ const START_SLACK_M: f32 = 1e-3;
 /// rays from 4,576 grid positions took 11–16 s as traversals, and 2.3–2.9 s tried against the
 /// last occluder first, 1.8 million of them traversing (load 4.5; the positions' gathering
 /// 0.3–0.5 s of either).
-const TRIED_PER_TRAVERSAL: u64 = 10;
+pub const TRIED_PER_TRAVERSAL: u64 = 10;
 
 /// A segment of the model seen from a position.
 #[derive(Debug, Clone, Copy, PartialEq)]
