@@ -218,29 +218,42 @@ mod tests {
         assert!(EdgePlane::from_rays(Point3::origin(), &r, &(2.0 * r)).is_none());
     }
 
-    /// tan² α without the normalisation is `alpha_terms`' ratio squared, to 10⁻¹⁵ rad of angle,
-    /// for planes at any angle (exact ones too), and infinite for segments pointing at the centre.
-    #[test]
-    fn alpha_tan2_is_the_tangent_of_alpha_squared() {
-        let mut x = 0x9e37_79b9_7f4a_7c15u64;
-        let mut next = move || {
+    /// Uniform draws in [-1, 1) from `seed` (xorshift64).
+    fn uniform(mut x: u64) -> impl FnMut() -> f64 {
+        move || {
             x ^= x << 13;
             x ^= x >> 7;
             x ^= x << 17;
             (x >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
-        };
+        }
+    }
+
+    /// A segment a few metres off observed exactly from a sensor centre near the rig's, and a
+    /// pose a few decimetres from the one it was observed at.
+    fn random_case(next: &mut impl FnMut() -> f64) -> (Correspondence, Pose) {
+        let c = exact(
+            [
+                Point3::new(4.0 * next(), 4.0 * next(), 2.0 * next()),
+                Point3::new(4.0 * next(), 4.0 * next(), 2.0 * next()),
+            ],
+            Point3::new(0.05 * next(), 0.05 * next(), 0.05 * next()),
+        );
+        (
+            c,
+            Isometry3::translation(0.3 * next(), 0.3 * next(), 0.1 * next()) * pose(),
+        )
+    }
+
+    /// tan² α without the normalisation is `alpha_terms`' ratio squared, to 10⁻¹⁵ rad of angle,
+    /// for planes at any angle (exact ones too), and infinite for segments pointing at the centre.
+    #[test]
+    fn alpha_tan2_is_the_tangent_of_alpha_squared() {
+        let mut next = uniform(0x9e37_79b9_7f4a_7c15);
         for i in 0..5000 {
-            let mut c = exact(
-                [
-                    Point3::new(4.0 * next(), 4.0 * next(), 2.0 * next()),
-                    Point3::new(4.0 * next(), 4.0 * next(), 2.0 * next()),
-                ],
-                Point3::new(0.05 * next(), 0.05 * next(), 0.05 * next()),
-            );
+            let (mut c, p) = random_case(&mut next);
             if i % 3 > 0 {
                 c.edge.normal = Unit::new_normalize(Vector3::new(next(), next(), next()));
             }
-            let p = Isometry3::translation(0.3 * next(), 0.3 * next(), 0.1 * next()) * pose();
             let (sin, cos) = c.alpha_terms(&p).unwrap();
             let tan = sin / cos;
             let got = c.alpha_tan2(&p).sqrt();
@@ -269,23 +282,10 @@ mod tests {
                 .atan2(c.edge.normal.dot(&pl.normal).abs()),
             None => std::f64::consts::FRAC_PI_2,
         };
-        let mut x = 0x2545_f491_4f6c_dd1du64;
-        let mut next = move || {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            (x >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
-        };
+        let mut next = uniform(0x2545_f491_4f6c_dd1d);
         for _ in 0..5000 {
-            let mut c = exact(
-                [
-                    Point3::new(4.0 * next(), 4.0 * next(), 2.0 * next()),
-                    Point3::new(4.0 * next(), 4.0 * next(), 2.0 * next()),
-                ],
-                Point3::new(0.05 * next(), 0.05 * next(), 0.05 * next()),
-            );
+            let (mut c, p) = random_case(&mut next);
             c.edge.normal = Unit::new_normalize(Vector3::new(next(), next(), next()));
-            let p = Isometry3::translation(0.3 * next(), 0.3 * next(), 0.1 * next()) * pose();
             assert_eq!(c.alpha(&p).to_bits(), reference(&c, &p).to_bits());
         }
         let through = Correspondence {
