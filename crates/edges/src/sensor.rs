@@ -95,8 +95,12 @@ pub(crate) struct Workspace {
     prefix: Vec<Moments>,
     stack: Vec<(u32, u32)>,
     pieces: Vec<(u32, u32)>,
-    /// One piece's hue-strip pixels (byte offsets into the image), left and right in turn.
+    /// One piece's hue-strip samples (x, y, and the unit step (dx, dy) to the left), and its
+    /// strip pixels as [t][side][sample]: their byte offsets into the image, then their hues
+    /// ([`HueTable::classify`]).
+    samples: [Vec<f32>; 4],
     strip: Vec<u32>,
+    strip_hues: Vec<u32>,
     cands: Vec<Candidate>,
     /// The candidates' normals packed for the pair test of `merge_across_chains` (0 once dead),
     /// one array per coordinate so that the test of a block of pairs vectorises: the test of
@@ -176,7 +180,9 @@ impl Workspace {
             prefix: resident(Vec::with_capacity(2 * MAX_CHAIN + 1)),
             stack: resident(Vec::with_capacity(2 * MAX_CHAIN)),
             pieces: resident(Vec::with_capacity(2 * MAX_CHAIN)),
+            samples: std::array::from_fn(|_| resident(Vec::with_capacity(params.hue_samples_per_edge.max(1)))),
             strip: resident(Vec::with_capacity(2 * strip_px * params.hue_samples_per_edge.max(1))),
+            strip_hues: resident(Vec::with_capacity(2 * strip_px * params.hue_samples_per_edge.max(1))),
             cands: resident(Vec::with_capacity(cand_cap)),
             normals: std::array::from_fn(|_| resident(Vec::with_capacity(cand_cap))),
             // Pieces are sampled once a pixel: none is longer than a few image perimeters.
