@@ -27,6 +27,9 @@ impl Workspace {
         let two_line = self.params.two_line_excess;
         let min_support = self.params.merge_min_support;
         let min_evidence = self.params.merge_gap_evidence;
+        // The cosine of the widest end-to-end angle `try_merge` lets through, once a pass rather
+        // than once a pair tried.
+        let near_cos = (1.5 * gap_max + 0.01).min(std::f64::consts::PI).cos();
         let pack = |n: &Vector3<f64>| [n.x as f32, n.y as f32, n.z as f32];
         for (k, coord) in self.normals.iter_mut().enumerate() {
             coord.clear();
@@ -41,6 +44,9 @@ impl Workspace {
                 if !self.cands[i].alive {
                     continue;
                 }
+                // i's own frame for `try_merge`'s gap test, made when first needed and again
+                // after each merge into i, rather than once a pair tried.
+                let mut i_frame = None;
                 // The normal test of a block of pairs at once (the compiler vectorises it):
                 // nearly every pair fails it. Pairs that pass are tried in the same order as
                 // one by one, and a merge, which turns i's normal, tests the rest of the
@@ -68,12 +74,14 @@ impl Workspace {
                         if dot.abs() < cos_max {
                             continue;
                         }
-                        if let Some(m) = try_merge(ci, cj, gap_max, tol, two_line, min_support) {
+                        let frame = *i_frame.get_or_insert_with(|| PlaneFrame::of(ci));
+                        if let Some(m) = try_merge(ci, cj, &frame, gap_max, near_cos, tol, two_line, min_support) {
                             if min_evidence > 0.0 && self.gap_evidence(&m, ci, cj, min_evidence) < min_evidence {
                                 self.stats.merges_refused += 1;
                                 continue;
                             }
                             self.cands[i] = m;
+                            i_frame = None;
                             self.cands[jj].alive = false;
                             for (k, coord) in self.normals.iter_mut().enumerate() {
                                 coord[i] = pack(&m.n)[k];
@@ -182,10 +190,33 @@ impl Workspace {
 /// Pairs whose normals `merge_across_chains` tests at once.
 const PAIR_BLOCK: usize = 32;
 
+/// A candidate's plane as `try_merge`'s gap test measures along it: the direction 90° on from
+/// r1 (n × r1), and the angle from r1 to r2.
+#[derive(Clone, Copy)]
+struct PlaneFrame {
+    e2: Vector3<f64>,
+    len: f64,
+}
+
+impl PlaneFrame {
+    fn of(c: &Candidate) -> PlaneFrame {
+        let e2 = c.n.cross(&c.r1);
+        PlaneFrame {
+            e2,
+            len: c.r2.dot(&e2).atan2(c.r2.dot(&c.r1)),
+        }
+    }
+}
+
+/// `frame`: `ci`'s [`PlaneFrame`]; `near_cos`: cos(min(1.5 `gap_max` + 0.01, π)), the cheapest
+/// reject's bound.
+#[allow(clippy::too_many_arguments)]
 fn try_merge(
     ci: &Candidate,
     cj: &Candidate,
+    frame: &PlaneFrame,
     gap_max: f64,
+    near_cos: f64,
     tol: f64,
     two_line: f64,
     min_support: f64,
@@ -206,14 +237,13 @@ fn try_merge(
         .max(ci.r1.dot(&jr2))
         .max(ci.r2.dot(&jr1))
         .max(ci.r2.dot(&jr2));
-    if near < (1.5 * gap_max + 0.01).min(std::f64::consts::PI).cos() {
+    if near < near_cos {
         return None;
     }
     // Cheap reject before the eigen-decomposition: the gap measured along i's own plane.
     {
-        let e2 = ci.n.cross(&ci.r1);
-        let ang = |r: &Vector3<f64>| r.dot(&e2).atan2(r.dot(&ci.r1));
-        let ilen = ang(&ci.r2);
+        let ang = |r: &Vector3<f64>| r.dot(&frame.e2).atan2(r.dot(&ci.r1));
+        let ilen = frame.len;
         let (a1, a2) = (ang(&jr1), ang(&jr2));
         let (lo, hi) = (a1.min(a2), a1.max(a2));
         let gap = if lo > ilen { lo - ilen } else { -hi };
