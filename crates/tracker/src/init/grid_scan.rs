@@ -26,10 +26,10 @@ use super::scoring::length_share;
 #[cfg(debug_assertions)]
 use super::scoring::support_of;
 use super::{work, GridBest, Initialiser, SearchVolume, FULL_COVER, GRID_SEGMENTS, LANES, VOTE_EDGES};
-use crate::edge_index::EdgeIndex;
+use crate::edge_index::{EdgeIndex, Reach};
 #[cfg(debug_assertions)]
 use crate::matching::best_edge_and_cover;
-use crate::matching::{Gate, Predicted, SegmentArc};
+use crate::matching::{Gate, Predicted, SegmentArc, MAX_SENSORS};
 use crate::vanishing::MAX_ROTATIONS;
 use crate::visibility::at_pose::{sample_point, SeenSegment, SightBuffers, SAMPLES};
 use nalgebra::{Point3, Translation3};
@@ -366,6 +366,10 @@ impl Initialiser<'_> {
         floor: f64,
     ) -> (Option<f64>, u64) {
         let (mut explained, mut counted) = (0.0, 0usize);
+        let mut reach = [Reach::Anything; MAX_SENSORS];
+        for (s, r) in reach.iter_mut().enumerate().take(self.centres.len()) {
+            *r = self.vote_index.reach(s, gate.cos_alpha);
+        }
         m.explained[..self.vote_edges.len()].fill(false);
         m.predicted.clear();
         m.counted.clear();
@@ -384,6 +388,7 @@ impl Initialiser<'_> {
                 &self.centres,
                 &self.vote_edges,
                 &self.vote_index,
+                &reach,
                 gate,
                 &mut m.explained,
             );
@@ -484,17 +489,25 @@ impl Initialiser<'_> {
 /// [`best_edge_and_cover`]'s cover of `pred` over the edges of `index` (built from `edges`)
 /// that can pass the gate: `None` if no edge passes it. Every edge that passes is marked in
 /// `explained`: the support's test (plane within the gate, overlapping by half) is the cover's.
+///
+/// Only the sensors whose edges the segment can meet are looked at (`reach`: each sensor's
+/// [`EdgeIndex::reach`] for the gate), with the same answer: a segment in front of one sensor of
+/// a ring has far fewer pairs to test.
 fn cover_near(
     pred: &Predicted,
     centres: &[Point3<f64>],
     edges: &[Edge],
     index: &EdgeIndex,
+    reach: &[Reach],
     gate: &Gate,
     explained: &mut [bool],
 ) -> Option<f64> {
     let mut covered = 0.0;
     let mut any = false;
-    for (s, c) in centres.iter().enumerate() {
+    for ((s, c), reach) in centres.iter().enumerate().zip(reach) {
+        if !reach.may_share(&(pred.ends_rig[0] - c.coords), &(pred.ends_rig[1] - c.coords)) {
+            continue;
+        }
         let n = &pred.normals[s];
         let Some(arc) = SegmentArc::new(pred, c, n) else {
             continue;
