@@ -347,11 +347,12 @@ impl SegmentArc {
     /// end angles in (−π, π], so an edge across the direction opposite the segment's first end
     /// (behind the sensor, in the extension of the segment's plane) covers the whole segment;
     /// on FZK-Haus 8 % of the pairs the grid's gate passed were such edges. Measuring them
-    /// along the arc through π (branch `arc-wrap-fix`) added wrong commits: ZInD 0 / 0 / 0 → 1
-    /// / 2 / 2 (a garage's half-turn twin, a pantry's quarter turn), FZK-Haus 1 / 1 / 1 → 1 / 2
-    /// / 2. Why they favour the truth in the final scores is not established; they are to go
-    /// when twins are refused by evidence (issue 47, item 2). The grid's coarse merit no longer
-    /// sees them (`EdgeIndex::may_share`).
+    /// along the arc through π (end angles more than π apart: an edge subtends less) added
+    /// wrong commits: ZInD 0 / 0 / 0 → 1 / 2 / 2 (a garage's half-turn twin, a pantry's quarter
+    /// turn), FZK-Haus 1 / 1 / 1 → 1 / 2 / 2 (docs/decisions.md, 2026-11-30). Why they favour
+    /// the truth is not established; they are to go when twins are refused by evidence (issue
+    /// 47, item 2). The grid's sensor test (`Reach::may_share`) keeps them, so that its answer
+    /// is every pair's.
     #[inline]
     pub(crate) fn shared(&self, edge: &Edge) -> (f64, f64, f64) {
         let angle = |x: &Vector3<f64>| x.dot(&self.w).atan2(x.dot(&self.u));
