@@ -85,7 +85,7 @@ fn az_bin(az: f64) -> usize {
     ((a / TAU * AZ_BINS as f64) as usize).min(AZ_BINS - 1)
 }
 
-/// A sensor's [`Cap`] widened by a gate ([`EdgeIndex::reach`]).
+/// A sensor's cap of directions (where its edges lie) widened by a gate ([`EdgeIndex::reach`]).
 #[derive(Debug, Clone, Copy)]
 pub enum Reach {
     /// The sensor has no edges.
