@@ -53,7 +53,7 @@ pub struct EdgeIndex {
 
 /// Where one sensor's edges lie: the cap of directions (axis, cosine of its radius) that holds
 /// the end rays of all of them, and so their whole arcs (a cap narrower than a hemisphere holds
-/// the shorter great-circle arc between any two of its points). `None` when no such cap is
+/// the shorter great-circle arc between any two of its points). `Anywhere` when no such cap is
 /// narrower than [`CAP_MAX_RAD`] (a fisheye's edges may lie all round): then every segment
 /// may meet them.
 #[derive(Debug, Clone, Copy, Default)]
@@ -391,8 +391,9 @@ mod tests {
     }
 
     /// No edge that shares an angle with a segment within the gate (as `SegmentArc::shared`
-    /// measures it, its known defect included) is left out by its sensor's cap (ring sensors with edges up to 55° off their axes, segments anywhere round, gates
-    /// from 2° to 12°), and most segments are ruled out for most sensors.
+    /// measures it, its known defect included) is left out by its sensor's cap (a ring of five
+    /// sensors with edges up to 55° off their axes, segments anywhere round, gates from 2° to
+    /// 12°), and most segments are ruled out for most sensors.
     #[test]
     fn a_sensors_cap_never_rules_out_an_edge_that_shares_an_angle() {
         use crate::matching::{Gate, Predicted, SegmentArc};
@@ -420,8 +421,8 @@ mod tests {
             ];
             let pred = Predicted::new(&ends, &omnitrack_core::geometry::Pose::identity(), &centres);
             // Edges in or near the segment's plane of each sensor, tilted within the gate, their
-            // ends anywhere along that plane inside the sensor's view; and others anywhere in
-            // view, which make up the caps.
+            // ends anywhere along that plane inside the sensor's view (behind the segment too,
+            // across the direction opposite its first end). They alone make up the caps.
             let mut edges = Vec::new();
             for s in 0..5 {
                 let n = pred.normals[s];
