@@ -10,8 +10,10 @@ use nalgebra::{Point3, Vector3};
 use omnitrack_core::geometry::{Correspondence, Pose};
 use omnitrack_edges::{Edge, HueSignature};
 
-/// Most sensors a rig may have for the fixed per-sensor arrays of the matcher.
-pub const MAX_SENSORS: usize = 16;
+/// Most sensors a rig may have: the size of the matcher's fixed per-sensor arrays (a rig file
+/// of more is refused when it is read). A rig built in code with more has its sensors past
+/// these left out of matching rather than read past the arrays.
+pub const MAX_SENSORS: usize = omnitrack_core::rig::MAX_SENSORS;
 
 /// A model segment as seen from a pose: its end points in the rig frame and, per sensor, the
 /// unit normal of the plane through the sensor's centre and the segment.
@@ -140,7 +142,7 @@ pub fn best_edge(pred: &Predicted, centres: &[Point3<f64>], edges: &[Edge], gate
     let mut best: Option<(usize, f64)> = None;
     for (i, e) in edges.iter().enumerate() {
         let s = e.sensor as usize;
-        if s >= centres.len() {
+        if s >= centres.len().min(MAX_SENSORS) {
             continue;
         }
         let n = &pred.normals[s];

@@ -28,6 +28,12 @@ use toml::{Table, Value};
 /// equirectangular panorama); the stages' buffers are sized by it.
 pub const MAX_SENSOR_PIXELS: u64 = 1 << 26;
 
+/// The most sensors a rig may have. The tracker keeps its per-sensor figures of a model segment
+/// (its plane in each sensor, its arc, which edges it may meet) in fixed arrays that are copied
+/// for every segment a search scores, so their size is fixed at build time; a rig of more is
+/// refused when it is read rather than having sensors the tracker would leave out.
+pub const MAX_SENSORS: usize = 16;
+
 /// One camera of the rig.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Sensor {
@@ -198,6 +204,12 @@ impl Rig {
                 ))
             }
         };
+        if entries.len() > MAX_SENSORS {
+            return Err(err(
+                "key 'sensors': ".into(),
+                format!("{} sensors; a rig may have at most {MAX_SENSORS}", entries.len()),
+            ));
+        }
         let control = control::rig_control(&table).map_err(|(key, m)| err(format!("key '{key}': "), m))?;
         let mut sensors: Vec<Option<Sensor>> = vec![None; entries.len()];
         for (index, entry) in entries.iter().enumerate() {

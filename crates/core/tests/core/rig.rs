@@ -122,6 +122,19 @@ fn error_of(text: &str) -> String {
     Rig::from_toml_str(text, "rig.toml").unwrap_err().to_string()
 }
 
+/// The most sensors a rig may have load; one more is refused (in the errors test below).
+#[test]
+fn a_rig_of_the_most_sensors_loads() {
+    let text = format!(
+        "name = \"t\"\n{}",
+        (0..omnitrack_core::rig::MAX_SENSORS)
+            .map(|i| GOOD_SENSOR.replace("id = 0", &format!("id = {i}")))
+            .collect::<String>()
+    );
+    let rig = Rig::from_toml_str(&text, "rig.toml").unwrap();
+    assert_eq!(rig.sensors.len(), omnitrack_core::rig::MAX_SENSORS);
+}
+
 #[test]
 fn a_two_sensor_mixed_rig_loads() {
     let rig = Rig::from_toml_str(&with_second_sensor(KB4_SENSOR), "rig.toml").unwrap();
@@ -204,6 +217,15 @@ fn bad_rig_files_name_the_file_the_sensor_and_the_key() {
             "rig.toml: key 'sensors': no [[sensors]] entries",
         ),
         ("name = [\n".to_string(), "rig.toml: not valid TOML:"),
+        (
+            format!(
+                "name = \"t\"\n{}",
+                (0..17)
+                    .map(|i| GOOD_SENSOR.replace("id = 0", &format!("id = {i}")))
+                    .collect::<String>()
+            ),
+            "rig.toml: key 'sensors': 17 sensors; a rig may have at most 16",
+        ),
     ];
     for (text, expected) in cases {
         let e = error_of(&text);
