@@ -270,8 +270,9 @@ pub(crate) fn detailed(a: &Args, rig: &Rig, label: &str, options: &RecordingOpti
             }
         }
     }
+    let appearance = a.appearance.as_deref().unwrap_or("default");
     let title = format!(
-        "{name} ({} segments, {long} used), rig {}, {} starts ({blind} more that see fewer than 3 model segments not counted), appearance {label}",
+        "{name} ({} segments, {long} used), rig {}, {} starts ({blind} more that see fewer than 3 model segments not counted), appearance {appearance}",
         model.segments.len(),
         rig.name,
         rows.iter().map(|r| r.counted).max().unwrap_or(0),
@@ -286,13 +287,15 @@ pub(crate) fn detailed(a: &Args, rig: &Rig, label: &str, options: &RecordingOpti
         row.first_pose_ms.sort_by(f64::total_cmp);
         let (looked, of) = row.cells.iter().fold((0, 0), |s, c| (s.0 + c.0, s.1 + c.1));
         table.push_str(&format!(
-            "\n| {row_name} | {} of {n} | {} | {} | {} | {looked} of {of} | {:.0} / {:.0} |",
+            "\n| {row_name} | {} of {n} | {} | {} | {} | {looked} of {of} | {} |",
             row.within_10,
             row.within_30,
             row.wrong,
             row.none,
-            percentile(&row.first_pose_ms, 0.5),
-            row.first_pose_ms.last().copied().unwrap_or(f64::NAN),
+            match row.first_pose_ms.last() {
+                Some(max) => format!("{:.0} / {max:.0}", percentile(&row.first_pose_ms, 0.5)),
+                None => "no first pose".into(),
+            },
             n = row.counted,
         ));
     }
@@ -314,21 +317,29 @@ pub(crate) fn detailed(a: &Args, rig: &Rig, label: &str, options: &RecordingOpti
         }
     );
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    // The command as given: the label also names the rig, which the file name and `--rig` say.
+    let mut command = format!("cargo bench --bench tracker -- --model {}", model_path.display());
+    if let Some(r) = &a.rig {
+        command.push_str(&format!(" --rig {}", r.display()));
+    }
+    command.push_str(&format!(" --starts {}", a.starts));
+    if let Some(spec) = &a.appearance {
+        command.push_str(&format!(" --appearance {spec}"));
+    }
+    if a.window_s != WINDOW_S {
+        command.push_str(&format!(" --window {}", a.window_s));
+    }
+    if let Some(r) = &a.rows {
+        command.push_str(&format!(" --rows {r}"));
+    }
+    if let Some(c) = &a.config {
+        command.push_str(&format!(" --config {}", c.display()));
+    }
     match omnitrack::desk::results::write(
         root,
-        &format!("detailed-{name}-{}-{label}", rig.name),
+        &format!("detailed-{name}-{}-{appearance}", rig.name),
         &title,
-        &format!(
-            "cargo bench --bench tracker -- --model {} --starts {} --appearance {label}{}{}",
-            model_path.display(),
-            a.starts,
-            if a.window_s == WINDOW_S {
-                String::new()
-            } else {
-                format!(" --window {}", a.window_s)
-            },
-            a.rows.as_ref().map_or(String::new(), |r| format!(" --rows {r}")),
-        ),
+        &command,
         &note,
     ) {
         Ok(path) => eprintln!("{name}: results in {}", path.display()),
