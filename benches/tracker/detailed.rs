@@ -317,7 +317,7 @@ pub(crate) fn detailed(a: &Args, rig: &Rig, label: &str, options: &RecordingOpti
         }
     );
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    // The command as given: the label also names the rig, which the file name and `--rig` say.
+    // The command as given (the recording's cache label is not an option: it also names the rig).
     let mut command = format!("cargo bench --bench tracker -- --model {}", model_path.display());
     if let Some(r) = &a.rig {
         command.push_str(&format!(" --rig {}", r.display()));
