@@ -281,6 +281,21 @@ fn recovers_after_the_rig_is_occluded_for_a_second() {
     assert!(worst < 0.15, "worst error after recovery {:.1} cm", worst * 100.0);
 }
 
+/// The fixture's frames detected, and the walk that turns back twice: the walk, then back from
+/// its end and forth again, two frames skipped at each turn (frame indices), with the rig, the
+/// test configuration and the frame period.
+fn turn_back_walk(f: &LabRecording) -> (Rig, TrackerConfig, Vec<Vec<omnitrack::edges::Edge>>, Vec<usize>, u64) {
+    let (mut source, rig, cfg, mut frame, mut detector) = replay(f);
+    let mut recorded = Vec::with_capacity(FRAMES);
+    while source.next_frame(&mut frame).unwrap() {
+        recorded.push(detector.detect(&frame).to_vec());
+    }
+    let period_ns = f.truth[1].timestamp_ns - f.truth[0].timestamp_ns;
+    let last = recorded.len() - 1;
+    let schedule: Vec<usize> = (0..=last).chain((60..=last - 3).rev()).chain(63..=last).collect();
+    (rig, cfg, recorded, schedule, period_ns)
+}
+
 /// Tracking allocates nothing per frame; nor does a bounded search (here the hinted first one:
 /// the module doc of `tracker::init`), the translation vote and its height sweep included; nor
 /// do relocalisations, however many (issue 50): after the walk the rig turns back twice, each
@@ -292,15 +307,8 @@ fn recovers_after_the_rig_is_occluded_for_a_second() {
 #[test]
 fn tracking_searches_and_relocalisations_allocate_nothing_and_touch_no_new_memory() {
     let f = fixture();
-    let (mut source, rig, cfg, mut frame, mut detector) = replay(f);
-    let mut recorded = Vec::with_capacity(FRAMES);
-    while source.next_frame(&mut frame).unwrap() {
-        recorded.push(detector.detect(&frame).to_vec());
-    }
-    let period_ns = f.truth[1].timestamp_ns - f.truth[0].timestamp_ns;
-    // The walk, then back from its end and forth again, two frames skipped at each turn.
+    let (rig, cfg, recorded, schedule, period_ns) = turn_back_walk(f);
     let last = recorded.len() - 1;
-    let schedule: Vec<usize> = (0..=last).chain((60..=last - 3).rev()).chain(63..=last).collect();
     let mut tracker = Tracker::new(&rig, &f.model, &f.table, &cfg, Some(hint(f)), 1);
     common::assert_counter_works();
     let (mut allocated, mut counted, mut tracking_frames) = (0, 0, 0);
@@ -358,6 +366,34 @@ fn tracking_searches_and_relocalisations_allocate_nothing_and_touch_no_new_memor
         faults_after_walk.is_empty(),
         "frames that wrote memory not written before (frame, pages): {faults_after_walk:?}"
     );
+}
+
+/// The turn from the image (`motion.frame_rotation`, off by default): on the walk that turns back
+/// twice skipping two frames (the test above), the turns the motion model cannot follow are
+/// measured from the frames' edges, nothing is allocated for it, and the walk is held as well.
+#[test]
+fn the_turn_measured_from_the_image_allocates_nothing_and_follows_a_turn_back() {
+    let f = fixture();
+    let (rig, mut cfg, recorded, schedule, period_ns) = turn_back_walk(f);
+    cfg.motion.frame_rotation = true;
+    let mut tracker = Tracker::new(&rig, &f.model, &f.table, &cfg, Some(hint(f)), 1);
+    let (mut allocated, mut worst) = (0, 0.0f64);
+    for (k, &i) in schedule.iter().enumerate() {
+        let tracking = tracker.state() == TrackerState::Tracking;
+        let (r, n) = common::allocations_in(|| tracker.process(&recorded[i], k as u64 * period_ns));
+        if tracking {
+            allocated += n;
+            if let Some(p) = &r.pose {
+                worst = worst.max(errors(f, f.truth[i].timestamp_ns, p).0);
+            }
+        }
+    }
+    let stats = tracker.stats();
+    eprintln!("{stats:?}; worst {:.1} cm", worst * 100.0);
+    assert_eq!(allocated, 0, "allocations while tracking with the turn from the image");
+    assert!(stats.frame_turns >= 1, "no turn taken from the image: {stats:?}");
+    assert_eq!(stats.losses, 0, "{stats:?}");
+    assert!(worst < 0.10, "worst {:.1} cm", worst * 100.0);
 }
 
 /// A relocalised pose is published only once a later frame's maintenance holds it (module

@@ -223,6 +223,12 @@ pub struct MotionConfig {
     pub accel_noise_m_s2: f64,
     /// The same for turning (deg/s² per √s).
     pub angular_accel_noise_deg_s2: f64,
+    /// Maintenance predicts the rig's turn since the last frame from the image
+    /// (`omnitrack_tracker::frame_rotation`: the frames' edges, model lines or not) where it
+    /// disagrees with the motion model's by more than the inlier angle. Off by default: on the
+    /// one-pinhole recordings it measured turns well but held no more frames (docs/decisions.md,
+    /// 2026-11-30).
+    pub frame_rotation: bool,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -381,6 +387,7 @@ impl Default for MotionConfig {
             filter: true,
             accel_noise_m_s2: 2.0,             // ours: a walk starting or stopping within a second
             angular_accel_noise_deg_s2: 180.0, // ours: a head turning to 180°/s within a second
+            frame_rotation: false,             // ours: measured, no gain on the one-pinhole hold (docs/decisions.md)
         } // Koch–Teller §5.4
     }
 }

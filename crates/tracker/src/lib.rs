@@ -32,7 +32,8 @@
 //! the search scheduling and the commit decision in `tracker::search` and Figure 7 in
 //! `tracker::maintenance`); what a frame's answer holds (module `report`); the searches
 //! themselves (module [`init`]); the correspondence table of Figure 8 ([`correspondence`]); the
-//! visibility table ([`visibility`]); the search worker ([`background`]).
+//! visibility table ([`visibility`]); the search worker ([`background`]); the motion filter
+//! ([`motion_filter`]) and the turn between frames from the image ([`frame_rotation`]).
 //!
 //! The tracker on a recording's frames, from a 3 m hint (what `omnitrack run` does, without the
 //! threads and the publishers; `tests/tracker.rs` runs it on rendered recordings):
@@ -70,6 +71,7 @@ pub mod background;
 pub mod correspondence;
 pub mod edge_index;
 mod floor;
+pub mod frame_rotation;
 pub mod init;
 pub mod matching;
 pub mod motion_filter;

@@ -93,6 +93,8 @@ pub struct TrackerStats {
     /// Frames with fewer accepted inliers than `maintenance.min_inliers` whose pose the motion
     /// filter fused where their lines fix it (module `motion_filter`), instead of refusing.
     pub filtered_few_lines: u64,
+    /// Maintenance frames whose predicted turn came from the image (module `frame_rotation`).
+    pub frame_turns: u64,
     /// Searches the wall clock stopped before their work budget did ([`InitReport::backstop`]):
     /// their answers depend on the machine's load.
     pub search_backstops: u64,

@@ -13,6 +13,7 @@ mod search;
 
 use crate::background::{Backlog, SearchJob, SearchLink};
 use crate::correspondence::{CorrespondenceState, CorrespondenceTable, HeldEdge, Track};
+use crate::frame_rotation::FrameRotation;
 use crate::init::{Candidate, InitOptions, Initialiser, SearchVolume};
 use crate::matching::{best_edge, EdgeNormals, Gate, Predicted};
 use crate::motion_filter::{MotionFilter, MotionNoise};
@@ -133,6 +134,8 @@ pub struct Tracker<'m> {
     support_solved: Vec<Option<(u32, f64)>>,
     /// The frame's edge normals packed for matching (`matching::EdgeNormals`).
     edge_normals: EdgeNormals,
+    /// The turn between consecutive frames from their edges (`motion.frame_rotation`).
+    frame_rotation: FrameRotation,
     /// The weights and residuals of the final robust fit (`solver::refine::cauchy`).
     robust_scratch: Vec<f64>,
     rng: SmallRng,
@@ -253,6 +256,7 @@ impl<'m> Tracker<'m> {
             support_at: resident(vec![None; capacity]),
             support_solved: resident(vec![None; capacity]),
             edge_normals: EdgeNormals::new(max_edges),
+            frame_rotation: FrameRotation::new(max_edges),
             robust_scratch: resident(vec![0.0; 2 * capacity]),
             rng: SmallRng::seed_from_u64(seed),
             state: TrackerState::Initialising,
