@@ -225,9 +225,11 @@ pub struct MotionConfig {
     pub angular_accel_noise_deg_s2: f64,
     /// Maintenance predicts the rig's turn since the last frame from the image
     /// (`omnitrack_tracker::frame_rotation`: the frames' edges, model lines or not) where it
-    /// disagrees with the motion model's by more than the inlier angle. Off by default: on the
-    /// one-pinhole recordings it measured turns well but held no more frames (docs/decisions.md,
-    /// 2026-11-30).
+    /// disagrees with the motion model's by more than the inlier angle; for rigs imaging at
+    /// least half the sphere (in a narrow view a turn and a step move the lines alike: on one
+    /// 50° pinhole it added wrong frames). Off by default: on the shipped rig the accuracy is
+    /// the same within the seeds' spread and maintenance's CPU p99 a sixth, but its p50 is
+    /// 0.1–0.2 ms higher (docs/decisions.md, 2026-11-30).
     pub frame_rotation: bool,
 }
 
@@ -387,7 +389,7 @@ impl Default for MotionConfig {
             filter: true,
             accel_noise_m_s2: 2.0,             // ours: a walk starting or stopping within a second
             angular_accel_noise_deg_s2: 180.0, // ours: a head turning to 180°/s within a second
-            frame_rotation: false,             // ours: measured, no gain on the one-pinhole hold (docs/decisions.md)
+            frame_rotation: false,             // ours: docs/decisions.md, 2026-11-30
         } // Koch–Teller §5.4
     }
 }

@@ -29,7 +29,9 @@
 //!    known).
 //! 3. A consensus: turns from two pairs of well separated normals (Wahba's problem, solved by
 //!    SVD), and the prior itself, each scored by the length of this frame's edges that some pair
-//!    of theirs explains within the inlier angle; the best refitted on its pairs twice.
+//!    of theirs explains within the inlier angle; as many as draw two right pairs with
+//!    probability `SUCCESS` at the share of pairs the best so far explains (KT eq. 2, λ = 2), at
+//!    most `HYPOTHESES`; the best refitted on its pairs twice.
 //! 4. Taken when at least [`MIN_LINES`] edges agree and two of them are at least
 //!    `MIN_SPREAD_RAD` apart in direction (one line, or many parallel normals, leave a turn
 //!    about them free).
@@ -38,6 +40,7 @@
 
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 use omnitrack_edges::Edge;
+use omnitrack_solver::sample_count;
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 
@@ -52,8 +55,10 @@ pub const PAIR_GATE_RAD: f64 = 0.21;
 /// Partners' lengths differ by less than this factor (an edge broken by an occluder, or grown
 /// by merging, changes length; a different line usually differs by more).
 const LENGTH_RATIO: f64 = 2.5;
-/// Hypotheses tried besides the prior.
+/// Most turns tried besides the prior …
 const HYPOTHESES: usize = 128;
+/// … and fewer when this chance of drawing two right pairs is reached sooner.
+const SUCCESS: f64 = 0.99;
 /// A turn is taken only when this many of the frame's edges agree on it …
 pub const MIN_LINES: usize = 6;
 /// … and two of them are at least this far apart in direction (rad, 20°).
@@ -101,6 +106,10 @@ pub struct FrameRotation {
     order: Vec<(f32, u32)>,
     /// (previous line, current line).
     pairs: Vec<(u16, u16)>,
+    /// The previous frame's normals under the turn being tried, and its midpoints under the
+    /// prior.
+    turned: Vec<Vector3<f64>>,
+    turned_mid: Vec<Vector3<f64>>,
     /// The pairs a refit uses: one per current line.
     chosen: Vec<(u16, u16)>,
     /// Per current line: explained by the hypothesis under test, and by the best so far.
@@ -118,6 +127,8 @@ impl FrameRotation {
             order: Vec::with_capacity(max_edges),
             pairs: Vec::with_capacity(MAX_PAIRS),
             chosen: Vec::with_capacity(LINES),
+            turned: Vec::with_capacity(LINES),
+            turned_mid: Vec::with_capacity(LINES),
             hit: Vec::with_capacity(LINES),
             rng: SmallRng::seed_from_u64(0x7e57_f00d),
         }
@@ -171,23 +182,27 @@ impl FrameRotation {
         if self.previous.len() < MIN_LINES || self.current.len() < MIN_LINES {
             return None;
         }
-        // 2. Pairs under the prior.
+        // 2. Pairs under the prior (the previous frame's normals and midpoints turned once).
         let cos_gate = PAIR_GATE_RAD.cos();
+        let r = prior.to_rotation_matrix();
+        self.turned.clear();
+        self.turned.extend(self.previous.iter().map(|p| r * p.normal));
+        self.turned_mid.clear();
+        self.turned_mid.extend(self.previous.iter().map(|p| r * p.mid));
         self.pairs.clear();
         'outer: for (j, c) in self.current.iter().enumerate() {
             for (i, p) in self.previous.iter().enumerate() {
                 if !(c.length < LENGTH_RATIO * p.length && p.length < LENGTH_RATIO * c.length) {
                     continue;
                 }
-                let n = prior * p.normal;
-                let cos = n.dot(&c.normal);
+                let cos = self.turned[i].dot(&c.normal);
                 let agree = if c.oriented && p.oriented { cos } else { cos.abs() };
                 if agree < cos_gate {
                     continue;
                 }
                 // Midpoints no further apart than the gate and half of both lengths.
                 let reach = PAIR_GATE_RAD + 0.5 * (c.length + p.length);
-                if (prior * p.mid).dot(&c.mid) < reach.min(std::f64::consts::PI).cos() {
+                if self.turned_mid[i].dot(&c.mid) < reach.min(std::f64::consts::PI).cos() {
                     continue;
                 }
                 if self.pairs.len() == self.pairs.capacity() {
@@ -202,8 +217,13 @@ impl FrameRotation {
         // 3. The consensus: the prior, then turns from two pairs.
         let cos_in = inlier_rad.cos();
         let mut best = (self.support(prior, cos_in), *prior);
+        // As many turns as give a pair of right pairs with probability SUCCESS, at the share of
+        // pairs the best turn so far explains (KT eq. 2 with λ = 2), at most HYPOTHESES.
+        let mut needed = self.turns_needed();
         let min_sin = MIN_SPREAD_RAD.sin();
-        for _ in 0..HYPOTHESES {
+        let mut tried = 0;
+        while tried < needed {
+            tried += 1;
             let a = self.pairs[self.rng.random_range(0..self.pairs.len())];
             let b = self.pairs[self.rng.random_range(0..self.pairs.len())];
             if a.1 == b.1 {
@@ -219,6 +239,7 @@ impl FrameRotation {
             let s = self.support(&q, cos_in);
             if s > best.0 {
                 best = (s, q);
+                needed = needed.min(self.turns_needed());
             }
         }
         // Refit on the best turn's pairs, twice.
@@ -243,11 +264,28 @@ impl FrameRotation {
         })
     }
 
-    /// The cosine between the pair (i, j)'s normals under turn `q` (its absolute value when
-    /// either is unoriented).
-    fn agreement(&self, q: &UnitQuaternion<f64>, (i, j): (u16, u16)) -> f64 {
+    /// How many turns from two pairs find one from right pairs with probability [`SUCCESS`],
+    /// when the lines `self.hit` marks are the share of the pairs that are right (one right
+    /// pair each), at most [`HYPOTHESES`].
+    fn turns_needed(&self) -> usize {
+        let right = self.hit.iter().filter(|h| **h).count();
+        let outliers = 100.0 * (1.0 - right as f64 / self.pairs.len().max(1) as f64);
+        sample_count(2, self.pairs.len(), outliers, SUCCESS).min(HYPOTHESES as u64) as usize
+    }
+
+    /// `self.turned` ← the previous frame's normals under turn `q`: once per turn tried, not
+    /// once per pair.
+    fn turn_previous(&mut self, q: &UnitQuaternion<f64>) {
+        let r = q.to_rotation_matrix();
+        self.turned.clear();
+        self.turned.extend(self.previous.iter().map(|p| r * p.normal));
+    }
+
+    /// The cosine between the pair (i, j)'s normals under the turn of `self.turned` (its
+    /// absolute value when either is unoriented).
+    fn agreement(&self, (i, j): (u16, u16)) -> f64 {
         let (p, c) = (&self.previous[i as usize], &self.current[j as usize]);
-        let cos = (q * p.normal).dot(&c.normal);
+        let cos = self.turned[i as usize].dot(&c.normal);
         if c.oriented && p.oriented {
             cos
         } else {
@@ -255,18 +293,14 @@ impl FrameRotation {
         }
     }
 
-    /// Whether the pair agrees with turn `q` within the inlier angle (cos).
-    fn agrees(&self, q: &UnitQuaternion<f64>, pair: (u16, u16), cos_in: f64) -> bool {
-        self.agreement(q, pair) >= cos_in
-    }
-
     /// The length of this frame's lines that a pair explains under `q`; `self.hit` marks them.
     fn support(&mut self, q: &UnitQuaternion<f64>, cos_in: f64) -> f64 {
+        self.turn_previous(q);
         self.hit.clear();
         self.hit.resize(self.current.len(), false);
         for k in 0..self.pairs.len() {
             let pair = self.pairs[k];
-            if !self.hit[pair.1 as usize] && self.agrees(q, pair, cos_in) {
+            if !self.hit[pair.1 as usize] && self.agreement(pair) >= cos_in {
                 self.hit[pair.1 as usize] = true;
             }
         }
@@ -281,6 +315,7 @@ impl FrameRotation {
     /// `self.chosen` ← per line of this frame, its pair that agrees best with `q` within the
     /// inlier angle (`self.pairs` runs line by line).
     fn choose_pairs(&mut self, q: &UnitQuaternion<f64>, cos_in: f64) {
+        self.turn_previous(q);
         self.chosen.clear();
         let mut best: Option<((u16, u16), f64)> = None;
         for k in 0..=self.pairs.len() {
@@ -291,7 +326,7 @@ impl FrameRotation {
                 }
             }
             let Some(pair) = pair else { break };
-            let cos = self.agreement(q, pair);
+            let cos = self.agreement(pair);
             if cos >= cos_in && best.is_none_or(|(_, c)| cos > c) {
                 best = Some((pair, cos));
             }

@@ -294,9 +294,10 @@ impl Tracker<'_> {
             _ => self.pose,
         };
         // The turn since the last frame as the image shows it, where it does (module
-        // `frame_rotation`; off by default, docs/decisions.md 2026-11-30): R₁ = R₀ Qᵀ, the
-        // motion model's turn Q₀ = R̂₁ᵀ R₀ its prior.
-        if self.cfg.motion.frame_rotation {
+        // `frame_rotation`, docs/decisions.md 2026-11-30): R₁ = R₀ Qᵀ, the motion model's turn
+        // Q₀ = R̂₁ᵀ R₀ its prior. Not for a narrow rig: in a narrow view a turn and a step move
+        // the lines alike, and on one 50° pinhole it added wrong frames.
+        if self.cfg.motion.frame_rotation && !self.narrow {
             let r0 = self.pose.rotation;
             let prior = predicted.rotation.inverse() * r0;
             let measured =
