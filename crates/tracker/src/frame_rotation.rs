@@ -49,8 +49,9 @@ use rand::{Rng, SeedableRng};
 pub const LINES: usize = 96;
 /// Most candidate pairs kept per frame.
 const MAX_PAIRS: usize = 2048;
-/// How far (rad) an edge's normal may lie from its partner's under the prior turn: the turn a
-/// head makes between frames beyond what the motion model predicts (about 12° at 30 Hz).
+/// How far (rad) an edge's normal may lie from its partner's under the prior turn (12°): the
+/// turn a head makes between frames beyond what the motion model predicts (the renders' 5 Hz
+/// frames turn by up to 12° unforeseen).
 pub const PAIR_GATE_RAD: f64 = 0.21;
 /// Partners' lengths differ by less than this factor (an edge broken by an occluder, or grown
 /// by merging, changes length; a different line usually differs by more).
@@ -65,7 +66,7 @@ pub const MIN_LINES: usize = 6;
 const MIN_SPREAD_RAD: f64 = 0.35;
 
 /// One kept edge: its plane normal (rig frame; oriented by polarity when `oriented`), the
-/// directions of its ends and its length (rad).
+/// direction of its midpoint and its length (rad).
 #[derive(Debug, Clone, Copy)]
 struct Line {
     normal: Vector3<f64>,
@@ -112,7 +113,7 @@ pub struct FrameRotation {
     turned_mid: Vec<Vector3<f64>>,
     /// The pairs a refit uses: one per current line.
     chosen: Vec<(u16, u16)>,
-    /// Per current line: explained by the hypothesis under test, and by the best so far.
+    /// Per current line: explained by the turn last scored (`support`).
     hit: Vec<bool>,
     rng: SmallRng,
 }
