@@ -107,8 +107,8 @@ pub struct FrameRotation {
     order: Vec<(f32, u32)>,
     /// (previous line, current line).
     pairs: Vec<(u16, u16)>,
-    /// The previous frame's normals under the turn being tried, and its midpoints under the
-    /// prior.
+    /// The previous frame's normals under the turn being tried (the prior while pairing), and
+    /// its midpoints under the prior.
     turned: Vec<Vector3<f64>>,
     turned_mid: Vec<Vector3<f64>>,
     /// The pairs a refit uses: one per current line.
@@ -185,20 +185,16 @@ impl FrameRotation {
         }
         // 2. Pairs under the prior (the previous frame's normals and midpoints turned once).
         let cos_gate = PAIR_GATE_RAD.cos();
+        self.turn_previous(prior);
         let r = prior.to_rotation_matrix();
-        self.turned.clear();
-        self.turned.extend(self.previous.iter().map(|p| r * p.normal));
         self.turned_mid.clear();
         self.turned_mid.extend(self.previous.iter().map(|p| r * p.mid));
         self.pairs.clear();
-        'outer: for (j, c) in self.current.iter().enumerate() {
-            for (i, p) in self.previous.iter().enumerate() {
+        'outer: for j in 0..self.current.len() {
+            let c = self.current[j];
+            for i in 0..self.previous.len() {
+                let p = &self.previous[i];
                 if !(c.length < LENGTH_RATIO * p.length && p.length < LENGTH_RATIO * c.length) {
-                    continue;
-                }
-                let cos = self.turned[i].dot(&c.normal);
-                let agree = if c.oriented && p.oriented { cos } else { cos.abs() };
-                if agree < cos_gate {
                     continue;
                 }
                 // Midpoints no further apart than the gate and half of both lengths.
@@ -206,10 +202,14 @@ impl FrameRotation {
                 if self.turned_mid[i].dot(&c.mid) < reach.min(std::f64::consts::PI).cos() {
                     continue;
                 }
+                let pair = (i as u16, j as u16);
+                if self.agreement(pair) < cos_gate {
+                    continue;
+                }
                 if self.pairs.len() == self.pairs.capacity() {
                     break 'outer;
                 }
-                self.pairs.push((i as u16, j as u16));
+                self.pairs.push(pair);
             }
         }
         if self.pairs.len() < MIN_LINES {
