@@ -529,6 +529,56 @@ fn a_search_commits_no_pose_outside_the_volume_it_searched() {
     assert!(searched >= 1);
 }
 
+/// Issue 47, item 3: a hint says where the rig was when tracking started. Replayed standing
+/// still (the first frame again and again) every search keeps the 3 m volume as given; walking
+/// the recording, the searches on frames after the rig has moved search the hint grown by the
+/// walk it may have made (twice 2 m/s × the time it moved). (Nothing is accepted here, so that
+/// every search reports its volume; that a commit lies in the volume searched is the test
+/// above.)
+#[test]
+fn the_hint_grows_with_the_walk_the_rig_may_have_made_and_not_while_it_stands_still() {
+    let f = fixture();
+    let (_, rig, mut cfg, _, _) = replay(f);
+    cfg.initialisation.accept_explained_fraction = 0.999;
+    let frames = detected_frames(f, 20);
+    let hint = SearchVolume {
+        centre: Point3::from(f.truth[0].pose.translation.vector),
+        diameter_m: Some(3.0),
+    };
+    let period = frames[1].0 - frames[0].0;
+    // Every search of a run, with the frame it searched: (frame time, searched volume's
+    // diameter); and every pose with its distance from the hint's centre.
+    let run = |still: bool| {
+        let mut tracker = Tracker::new(&rig, &f.model, &f.table, &cfg, Some(hint), 1);
+        let mut searched = Vec::new();
+        for (k, (t, edges)) in frames.iter().enumerate() {
+            let (t, edges) = if still {
+                (frames[0].0 + k as u64 * period, &frames[0].1)
+            } else {
+                (*t, edges)
+            };
+            let r = tracker.process(edges, t);
+            for (t, r) in tracker.late().iter().map(|(t, r)| (*t, r)).chain([(t, &r)]) {
+                assert!(r.pose.is_none());
+                if let Some(TrackerEvent::Searched(s)) = &r.event {
+                    searched.push((t, s.diameter_m.expect("a volume")));
+                }
+            }
+        }
+        searched
+    };
+    let searched = run(true);
+    assert!(searched.len() >= 2, "{searched:?}");
+    assert!(searched.iter().all(|&(_, d)| d == 3.0), "standing still: {searched:?}");
+    let searched = run(false);
+    assert!(searched.len() >= 2, "{searched:?}");
+    assert_eq!(searched[0].1, 3.0, "the first frame is the hint's");
+    let max_growth = |t: u64| 3.0 + 4.0 * (t - frames[0].0) as f64 * 1e-9;
+    for &(t, d) in &searched[1..] {
+        assert!(d > 3.0 && d <= max_growth(t) + 1e-9, "walking: {searched:?}");
+    }
+}
+
 /// Issue 47, item 1 (`sweep_volume`, off by default): a volume one search's budget does not
 /// cover is swept by the searches that follow, each going on from the cells the earlier ones
 /// looked at (their best candidates carried along as rivals), and nothing is committed before
@@ -541,6 +591,9 @@ fn a_volume_too_large_for_one_search_is_swept_by_the_next_searches() {
     // A fifth of the budget: a 10 m volume of the lab takes several searches.
     cfg.initialisation.time_budget_ms /= 5.0;
     cfg.initialisation.sweep_volume = true;
+    // The volume as given: the rig walks, and a hint grown by its walk (module
+    // `tracker::hint_age`) would be a new volume for each search, never swept to its end.
+    cfg.motion.max_speed_m_s = 0.0;
     let volume = SearchVolume {
         centre: Point3::from(f.truth[0].pose.translation.vector + Vector3::new(3.5, -2.0, 0.0)),
         diameter_m: Some(10.0),

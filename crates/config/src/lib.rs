@@ -108,7 +108,9 @@ pub struct InitialisationConfig {
     /// nothing; the next goes on from the nearest cell it left, the best candidates so far
     /// carried along as rivals, and the search that ends the sweep decides (issue 47, item 1).
     /// Off by default: measured, it refuses wrong commits on FZK-Haus but adds one on ZInD and
-    /// delays the first pose (docs/decisions.md, 2026-11-30).
+    /// delays the first pose (docs/decisions.md, 2026-11-30). A hint that grows with the rig's
+    /// walk (`omnitrack_tracker`'s module `tracker::hint_age`) is a new volume for each search:
+    /// while the rig walks, such a sweep does not end.
     pub sweep_volume: bool,
     /// Which searches' grids rank their positions by the share of blank points too
     /// (`blank_radius_deg`), as the final merit does ([`GridBlank`]).

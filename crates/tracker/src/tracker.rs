@@ -7,6 +7,7 @@
 //! results of earlier kept frames through [`Tracker::late`].
 
 mod catch_up;
+mod hint_age;
 mod maintenance;
 mod relocalise;
 mod search;
@@ -19,6 +20,7 @@ use crate::matching::{best_edge, EdgeNormals, Gate, Predicted};
 use crate::motion_filter::{MotionFilter, MotionNoise};
 use crate::report::{FrameResult, StateCounts, TrackerState, TrackerStats};
 use crate::visibility::VisibilityTable;
+use hint_age::HintAge;
 use nalgebra::{Point3, UnitQuaternion};
 use omnitrack_config::TrackerConfig;
 use omnitrack_core::geometry::{Correspondence, Pose};
@@ -55,6 +57,9 @@ struct PendingSearch {
     started_ns: u64,
     due_ns: u64,
     volume: SearchVolume,
+    /// The volume is the hint grown by the walk the rig may have made since (module
+    /// `hint_age`): its candidates are judged only when the search looked at all of it.
+    grown: bool,
     turn_limit: Option<(UnitQuaternion<f64>, f64)>,
     floor: f64,
     /// Set for a relocalisation (module `maintenance`): what its frame concludes either way.
@@ -141,6 +146,8 @@ pub struct Tracker<'m> {
     rng: SmallRng,
     state: TrackerState,
     hint: Option<SearchVolume>,
+    /// How long the rig may have been moving since the hint's frame (module `hint_age`).
+    hint_age: HintAge,
     pose: Pose,
     /// Previous tracked pose and its time, for the constant-velocity prior.
     previous: Option<(Pose, u64)>,
@@ -261,6 +268,7 @@ impl<'m> Tracker<'m> {
             rng: SmallRng::seed_from_u64(seed),
             state: TrackerState::Initialising,
             hint,
+            hint_age: HintAge::new(cfg.noise.edge_normal_sigma_deg.to_radians(), max_edges),
             pose: Pose::identity(),
             previous: None,
             filter: MotionFilter::new(MotionNoise {
@@ -390,6 +398,9 @@ impl<'m> Tracker<'m> {
 
     /// One frame's work in the current state.
     fn step(&mut self, edges: &[Edge], timestamp_ns: u64) -> FrameResult {
+        if self.state == TrackerState::Initialising && self.hint.is_some_and(|h| h.diameter_m.is_some()) {
+            self.hint_age.observe(edges, timestamp_ns);
+        }
         let result = match self.state {
             TrackerState::Tracking => self.maintain(edges, timestamp_ns),
             TrackerState::Initialising | TrackerState::Lost => self.initialise(edges, timestamp_ns),

@@ -175,6 +175,7 @@ impl Tracker<'_> {
             started_ns: timestamp_ns,
             due_ns: timestamp_ns.saturating_add(u64::try_from(budget.as_nanos()).unwrap_or(u64::MAX)),
             volume,
+            grown: false,
             turn_limit: Some((turned_from, turn_limit)),
             floor: min_explained,
             relocalisation: Some(Relocalisation {

@@ -4,6 +4,10 @@
 //! acceptance test, and when the candidates weighed over the next frames are told apart well
 //! enough to commit one.
 //!
+//! Before the first pose, the volume is the hint grown by the walk the rig may have made since
+//! it (module `hint_age`), and a grown volume commits only what a search that looked at all of
+//! it found.
+//!
 //! In: a frame's [`Edge`]s while not tracking, a finished search's candidates. Out: a committed
 //! pose (tracking starts at it) or none yet; never one from a search a stop cut short
 //! ([`Tracker::stop_searches_on`]).
@@ -141,6 +145,7 @@ impl<'m> Tracker<'m> {
             started_ns: timestamp_ns,
             due_ns: timestamp_ns.saturating_add(u64::try_from(budget.as_nanos()).unwrap_or(u64::MAX)),
             volume,
+            grown: self.hint_grown_m() > 0.0,
             turn_limit,
             floor,
             relocalisation: None,
@@ -288,6 +293,7 @@ impl<'m> Tracker<'m> {
         };
         let PendingSearch {
             volume,
+            grown,
             turn_limit,
             floor,
             started_ns,
@@ -327,8 +333,14 @@ impl<'m> Tracker<'m> {
         // And it must lie in the volume searched (the polish may carry a start beyond it): a
         // hint says where the rig is. Candidates outside still count as rivals above.
         let inside = |c: &Candidate| within(&volume, &c.pose);
-        let accepted =
-            |c: &&Candidate| acceptable(&self.cfg, c) && plausible(c) && c.explained >= floor && inside(c) && clear(c);
+        // A hint grown by the walk the rig may have made since (module `hint_age`) is judged
+        // only when the search looked at every cell of it: the part left unlooked at may hold
+        // the rig, and with it the rival that would refuse what the rest offers (the door along
+        // a corridor, module `hint_age`).
+        let looked_at_all = !grown || report.plan_cells_scanned >= report.plan_cells_in_volume;
+        let accepted = |c: &&Candidate| {
+            acceptable(&self.cfg, c) && plausible(c) && c.explained >= floor && inside(c) && clear(c) && looked_at_all
+        };
         // With `sweep_volume`, a search that ran out of budget before it looked at every cell
         // of its volume decides nothing: the next one goes on from the nearest cell it left (a sweep), its
         // best candidates carried along, at the same breadth and volume; only the search that
@@ -481,10 +493,28 @@ impl<'m> Tracker<'m> {
                     diameter_m: Some(base * grow).filter(|d| *d < 64.0 * base),
                 }
             }
-            _ => self.hint.unwrap_or(SearchVolume {
-                centre: Point3::origin(),
-                diameter_m: None,
-            }),
+            _ => match self.hint {
+                // The hint grown by the walk the rig may have made since (module `hint_age`).
+                Some(h) => SearchVolume {
+                    diameter_m: h.diameter_m.map(|d| d + self.hint_grown_m()),
+                    ..h
+                },
+                None => SearchVolume {
+                    centre: Point3::origin(),
+                    diameter_m: None,
+                },
+            },
+        }
+    }
+
+    /// How much a hint's diameter has grown (m): twice the way the rig may have walked since
+    /// the hint's frame at `motion.max_speed_m_s` (module `hint_age`).
+    fn hint_grown_m(&self) -> f64 {
+        match (self.state, self.hint) {
+            (TrackerState::Initialising, Some(h)) if h.diameter_m.is_some() => {
+                2.0 * self.cfg.motion.max_speed_m_s.max(0.0) * self.hint_age.moving_s()
+            }
+            _ => 0.0,
         }
     }
 }
