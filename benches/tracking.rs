@@ -184,7 +184,14 @@ mod bench {
             let mut all: Vec<f64> = best.iter().map(|t| t.0.as_secs_f64() * 1e3).collect();
             maint.sort_by(f64::total_cmp);
             all.sort_by(f64::total_cmp);
-            let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+            // NaN over no frames, as the percentiles (a sum of none is −0.0).
+            let mean = |v: &[f64]| {
+                if v.is_empty() {
+                    f64::NAN
+                } else {
+                    v.iter().sum::<f64>() / v.len() as f64
+                }
+            };
             let same = digests.iter().all(|d| *d == digests[0]);
             println!(
                 "| {} | {} | {} | {} | {:.3} / {:.3} / {:.3} / {:.3} | {:.3} / {:.3} | {} | {:016x}{} |",
