@@ -140,6 +140,7 @@ pub fn run(a: Args) -> CommandResult {
     let mut sink = RunSink::new(
         a.trajectory.as_deref().map(TumSink::create).transpose()?,
         cfg.initialisation.sweep_volume,
+        hint.and_then(|h| h.diameter_m),
     );
     let publish = (!a.no_publish).then_some(());
     let opts = PipelineOptions {
@@ -247,13 +248,19 @@ pub struct RunSink {
     /// `initialisation.sweep_volume`: a search that left cells is followed by one that goes
     /// on with them.
     sweeps: bool,
+    /// The hint's diameter (m), and the widest volume a search reported: a hint that grew with
+    /// the walk the rig may have made before its first pose (the tracker's `hint_age`).
+    hint_m: Option<f64>,
+    widest_m: f64,
 }
 
 impl RunSink {
-    fn new(tum: Option<omnitrack::runtime::pipeline::TumSink>, sweeps: bool) -> RunSink {
+    fn new(tum: Option<omnitrack::runtime::pipeline::TumSink>, sweeps: bool, hint_m: Option<f64>) -> RunSink {
         RunSink {
             tum,
             sweeps,
+            hint_m,
+            widest_m: 0.0,
             on_time: 0,
             late: 0,
             first_frame_ns: None,
@@ -277,6 +284,9 @@ impl RunSink {
                         "omnitrack: frame {}: no valid visibility node in the search volume; searched the nearest, {:.1} m about its centre",
                         r.sequence, d
                     );
+                }
+                if rep.widened_to_m.is_none() {
+                    self.widest_m = self.widest_m.max(rep.diameter_m.unwrap_or(0.0));
                 }
                 let volume = match rep.diameter_m {
                     Some(d) => format!("a {d:.1} m volume"),
@@ -390,6 +400,11 @@ fn no_pose_reason(summary: &omnitrack::runtime::pipeline::PipelineSummary, sink:
         "the visibility table has no valid node (nowhere in the model has room for a person to stand: check the model's floors and scale, or rebuild the table)".to_string()
     } else if widened == searches {
         format!("the search volume holds no valid visibility node; {searches} searches of the nearest nodes found no pose that explains the frames clearly (check the --init hint)")
+    } else if sink.hint_m.is_some_and(|h| sink.widest_m > h + 0.01) {
+        format!(
+            "{searches} searches found no pose that explains the frames clearly enough to commit; the rig moved before its first pose and the hint grew with the walk it may have made, to {:.1} m (a wrong pose is refused; a rig standing still keeps the hint as given)",
+            sink.widest_m
+        )
     } else {
         format!("{searches} searches found no pose that explains the frames clearly enough to commit (a wrong pose is refused: a model that differs from the building, or a hint far from the rig?)")
     }
