@@ -20,9 +20,12 @@
 //!
 //! In: the frames' [`Edge`]s and capture times, in order, while the tracker initialises from
 //! a hint. Out: the seconds the rig may have been moving ([`HintAge::moving_s`]). Fixed memory:
-//! the anchor's lines are kept in a buffer sized at start-up.
+//! the anchor's lines and the frame's edge order are kept in buffers sized at start-up. Bounded
+//! time: a frame costs at most [`ANCHOR_EDGES`] × its edges plane comparisons (a few tens of
+//! microseconds), and only before the first pose.
 
 use nalgebra::Vector3;
+use omnitrack_core::memory::resident;
 use omnitrack_edges::Edge;
 
 /// Anchor edges compared: the longest this many.
@@ -64,7 +67,7 @@ pub(super) struct HintAge {
     /// cos of the largest angle between an anchor's plane and the same line's in a frame of
     /// a rig that has not moved.
     same_plane_cos: f64,
-    /// The longest edges of the frame looked at (indices), sorted once per frame.
+    /// A frame's edges (indices), the longest picked out when it becomes the anchor.
     order: Vec<u32>,
 }
 
@@ -72,11 +75,11 @@ impl HintAge {
     /// For frames of at most `max_edges` edges whose planes scatter by `edge_sigma_rad`.
     pub(super) fn new(edge_sigma_rad: f64, max_edges: usize) -> HintAge {
         HintAge {
-            anchor: Vec::with_capacity(ANCHOR_EDGES),
+            anchor: resident(Vec::with_capacity(ANCHOR_EDGES)),
             anchor_ns: None,
             moving_ns: 0,
             same_plane_cos: (2.0 * edge_sigma_rad).cos(),
-            order: Vec::with_capacity(max_edges),
+            order: resident(Vec::with_capacity(max_edges)),
         }
     }
 
