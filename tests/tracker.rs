@@ -546,8 +546,7 @@ fn the_hint_grows_with_the_walk_the_rig_may_have_made_and_not_while_it_stands_st
         diameter_m: Some(3.0),
     };
     let period = frames[1].0 - frames[0].0;
-    // Every search of a run, with the frame it searched: (frame time, searched volume's
-    // diameter); and every pose with its distance from the hint's centre.
+    // Every search of a run: (the frame it searched, its volume's diameter).
     let run = |still: bool| {
         let mut tracker = Tracker::new(&rig, &f.model, &f.table, &cfg, Some(hint), 1);
         let mut searched = Vec::new();
@@ -573,7 +572,7 @@ fn the_hint_grows_with_the_walk_the_rig_may_have_made_and_not_while_it_stands_st
     let searched = run(false);
     assert!(searched.len() >= 2, "{searched:?}");
     assert_eq!(searched[0].1, 3.0, "the first frame is the hint's");
-    let max_growth = |t: u64| 3.0 + 4.0 * (t - frames[0].0) as f64 * 1e-9;
+    let max_growth = |t: u64| 3.0 + 2.0 * cfg.motion.max_speed_m_s * (t - frames[0].0) as f64 * 1e-9;
     for &(t, d) in &searched[1..] {
         assert!(d > 3.0 && d <= max_growth(t) + 1e-9, "walking: {searched:?}");
     }
