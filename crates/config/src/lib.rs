@@ -116,6 +116,15 @@ pub struct InitialisationConfig {
     /// (`blank_radius_deg`), as the final merit does ([`GridBlank`]).
     pub grid_blank: GridBlank,
     pub clear_winner_ratio: f64,
+    /// A rival scoring more than `clear_winner_ratio` × the best is beaten all the same when
+    /// the best does at least as well by each part of the merit (explained, support, blank)
+    /// and, of the frame's edges that exactly one of the two explains (the *disputed* edges),
+    /// the rival explains at most this share (by angle): a twin differs from the truth only
+    /// where the building does, and there the image sides with the truth. 0 turns the test off.
+    pub disputed_share_max: f64,
+    /// … and when the disputed edges are at least this share (by angle) of the frame's edges:
+    /// a dispute over a line or two decides nothing.
+    pub disputed_min_fraction: f64,
     pub accept_explained_fraction: f64,
     /// A candidate must also explain this share of the frame's edges (by angle).
     pub accept_support_fraction: f64,
@@ -301,6 +310,8 @@ impl Default for InitialisationConfig {
             sweep_volume: false,
             grid_blank: GridBlank::Volumes,
             clear_winner_ratio: 0.8,
+            disputed_share_max: 0.33,
+            disputed_min_fraction: 0.03,
             accept_explained_fraction: 0.4,
             accept_support_fraction: 0.15,
             blank_radius_deg: 2.0,

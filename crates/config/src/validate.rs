@@ -135,6 +135,18 @@ impl TrackerConfig {
                 i.clear_winner_ratio
             ));
         }
+        if !(0.0..0.5).contains(&i.disputed_share_max) {
+            return Err(format!(
+                "key 'initialisation.disputed_share_max': must lie in [0, 0.5), found {}",
+                i.disputed_share_max
+            ));
+        }
+        if !(0.0..1.0).contains(&i.disputed_min_fraction) {
+            return Err(format!(
+                "key 'initialisation.disputed_min_fraction': must lie in [0, 1), found {}",
+                i.disputed_min_fraction
+            ));
+        }
         if !(i.accept_explained_fraction > 0.0 && i.accept_explained_fraction < 1.0) {
             return Err(format!(
                 "key 'initialisation.accept_explained_fraction': must lie strictly between 0 and 1, found {}",

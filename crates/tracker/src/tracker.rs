@@ -148,6 +148,9 @@ pub struct Tracker<'m> {
     hint: Option<SearchVolume>,
     /// How long the rig may have been moving since the hint's frame (module `hint_age`).
     hint_age: HintAge,
+    /// Per edge of a search frame, whether the best candidate and a rival explain it (the
+    /// disputed edges, module `search`).
+    explained_by: [Vec<bool>; 2],
     pose: Pose,
     /// Previous tracked pose and its time, for the constant-velocity prior.
     previous: Option<(Pose, u64)>,
@@ -269,6 +272,10 @@ impl<'m> Tracker<'m> {
             state: TrackerState::Initialising,
             hint,
             hint_age: HintAge::new(cfg.noise.edge_normal_sigma_deg.to_radians(), max_edges),
+            explained_by: [
+                resident(Vec::with_capacity(max_edges)),
+                resident(Vec::with_capacity(max_edges)),
+            ],
             pose: Pose::identity(),
             previous: None,
             filter: MotionFilter::new(MotionNoise {

@@ -172,6 +172,25 @@ impl Initialiser<'_> {
         )
     }
 
+    /// Per edge of `edges` (at least the shortest edge long), whether a segment in sight from
+    /// `pose` explains it as [`Self::edge_support`] counts: plane within the inlier gate and
+    /// overlapping by half.
+    pub fn edges_explained(&mut self, pose: &Pose, edges: &[Edge], out: &mut Vec<bool>) {
+        self.edge_support(pose, edges);
+        let cos_gate = self.opts.inlier_alpha_rad.cos();
+        let min_len = self.opts.min_length_rad;
+        out.clear();
+        out.extend(edges.iter().map(|e| {
+            let s = e.sensor as usize;
+            e.length_rad >= min_len
+                && s < self.centres.len()
+                && self.support_pred.iter().any(|pred| {
+                    let nrm = &pred.normals[s];
+                    nrm.dot(&e.plane.normal).abs() >= cos_gate && overlap(pred, &self.centres[s], nrm, e) >= 0.5
+                })
+        }));
+    }
+
     /// The share (by angle) of `edges` that one of `self.support_pred` explains: plane within
     /// the gate (cos) and overlapping.
     pub(super) fn predicted_support<'e>(&self, edges: impl Iterator<Item = &'e Edge>, cos_gate: f64) -> f64 {

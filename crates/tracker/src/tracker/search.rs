@@ -50,6 +50,24 @@ fn within(volume: &SearchVolume, pose: &Pose) -> bool {
         .is_none_or(|d| (pose.translation.vector - volume.centre.coords).norm() <= 0.5 * d + VOLUME_SLACK_M)
 }
 
+/// Of the `edges` at least `min_len` long (rad): the length only `a` explains, the length only
+/// `b` explains (per edge, `a[k]` and `b[k]`) and the length of all of them.
+fn disputed_lengths(edges: &[Edge], a: &[bool], b: &[bool], min_len: f64) -> (f64, f64, f64) {
+    let (mut only_a, mut only_b, mut total) = (0.0, 0.0, 0.0);
+    for ((e, &x), &y) in edges.iter().zip(a).zip(b) {
+        if e.length_rad < min_len {
+            continue;
+        }
+        total += e.length_rad;
+        match (x, y) {
+            (true, false) => only_a += e.length_rad,
+            (false, true) => only_b += e.length_rad,
+            _ => {}
+        }
+    }
+    (only_a, only_b, total)
+}
+
 /// Keeps the sweep's best distinct candidates so far (by merit, the carried ones as
 /// polished on this frame among them) to be polished again on the next search's frame.
 fn carry<'c>(carried: &mut [Option<Pose>; STARTS], candidates: impl Iterator<Item = &'c Candidate>) {
@@ -325,10 +343,27 @@ impl<'m> Tracker<'m> {
         // half or quarter round, the next door along) is refused by evidence; "no pose yet"
         // is better than a wrong one.
         let ratio = self.cfg.initialisation.clear_winner_ratio;
+        // A rival within the ratio may still be beaten by evidence: the best does at least as
+        // well by each of the merit's three parts (explained, support, blank), and the edges
+        // exactly one of the two explains side with it (`disputed_share_max`). Only the best
+        // can win so.
+        let best = candidates().max_by(|a, b| a.merit().total_cmp(&b.merit())).copied();
+        let disputes_won = best.is_some_and(|b| {
+            candidates()
+                .filter(|o| !init::same_pose(&o.pose, &b.pose, BASIN_M, BASIN_RAD))
+                .filter(|o| o.merit() > ratio * b.merit())
+                .all(|o| {
+                    b.explained >= o.explained
+                        && b.support >= o.support
+                        && b.blank <= o.blank
+                        && self.wins_dispute(&b.pose, &o.pose, job.edges())
+                })
+        });
         let clear = |c: &Candidate| {
+            let is_best = best.is_some_and(|b| b.pose == c.pose);
             candidates()
                 .filter(|o| !init::same_pose(&o.pose, &c.pose, BASIN_M, BASIN_RAD))
-                .all(|o| o.merit() <= ratio * c.merit())
+                .all(|o| o.merit() <= ratio * c.merit() || (is_best && disputes_won))
         };
         // And it must lie in the volume searched (the polish may carry a start beyond it): a
         // hint says where the rig is. Candidates outside still count as rivals above.
@@ -397,6 +432,23 @@ impl<'m> Tracker<'m> {
         self.job = Some(job);
         self.last_time = started_ns;
         result
+    }
+
+    /// Whether `best` beats `rival` on the frame's `edges` by the edges exactly one of the two
+    /// explains (`initialisation.disputed_share_max`, `disputed_min_fraction`).
+    fn wins_dispute(&mut self, best: &Pose, rival: &Pose, edges: &[Edge]) -> bool {
+        let i = &self.cfg.initialisation;
+        let (share_max, min_fraction) = (i.disputed_share_max, i.disputed_min_fraction);
+        if share_max <= 0.0 {
+            return false;
+        }
+        let [a, b] = &mut self.explained_by;
+        self.init.edges_explained(best, edges, a);
+        self.init.edges_explained(rival, edges, b);
+        let min_len = self.cfg.edges.min_edge_length_deg.to_radians();
+        let (only_best, only_rival, total) = disputed_lengths(edges, a, b, min_len);
+        let disputed = only_best + only_rival;
+        disputed > 0.0 && disputed >= min_fraction * total && only_rival <= share_max * disputed
     }
 
     /// Whether the candidates under confirmation are told apart (and, for a narrow rig, agreed
@@ -521,9 +573,35 @@ impl<'m> Tracker<'m> {
 
 #[cfg(test)]
 mod tests {
-    use super::{within, SearchVolume, VOLUME_SLACK_M};
-    use nalgebra::Point3;
-    use omnitrack_core::geometry::Pose;
+    use super::{disputed_lengths, within, SearchVolume, VOLUME_SLACK_M};
+    use crate::test_edges::edge_on;
+    use nalgebra::{Point3, Vector3};
+    use omnitrack_core::geometry::{EdgePlane, Pose};
+
+    #[test]
+    fn the_disputed_edges_are_those_exactly_one_pose_explains_by_length_and_short_ones_do_not_count() {
+        // Edges 0.1, 0.2, 0.3, 0.4 and 0.01 rad long.
+        let edges: Vec<_> = [0.1f64, 0.2, 0.3, 0.4, 0.01]
+            .iter()
+            .map(|&len| {
+                let b = Vector3::new(len.cos(), len.sin(), 0.0);
+                edge_on(
+                    0,
+                    EdgePlane::from_rays(Point3::origin(), &Vector3::x(), &b).unwrap(),
+                    50,
+                )
+            })
+            .collect();
+        let a = [true, true, false, false, true];
+        let b = [true, false, true, true, false];
+        let (only_a, only_b, total) = disputed_lengths(&edges, &a, &b, 0.05);
+        assert!((only_a - 0.2).abs() < 1e-12, "{only_a}");
+        assert!((only_b - 0.7).abs() < 1e-12, "{only_b}");
+        assert!((total - 1.0).abs() < 1e-12, "{total}");
+        let (only_a, only_b, total) = disputed_lengths(&edges, &a, &a, 0.0);
+        assert_eq!((only_a, only_b), (0.0, 0.0));
+        assert!((total - 1.01).abs() < 1e-12);
+    }
 
     #[test]
     fn a_pose_is_within_a_volume_up_to_the_slack_and_always_within_the_whole_model() {
