@@ -128,6 +128,12 @@ pub struct InitialisationConfig {
     pub accept_explained_fraction: f64,
     /// A candidate must also explain this share of the frame's edges (by angle).
     pub accept_support_fraction: f64,
+    /// A search that looked at every cell of its volume may also accept a candidate by the
+    /// share explained over the lines the matcher can resolve: segments whose planes through the
+    /// rig's centre lie within the inlier angle of each other and whose arcs overlap by half the
+    /// shorter count as one line. A detailed model draws a window as nested frames and a floor
+    /// junction as slab, finish and skirting lines, where the image shows one.
+    pub accept_resolved_lines: bool,
     /// A sampled point of a predicted segment with no edge of any direction this near (deg) is
     /// *blank*: the model draws a line across a plain surface of the image there. 0 turns the
     /// blank share off.
@@ -314,6 +320,7 @@ impl Default for InitialisationConfig {
             disputed_min_fraction: 0.03,
             accept_explained_fraction: 0.4,
             accept_support_fraction: 0.15,
+            accept_resolved_lines: true,
             blank_radius_deg: 2.0,
             wide_edges_considered: 64,
             wide_segments_considered: 60,

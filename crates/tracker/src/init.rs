@@ -343,6 +343,8 @@ pub struct Initialiser<'m> {
     view: ViewMap,
     /// Scratch of [`Self::edge_support`]: the predicted segments.
     support_pred: Vec<Predicted>,
+    /// Scratch of [`Self::explained_resolved`].
+    resolved: Vec<scoring::ResolvedLine>,
     /// Work spent in this run (module [`work`]), and when the wall clock's backstop falls.
     work: u64,
     /// Rays of `at_pose` already charged.
@@ -435,6 +437,7 @@ impl<'m> Initialiser<'m> {
             at_pose: PoseVisibility::new(model),
             view: ViewMap::new(rig),
             support_pred: resident(Vec::with_capacity(max_set)),
+            resolved: resident(Vec::with_capacity(max_set)),
             work: 0,
             rays_charged: 0,
             backstop: Instant::now(),

@@ -73,6 +73,9 @@ struct Confirming {
     merit_sum: f64,
     frames: u32,
     alive: bool,
+    /// Accepted by the share explained over resolved lines (module `search`): the confirmation
+    /// frames accept it so too.
+    resolved: bool,
 }
 
 /// A relocalisation under way (module `background`): what its candidates are judged by, and
@@ -296,6 +299,7 @@ impl<'m> Tracker<'m> {
                 merit_sum: 0.0,
                 frames: 0,
                 alive: false,
+                resolved: false,
             }; 4],
             confirm_count: 0,
             search_attempts: 0,

@@ -265,6 +265,46 @@ impl Initialiser<'_> {
         }
     }
 
+    /// [`Candidate::explained`] counted over the lines the matcher can resolve
+    /// ([`resolved_share`]; `initialisation.accept_resolved_lines`): the segments in sight and
+    /// long enough, each explained as `final_score` counts it.
+    pub fn explained_resolved(&mut self, pose: &Pose, edges: &[Edge]) -> f64 {
+        let cap = self.opts.inlier_alpha_rad;
+        let gate = Gate::geometric(cap);
+        self.resolved.clear();
+        let seen = self
+            .at_pose
+            .at(self.model, self.table, &Point3::from(pose.translation.vector));
+        for s in seen {
+            let seg = &self.model.segments[s.segment as usize];
+            let pred = Predicted::new(&[seg.a, seg.b], pose, &self.centres);
+            if pred.length_rad < self.opts.min_length_rad || self.resolved.len() == self.resolved.capacity() {
+                continue;
+            }
+            let [a, b] = pred.ends_rig;
+            let (Some(normal), Some(ra), Some(rb)) = (
+                a.cross(&b).try_normalize(1e-12),
+                a.try_normalize(1e-12),
+                b.try_normalize(1e-12),
+            ) else {
+                continue;
+            };
+            let f = f64::from(s.fraction);
+            let explained = match best_edge_and_cover(&pred, &self.centres, edges, &gate) {
+                (Some(_), cover) => f * (cover / (FULL_COVER * f)).min(1.0),
+                (None, _) => 0.0,
+            };
+            self.resolved.push(ResolvedLine {
+                normal,
+                ends: [ra, rb],
+                in_sight: f,
+                explained,
+                root: 0,
+            });
+        }
+        resolved_share(&mut self.resolved, cap.cos())
+    }
+
     /// [`Candidate::blank`] of any pose: of the [`SAMPLES`] points of each segment in sight and
     /// long enough, those in sight and on some sensor's image ([`ViewMap`]), the share with no
     /// edge of any direction within `blank_radius_deg` of its ray from that edge's sensor (off
@@ -328,6 +368,80 @@ impl Initialiser<'_> {
     }
 }
 
+/// A segment in sight as the matcher sees it from a pose: its plane through the rig's centre,
+/// its end rays (rig frame), the share of it in sight, the share of it explained (times the
+/// share in sight, as [`Candidate::explained`] counts it) and its line's root (union–find).
+#[derive(Debug, Clone, Copy)]
+pub(super) struct ResolvedLine {
+    pub(super) normal: Vector3<f64>,
+    pub(super) ends: [Vector3<f64>; 2],
+    pub(super) in_sight: f64,
+    pub(super) explained: f64,
+    pub(super) root: u32,
+}
+
+/// The share explained over resolved lines: `lines` whose planes lie within the gate (`cos_gate`,
+/// the cosine of the inlier angle) of each other and whose arcs overlap by half the shorter are
+/// one line, which weighs its members' largest share in sight and is explained as far as its
+/// best explained member is. One edge matches whichever of such segments it lies along, so the
+/// matcher cannot tell them apart. 0 when `lines` is empty. Quadratic in the lines, which is why
+/// only the candidates about to be accepted ask for it.
+pub(super) fn resolved_share(lines: &mut [ResolvedLine], cos_gate: f64) -> f64 {
+    fn root(lines: &mut [ResolvedLine], mut i: usize) -> usize {
+        while lines[i].root as usize != i {
+            let up = lines[i].root as usize;
+            lines[i].root = lines[up].root;
+            i = up;
+        }
+        i
+    }
+    for (i, l) in lines.iter_mut().enumerate() {
+        l.root = i as u32;
+    }
+    for i in 0..lines.len() {
+        let (ni, [ai, bi]) = (lines[i].normal, lines[i].ends);
+        // Angles along i's plane from its first end.
+        let e2 = ni.cross(&ai);
+        let along = |r: &Vector3<f64>| r.dot(&e2).atan2(r.dot(&ai));
+        let bi_at = along(&bi);
+        let (ilo, ihi) = (bi_at.min(0.0), bi_at.max(0.0));
+        for j in i + 1..lines.len() {
+            if ni.dot(&lines[j].normal).abs() < cos_gate {
+                continue;
+            }
+            let [aj, bj] = lines[j].ends;
+            let (ja, jb) = (along(&aj), along(&bj));
+            let (jlo, jhi) = (ja.min(jb), ja.max(jb));
+            if ihi.min(jhi) - ilo.max(jlo) >= 0.5 * (ihi - ilo).min(jhi - jlo) {
+                let (ri, rj) = (root(lines, i), root(lines, j));
+                lines[ri].root = rj as u32;
+            }
+        }
+    }
+    // Each root gathers its line's largest shares; a member's own fields are read before its
+    // root's are raised, and a root is its own member.
+    for i in 0..lines.len() {
+        let r = root(lines, i);
+        if r != i {
+            let (f, e) = (lines[i].in_sight, lines[i].explained);
+            lines[r].in_sight = lines[r].in_sight.max(f);
+            lines[r].explained = lines[r].explained.max(e);
+        }
+    }
+    let (mut weight, mut explained) = (0.0, 0.0);
+    for (i, l) in lines.iter().enumerate() {
+        if l.root as usize == i {
+            weight += l.in_sight;
+            explained += l.explained;
+        }
+    }
+    if weight > 0.0 {
+        explained / weight
+    } else {
+        0.0
+    }
+}
+
 /// Share of the segment a–b in view from `pose`: of its [`SAMPLES`] sampled points, those in
 /// sight (bit k of `mask`, as `at_pose` gives it) that some sensor of the rig images.
 pub(super) fn in_view(view: &ViewMap, pose: &Pose, a: &Point3<f64>, b: &Point3<f64>, mask: u8) -> f64 {
@@ -386,6 +500,61 @@ mod tests {
     use super::*;
     use nalgebra::{Translation3, UnitQuaternion};
     use omnitrack_core::rig::Rig;
+
+    /// A line in the plane through the rig's centre with normal `tilt_deg` off +z (about x),
+    /// from `from_deg` to `to_deg` round it.
+    fn line(tilt_deg: f64, from_deg: f64, to_deg: f64, in_sight: f64, explained: f64) -> ResolvedLine {
+        let q = UnitQuaternion::from_euler_angles(tilt_deg.to_radians(), 0.0, 0.0);
+        let ray = |deg: f64| q * Vector3::new(deg.to_radians().cos(), deg.to_radians().sin(), 0.0);
+        ResolvedLine {
+            normal: q * Vector3::z(),
+            ends: [ray(from_deg), ray(to_deg)],
+            in_sight,
+            explained,
+            root: 0,
+        }
+    }
+
+    #[test]
+    fn segments_the_matcher_cannot_tell_apart_count_as_one_line() {
+        let gate = 1.5f64.to_radians().cos();
+        // A junction drawn twice 0.5° apart, one of the two explained, and a line elsewhere not
+        // explained: one line of two explained, where a segment count says one of three.
+        let mut lines = [
+            line(0.0, 0.0, 40.0, 1.0, 1.0),
+            line(0.5, 5.0, 35.0, 1.0, 0.0),
+            line(30.0, 0.0, 40.0, 1.0, 0.0),
+        ];
+        assert!((resolved_share(&mut lines, gate) - 0.5).abs() < 1e-12);
+        // Each line weighs its members' largest share in sight, and is explained as far as its
+        // best explained member is.
+        let mut lines = [
+            line(0.0, 0.0, 40.0, 0.5, 0.5),
+            line(0.5, 5.0, 35.0, 1.0, 0.25),
+            line(30.0, 0.0, 40.0, 1.0, 0.0),
+        ];
+        assert!((resolved_share(&mut lines, gate) - 0.25).abs() < 1e-12);
+        // Planes 3° apart (twice the inlier angle) are two lines, and so are arcs that overlap by
+        // less than half the shorter (the same plane, 0–40° and 30–70°), or not at all.
+        for second in [
+            line(3.0, 5.0, 35.0, 1.0, 0.0),
+            line(0.0, 30.0, 70.0, 1.0, 0.0),
+            line(0.0, 50.0, 90.0, 1.0, 0.0),
+        ] {
+            let mut lines = [line(0.0, 0.0, 40.0, 1.0, 1.0), second, line(30.0, 0.0, 40.0, 1.0, 0.0)];
+            assert!((resolved_share(&mut lines, gate) - 1.0 / 3.0).abs() < 1e-12);
+        }
+        // Chains join: 0–40° and 30–70° overlap too little, but each overlaps 15–55° enough, so
+        // the three are one line, whichever order they come in.
+        let mut lines = [
+            line(0.0, 15.0, 55.0, 1.0, 0.0),
+            line(0.3, 0.0, 40.0, 1.0, 1.0),
+            line(0.6, 30.0, 70.0, 1.0, 0.0),
+            line(30.0, 0.0, 40.0, 1.0, 0.0),
+        ];
+        assert!((resolved_share(&mut lines, gate) - 0.5).abs() < 1e-12);
+        assert_eq!(resolved_share(&mut [], gate), 0.0);
+    }
 
     #[test]
     fn a_segment_is_in_view_for_the_share_a_sensor_images() {

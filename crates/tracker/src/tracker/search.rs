@@ -43,6 +43,11 @@ const BASIN_RAD: f64 = 0.175;
 /// edge polishes a few centimetres either way.
 const VOLUME_SLACK_M: f64 = 0.1;
 
+/// At most this many candidates of a search are accepted by resolved lines. Accepted ones are
+/// clear winners, so they lie in one basin, and more of one basin would add nothing; the bound
+/// keeps the quadratic count off the frame path.
+const RESOLVED_MAX: usize = 4;
+
 /// Whether `pose` lies in `volume` (within [`VOLUME_SLACK_M`] of it).
 fn within(volume: &SearchVolume, pose: &Pose) -> bool {
     volume
@@ -272,13 +277,18 @@ impl<'m> Tracker<'m> {
         // explains less than `accept_explained_fraction` of what it predicts here is dropped,
         // and when none is left the next frame searches afresh. (The wrong commits in `lab`'s
         // initialisation trials were candidates that barely passed on the search frame and
-        // failed it on the next while the truth was never found.)
+        // failed it on the next while the truth was never found.) One accepted by resolved
+        // lines is judged by them again.
         for k in 0..self.confirm_count {
             if !self.confirming[k].alive {
                 continue;
             }
-            match self.init.polish(&self.confirming[k].pose, edges) {
-                Some(c) if acceptable(&self.cfg, &c) => {
+            let polished = self.init.polish(&self.confirming[k].pose, edges);
+            let passes = polished.is_some_and(|c| {
+                acceptable(&self.cfg, &c) || (self.confirming[k].resolved && self.resolved_acceptable(&c, edges))
+            });
+            match polished {
+                Some(c) if passes => {
                     let slot = &mut self.confirming[k];
                     slot.pose = c.pose;
                     slot.merit_sum += c.merit();
@@ -373,8 +383,39 @@ impl<'m> Tracker<'m> {
         // the rig, and with it the rival that would refuse what the rest offers (the door along
         // a corridor, module `hint_age`).
         let looked_at_all = !grown || report.plan_cells_scanned >= report.plan_cells_in_volume;
+        // A search that looked at every cell of its volume saw every rival there, and may accept
+        // by the share explained over the lines the matcher resolves
+        // (`initialisation.accept_resolved_lines`): asked only of the candidates that pass every
+        // other test, since it is quadratic in the segments in sight. (From a part of a volume,
+        // FZK-Haus committed a look-alike 1.13 m off so: the truth that would have refused it lay
+        // in the cells not reached.)
+        let mut resolved = [None::<Pose>; RESOLVED_MAX];
+        if self.cfg.initialisation.accept_resolved_lines && report.plan_cells_scanned >= report.plan_cells_in_volume {
+            let mut n = 0;
+            for c in candidates() {
+                if n == RESOLVED_MAX {
+                    break;
+                }
+                let near_miss = c.explained < self.cfg.initialisation.accept_explained_fraction
+                    && plausible(c)
+                    && c.explained >= floor
+                    && inside(c)
+                    && clear(c)
+                    && looked_at_all;
+                if near_miss && self.resolved_acceptable(c, job.edges()) {
+                    resolved[n] = Some(c.pose);
+                    n += 1;
+                }
+            }
+        }
+        let by_resolved = |c: &Candidate| resolved.contains(&Some(c.pose));
         let accepted = |c: &&Candidate| {
-            acceptable(&self.cfg, c) && plausible(c) && c.explained >= floor && inside(c) && clear(c) && looked_at_all
+            (acceptable(&self.cfg, c) || by_resolved(c))
+                && plausible(c)
+                && c.explained >= floor
+                && inside(c)
+                && clear(c)
+                && looked_at_all
         };
         // With `sweep_volume`, a search that ran out of budget before it looked at every cell
         // of its volume decides nothing: the next one goes on from the nearest cell it left (a sweep), its
@@ -412,6 +453,7 @@ impl<'m> Tracker<'m> {
                 merit_sum: c.merit(),
                 frames: 1,
                 alive: true,
+                resolved: !acceptable(&self.cfg, c),
             };
             n += 1;
         }
@@ -432,6 +474,16 @@ impl<'m> Tracker<'m> {
         self.job = Some(job);
         self.last_time = started_ns;
         result
+    }
+
+    /// Whether `c` passes the acceptance test with its share explained counted over resolved
+    /// lines ([`Initialiser::explained_resolved`]) in place of [`Candidate::explained`].
+    fn resolved_acceptable(&mut self, c: &Candidate, edges: &[Edge]) -> bool {
+        let resolved = Candidate {
+            explained: self.init.explained_resolved(&c.pose, edges),
+            ..*c
+        };
+        acceptable(&self.cfg, &resolved)
     }
 
     /// Whether `best` beats `rival` on the frame's `edges` by the edges exactly one of the two
