@@ -265,9 +265,9 @@ impl Initialiser<'_> {
         }
     }
 
-    /// [`Candidate::explained`] counted over the lines the matcher can resolve
-    /// ([`resolved_share`]; `initialisation.accept_resolved_lines`): the segments in sight and
-    /// long enough, each explained as `final_score` counts it.
+    /// [`Candidate::explained`] counted over the lines the matcher can resolve (`resolved_share`
+    /// in this module; `initialisation.accept_resolved_lines`): the segments in sight and long
+    /// enough, each explained as `final_score` counts it.
     pub fn explained_resolved(&mut self, pose: &Pose, edges: &[Edge]) -> f64 {
         let cap = self.opts.inlier_alpha_rad;
         let gate = Gate::geometric(cap);
