@@ -4,8 +4,11 @@
 //! or I/O (the dependency rules of docs/design.md, "Layers"), so the solvers and tests can use it
 //! anywhere.
 
+pub mod angle;
 pub mod lens;
 pub mod observation;
+
+pub use angle::arc_tangent;
 
 pub use lens::{DoubleSphere, Equirectangular, Eucm, Kb4, Lens, LensError, Omni, Pinhole, Radtan};
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};

@@ -9,6 +9,7 @@ use super::plane::{angle_in_plane, plane_normal, plane_residual, two_lines_apart
 use super::{Candidate, Workspace};
 use crate::edge::MAX_GAPS;
 use nalgebra::{Point2, Vector2, Vector3};
+use omnitrack_core::geometry::arc_tangent;
 
 /// A gradient counts as across a line when its component along the line is at most this share
 /// of it (sin 10°: within 10° of the line's normal, as along a real line; texture beside a gap
@@ -203,7 +204,7 @@ impl PlaneFrame {
         let e2 = c.n.cross(&c.r1);
         PlaneFrame {
             e2,
-            len: c.r2.dot(&e2).atan2(c.r2.dot(&c.r1)),
+            len: arc_tangent(c.r2.dot(&e2), c.r2.dot(&c.r1)),
         }
     }
 }
@@ -242,7 +243,7 @@ fn try_merge(
     }
     // Cheap reject before the eigen-decomposition: the gap measured along i's own plane.
     {
-        let ang = |r: &Vector3<f64>| r.dot(&frame.e2).atan2(r.dot(&ci.r1));
+        let ang = |r: &Vector3<f64>| arc_tangent(r.dot(&frame.e2), r.dot(&ci.r1));
         let ilen = frame.len;
         let (a1, a2) = (ang(&jr1), ang(&jr2));
         let (lo, hi) = (a1.min(a2), a1.max(a2));

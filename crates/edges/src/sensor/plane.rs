@@ -6,6 +6,7 @@
 //! residuals (Σ w sin² off the plane), angles, and whether runs of edgels are two lines.
 
 use nalgebra::{Matrix3, Vector3};
+use omnitrack_core::geometry::arc_tangent;
 
 /// Whether runs of edgels fitted by two planes with residual `two` (Σ w sin²), and by one plane
 /// with residual `one`, are two lines: the rise from two planes to one (the excess) is more
@@ -101,7 +102,7 @@ pub(super) fn plane_residual(m: &Moments, n: &Vector3<f64>) -> f64 {
 #[inline]
 pub(super) fn angle_in_plane(n: &Vector3<f64>, e1: &Vector3<f64>, r: &Vector3<f64>) -> f64 {
     let e2 = n.cross(e1);
-    r.dot(&e2).atan2(r.dot(e1))
+    arc_tangent(r.dot(&e2), r.dot(e1))
 }
 
 #[cfg(test)]
