@@ -8,6 +8,12 @@
 //! it (module `hint_age`), and a grown volume commits only what a search that looked at all of
 //! it found.
 //!
+//! Two pieces of evidence beyond the clear-winner ratio (docs/tracker.md, "Repeated
+//! structure" and "How it works"): a rival within the ratio is beaten when the edges exactly one
+//! of the two explains side with the best (the *disputed* edges), and a search that looked at
+//! every cell of its volume may accept by the share explained over *resolved lines*
+//! (`Initialiser::explained_resolved`).
+//!
 //! In: a frame's [`Edge`]s while not tracking, a finished search's candidates. Out: a committed
 //! pose (tracking starts at it) or none yet; never one from a search a stop cut short
 //! ([`Tracker::stop_searches_on`]).
