@@ -153,18 +153,7 @@ impl Initialiser<'_> {
     /// truth a clear margin (merit ratio ≤ 0.8) over the best pose 0.6 m or 10° away on 27 of 32,
     /// against 22 with the 64 longest.
     pub fn edge_support(&mut self, pose: &Pose, edges: &[Edge]) -> f64 {
-        // Each segment's plane in every sensor, once.
-        self.support_pred.clear();
-        let seen = self
-            .at_pose
-            .at(self.model, self.table, &Point3::from(pose.translation.vector));
-        for k in seen {
-            let seg = &self.model.segments[k.segment as usize];
-            if self.support_pred.len() < self.support_pred.capacity() {
-                self.support_pred
-                    .push(Predicted::new(&[seg.a, seg.b], pose, &self.centres));
-            }
-        }
+        self.predict_in_sight(pose);
         let min_len = self.opts.min_length_rad;
         self.predicted_support(
             edges.iter().filter(|e| e.length_rad >= min_len),
@@ -176,19 +165,30 @@ impl Initialiser<'_> {
     /// `pose` explains it as [`Self::edge_support`] counts: plane within the inlier gate and
     /// overlapping by half.
     pub fn edges_explained(&mut self, pose: &Pose, edges: &[Edge], out: &mut Vec<bool>) {
-        self.edge_support(pose, edges);
+        self.predict_in_sight(pose);
         let cos_gate = self.opts.inlier_alpha_rad.cos();
         let min_len = self.opts.min_length_rad;
         out.clear();
         out.extend(edges.iter().map(|e| {
-            let s = e.sensor as usize;
             e.length_rad >= min_len
-                && s < self.centres.len()
-                && self.support_pred.iter().any(|pred| {
-                    let nrm = &pred.normals[s];
-                    nrm.dot(&e.plane.normal).abs() >= cos_gate && overlap(pred, &self.centres[s], nrm, e) >= 0.5
-                })
+                && (e.sensor as usize) < self.centres.len()
+                && explains(&self.support_pred, &self.centres, e, cos_gate)
         }));
+    }
+
+    /// `self.support_pred` ← each segment in sight from `pose`, its plane in every sensor.
+    fn predict_in_sight(&mut self, pose: &Pose) {
+        self.support_pred.clear();
+        let seen = self
+            .at_pose
+            .at(self.model, self.table, &Point3::from(pose.translation.vector));
+        for k in seen {
+            let seg = &self.model.segments[k.segment as usize];
+            if self.support_pred.len() < self.support_pred.capacity() {
+                self.support_pred
+                    .push(Predicted::new(&[seg.a, seg.b], pose, &self.centres));
+            }
+        }
     }
 
     /// The share (by angle) of `edges` that one of `self.support_pred` explains: plane within
@@ -250,7 +250,7 @@ impl Initialiser<'_> {
             weight += f;
             match best_edge_and_cover(&pred, &self.centres, edges, &gate) {
                 (Some((_, a)), cover) => {
-                    let w = (cover / (FULL_COVER * f)).min(1.0);
+                    let w = covered_share(cover, f);
                     sum += f * (w * a * a + (1.0 - w) * cap * cap);
                     explained += f * w;
                     inliers += 1;
@@ -291,7 +291,7 @@ impl Initialiser<'_> {
             };
             let f = f64::from(s.fraction);
             let explained = match best_edge_and_cover(&pred, &self.centres, edges, &gate) {
-                (Some(_), cover) => f * (cover / (FULL_COVER * f)).min(1.0),
+                (Some(_), cover) => f * covered_share(cover, f),
                 (None, _) => 0.0,
             };
             self.resolved.push(ResolvedLine {
@@ -462,12 +462,22 @@ pub(super) fn support_of<'e>(
     edges: impl Iterator<Item = &'e Edge>,
     cos_gate: f64,
 ) -> f64 {
-    length_share(edges, centres.len(), |_, e| {
-        let s = e.sensor as usize;
-        predicted.iter().any(|pred| {
-            let nrm = &pred.normals[s];
-            nrm.dot(&e.plane.normal).abs() >= cos_gate && overlap(pred, &centres[s], nrm, e) >= 0.5
-        })
+    length_share(edges, centres.len(), |_, e| explains(predicted, centres, e, cos_gate))
+}
+
+/// How far a segment counts as explained: the share `cover` of it that edges cover, over the
+/// share `in_sight` of it in sight, up to [`FULL_COVER`] counting whole.
+fn covered_share(cover: f64, in_sight: f64) -> f64 {
+    (cover / (FULL_COVER * in_sight)).min(1.0)
+}
+
+/// Whether one of `predicted` explains edge `e` (of a sensor of the rig): its plane in the
+/// edge's sensor within the gate (`cos_gate`) of the edge's, and overlapping it by half.
+fn explains(predicted: &[Predicted], centres: &[Point3<f64>], e: &Edge, cos_gate: f64) -> bool {
+    let s = e.sensor as usize;
+    predicted.iter().any(|pred| {
+        let nrm = &pred.normals[s];
+        nrm.dot(&e.plane.normal).abs() >= cos_gate && overlap(pred, &centres[s], nrm, e) >= 0.5
     })
 }
 
