@@ -11,7 +11,7 @@ use crate::cpu::thread_cpu_time;
 use crate::edge::Edge;
 use crate::hue::HueTable;
 use crate::params::EdgeParams;
-use crate::sensor::{self, ExtractionStats, Workspace};
+use crate::sensor::{self, ExtractionStats, Scratch, Workspace};
 use crossbeam::channel::{bounded, Receiver, Sender};
 use omnitrack_config::EdgeConfig;
 use omnitrack_core::frame::{FrameSet, SensorImage};
@@ -38,6 +38,8 @@ unsafe impl Send for Job {}
 
 struct Shared {
     workspaces: Box<[Mutex<Workspace>]>,
+    /// One set of scratch buffers per thread (the caller's first), lent to each sensor it runs.
+    scratch: Box<[Mutex<Scratch>]>,
     next: AtomicUsize,
     /// CPU time (ns) the workers spent on the current frame, added by each before it reports
     /// that it is done (the channel orders the add before the caller's read).
@@ -45,8 +47,9 @@ struct Shared {
 }
 
 impl Shared {
-    /// Takes sensors off the shared counter until none is left.
-    fn work(&self, job: Job) {
+    /// Takes sensors off the shared counter until none is left, on thread `t`'s scratch.
+    fn work(&self, job: Job, t: usize) {
+        let mut scratch = self.scratch[t].lock().unwrap_or_else(|e| e.into_inner());
         loop {
             let k = self.next.fetch_add(1, Ordering::Relaxed);
             if k >= self.workspaces.len() {
@@ -56,7 +59,7 @@ impl Shared {
             if k < job.count {
                 // SAFETY: see `Job`.
                 let img = unsafe { &*job.images.add(k) };
-                ws.run(img);
+                ws.run(img, &mut scratch);
             } else {
                 ws.edges.clear();
             }
@@ -142,17 +145,34 @@ impl EdgeDetector {
             })
             .collect();
         let n = workspaces.len();
-        let shared = Arc::new(Shared {
-            workspaces,
-            next: AtomicUsize::new(0),
-            worker_cpu_ns: AtomicU64::new(0),
-        });
         let threads = if params.threads == 0 {
             std::thread::available_parallelism().map_or(1, |p| p.get()).min(2)
         } else {
             params.threads
         }
         .clamp(1, n.max(1));
+        let max_width = rig.sensors.iter().map(|s| s.width as usize).max().unwrap_or(0);
+        let max_pixels = rig
+            .sensors
+            .iter()
+            .map(|s| s.width as usize * s.height as usize)
+            .max()
+            .unwrap_or(0);
+        let shared = Arc::new(Shared {
+            workspaces,
+            scratch: (0..threads)
+                .map(|_| {
+                    Mutex::new(Scratch::new(
+                        max_width,
+                        max_pixels,
+                        &params,
+                        config.hue_strip_width_px as usize,
+                    ))
+                })
+                .collect(),
+            next: AtomicUsize::new(0),
+            worker_cpu_ns: AtomicU64::new(0),
+        });
         let (done_tx, done) = bounded::<()>(threads);
         let workers = (1..threads)
             .map(|k| {
@@ -166,7 +186,7 @@ impl EdgeDetector {
                         let _ = done_tx.send(());
                         while let Ok(job) = rx.recv() {
                             let started = thread_cpu_time();
-                            shared.work(job);
+                            shared.work(job, k);
                             let spent = (thread_cpu_time() - started).as_nanos() as u64;
                             shared.worker_cpu_ns.fetch_add(spent, Ordering::Relaxed);
                             if done_tx.send(()).is_err() {
@@ -224,7 +244,7 @@ impl EdgeDetector {
                 }
             }
         }
-        self.shared.work(job);
+        self.shared.work(job, 0);
         for _ in 0..sent {
             // A worker that died (panicked) drops its sender only after it stopped touching the
             // frame, so returning afterwards is still sound.
@@ -251,7 +271,8 @@ impl EdgeDetector {
         assert!(k < self.shared.workspaces.len(), "sensor {k} is not in the rig");
         {
             let mut ws = self.shared.workspaces[k].lock().unwrap_or_else(|e| e.into_inner());
-            ws.run(image);
+            let mut scratch = self.shared.scratch[0].lock().unwrap_or_else(|e| e.into_inner());
+            ws.run(image, &mut scratch);
         }
         self.collect();
         self.sensor_edges(k)

@@ -11,7 +11,7 @@
 use super::params::Smoothing;
 use multiversion::multiversion;
 
-/// Ring buffers of one image width, sized at start-up.
+/// Ring buffers for images up to one width, sized at start-up.
 pub(crate) struct Rows {
     w: usize,
     /// Planar colour rows: [slot][channel][u], three slots (rows v−1, v, v+1).
@@ -40,6 +40,11 @@ impl Rows {
             cd: vec![0; 3 * w],
         }
     }
+
+    /// Whether rows of `w` pixels fit.
+    pub fn fits(&self, w: usize) -> bool {
+        w <= self.w
+    }
 }
 
 /// Gradients and edgel map of an RGB8 image (`rgb`: rows of 3·w bytes). Writes rows 1..h−1,
@@ -67,7 +72,7 @@ pub(crate) fn gradients_and_edgels(
     if w < 3 || h < 3 || rgb.len() < 3 * n || gx.len() < n || gy.len() < n || mag.len() < n || map.len() < n {
         return 0;
     }
-    debug_assert_eq!(rows.w, w);
+    debug_assert!(rows.fits(w));
     let slot = |v: usize| v % 3;
     let row = |v: usize| &rgb[3 * w * v..3 * w * (v + 1)];
     deinterleave(row(0), &mut rows.p[0..3 * w], w);

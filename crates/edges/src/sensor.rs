@@ -5,7 +5,8 @@
 //!
 //! In: one [`SensorImage`] (RGB8) and the sensor's ray table ([`ray_table`]). Out: the
 //! [`Workspace`]'s `edges` (at most `max_edges`, strongest first) and its [`ExtractionStats`].
-//! Each step is a file of its own, all working on the one [`Workspace`]: [`chain`] (pixel pass →
+//! Each step is a file of its own, all working on the one [`Workspace`] (and the [`Scratch`] the
+//! running thread lends it): [`chain`] (pixel pass →
 //! chains of sub-pixel rays), [`fit`] (chains → candidate pieces), [`merge`] (collinear pieces
 //! of different chains joined), [`select`] (the strongest candidates → [`Edge`]s, with
 //! [`nfa`]'s a-contrario test of the pieces shown) and [`plane`] (the moments of rays and the
@@ -61,7 +62,9 @@ struct Candidate {
     merged_now: bool,
 }
 
-/// Every buffer one sensor needs, sized at start-up.
+/// What one sensor's extraction keeps from frame to frame (its lens and ray table, candidates,
+/// edges, counters), sized at start-up; the buffers it works through are a thread's
+/// [`Scratch`], lent by [`Workspace::run`].
 pub(crate) struct Workspace {
     pub sensor: u8,
     w: usize,
@@ -77,30 +80,9 @@ pub(crate) struct Workspace {
     strip_px: usize,
     max_edges: usize,
     min_len_rad: f64,
-    /// Ring buffers of the pixel pass.
-    rows: Rows,
-    gx: Vec<i16>,
-    gy: Vec<i16>,
-    /// |gx| + |gy| ≤ 2 · 4 · 4 · 4 · 255 = 32640: fits i16 (signed, so that SSE2 compares it).
-    mag: Vec<i16>,
-    /// 0: no edgel (or already linked); 1..=4: edgel with its gradient bin.
-    map: Vec<u8>,
-    fwd: Vec<u32>,
-    bwd: Vec<u32>,
-    // One chain, structure of arrays.
-    pos: Vec<[f32; 2]>,
-    grad: Vec<[f32; 2]>,
-    emag: Vec<f32>,
-    ray: Vec<Vector3<f64>>,
-    prefix: Vec<Moments>,
-    stack: Vec<(u32, u32)>,
-    pieces: Vec<(u32, u32)>,
-    /// One piece's hue-strip samples (x, y, and the unit step (dx, dy) to the left), and its
-    /// strip pixels as [t][side][sample]: their byte offsets into the image, then their hues
-    /// ([`HueTable::classify`]).
-    samples: [Vec<f32>; 4],
-    strip: Vec<u32>,
-    strip_hues: Vec<u32>,
+    /// The thread's buffers ([`Scratch`]), lent for the length of [`Workspace::run`]; empty
+    /// otherwise.
+    buf: Scratch,
     cands: Vec<Candidate>,
     /// The candidates' normals packed for the pair test of `merge_across_chains` (0 once dead),
     /// one array per coordinate so that the test of a block of pairs vectorises: the test of
@@ -148,7 +130,6 @@ impl Workspace {
         min_len_deg: f64,
     ) -> Workspace {
         let (w, h) = (sensor.width as usize, sensor.height as usize);
-        let n = w * h;
         let cand_cap = (max_edges * 4).max(64);
         std::sync::LazyLock::force(&LN_MAG);
         Workspace {
@@ -164,25 +145,7 @@ impl Workspace {
             strip_px,
             max_edges,
             min_len_rad: min_len_deg.to_radians(),
-            rows: Rows::new(w),
-            // Resident from the start (`omnitrack_core::memory`): a chain or a frame longer
-            // than any before would otherwise take new memory on the frame path.
-            gx: resident(vec![0; n]),
-            gy: resident(vec![0; n]),
-            mag: resident(vec![0; n]),
-            map: resident(vec![0; n]),
-            fwd: resident(Vec::with_capacity(MAX_CHAIN)),
-            bwd: resident(Vec::with_capacity(MAX_CHAIN)),
-            pos: resident(Vec::with_capacity(2 * MAX_CHAIN)),
-            grad: resident(Vec::with_capacity(2 * MAX_CHAIN)),
-            emag: resident(Vec::with_capacity(2 * MAX_CHAIN)),
-            ray: resident(Vec::with_capacity(2 * MAX_CHAIN)),
-            prefix: resident(Vec::with_capacity(2 * MAX_CHAIN + 1)),
-            stack: resident(Vec::with_capacity(2 * MAX_CHAIN)),
-            pieces: resident(Vec::with_capacity(2 * MAX_CHAIN)),
-            samples: std::array::from_fn(|_| resident(Vec::with_capacity(params.hue_samples_per_edge.max(1)))),
-            strip: resident(Vec::with_capacity(2 * strip_px * params.hue_samples_per_edge.max(1))),
-            strip_hues: resident(Vec::with_capacity(2 * strip_px * params.hue_samples_per_edge.max(1))),
+            buf: Scratch::empty(),
             cands: resident(Vec::with_capacity(cand_cap)),
             normals: std::array::from_fn(|_| resident(Vec::with_capacity(cand_cap))),
             // Pieces are sampled once a pixel: none is longer than a few image perimeters.
@@ -193,9 +156,24 @@ impl Workspace {
         }
     }
 
-    /// Detects the edges of one image into `self.edges` (cleared first). An invalid image, or
-    /// one of the wrong size, yields no edges.
-    pub fn run(&mut self, img: &SensorImage) {
+    /// Detects the edges of one image into `self.edges` (cleared first), on the calling
+    /// thread's `scratch` (made for at least this sensor's size). An invalid image, or one of the wrong size,
+    /// yields no edges.
+    pub fn run(&mut self, img: &SensorImage, scratch: &mut Scratch) {
+        scratch.prepare(self.w, self.h);
+        self.with_scratch(scratch, |ws| ws.run_lent(img));
+    }
+
+    /// Runs `f` with `scratch` lent to this workspace (after [`Workspace::run`], the maps it
+    /// filled hold this sensor's gradients).
+    fn with_scratch<R>(&mut self, scratch: &mut Scratch, f: impl FnOnce(&mut Workspace) -> R) -> R {
+        std::mem::swap(&mut self.buf, scratch);
+        let r = f(self);
+        std::mem::swap(&mut self.buf, scratch);
+        r
+    }
+
+    fn run_lent(&mut self, img: &SensorImage) {
         self.edges.clear();
         self.cands.clear();
         self.stats = ExtractionStats::default();
@@ -211,11 +189,11 @@ impl Workspace {
             self.h,
             self.params.smoothing,
             self.params.gradient_threshold.min(i16::MAX as u16) as i16,
-            &mut self.rows,
-            &mut self.gx,
-            &mut self.gy,
-            &mut self.mag,
-            &mut self.map,
+            &mut self.buf.rows,
+            &mut self.buf.gx,
+            &mut self.buf.gy,
+            &mut self.buf.mag,
+            &mut self.buf.map,
         );
         let t1 = thread_cpu_time();
         self.link(img.pixels());
@@ -229,6 +207,110 @@ impl Workspace {
         self.stats.chain_ns = ns(t2 - t1);
         self.stats.merge_ns = ns(t3 - t2);
         self.stats.select_ns = ns(t4 - t3);
+    }
+}
+
+/// The buffers one sensor's extraction works through and leaves nothing in: the pixel pass's
+/// full-image maps and ring buffers, and one chain's edgels and pieces. One set per thread
+/// rather than per sensor: a thread runs its sensors one after another, so its set (1.4 MB of
+/// maps at 512×384) stays in its core's cache from one sensor to the next, where six sets (one
+/// a sensor) were each fetched back from memory once a frame.
+pub(crate) struct Scratch {
+    rows: Rows,
+    gx: Vec<i16>,
+    gy: Vec<i16>,
+    /// |gx| + |gy| ≤ 2 · 4 · 4 · 4 · 255 = 32640: fits i16 (signed, so that SSE2 compares it).
+    mag: Vec<i16>,
+    /// 0: no edgel (or already linked); 1..=4: edgel with its gradient bin.
+    map: Vec<u8>,
+    /// The image size the maps were last used at: the pass writes only the interior, and
+    /// linking relies on a zero border.
+    size: (usize, usize),
+    fwd: Vec<u32>,
+    bwd: Vec<u32>,
+    // One chain, structure of arrays.
+    pos: Vec<[f32; 2]>,
+    grad: Vec<[f32; 2]>,
+    emag: Vec<f32>,
+    ray: Vec<Vector3<f64>>,
+    prefix: Vec<Moments>,
+    stack: Vec<(u32, u32)>,
+    pieces: Vec<(u32, u32)>,
+    /// One piece's hue-strip samples (x, y, and the unit step (dx, dy) to the left), and its
+    /// strip pixels as [t][side][sample]: their byte offsets into the image, then their hues
+    /// ([`HueTable::classify`]).
+    samples: [Vec<f32>; 4],
+    strip: Vec<u32>,
+    strip_hues: Vec<u32>,
+}
+
+impl Scratch {
+    /// Buffers for images of at most `max_pixels` pixels in rows of at most `max_width`,
+    /// resident from the start (`omnitrack_core::memory`): a chain or a frame longer than any
+    /// before would otherwise take new memory on the frame path.
+    pub fn new(max_width: usize, max_pixels: usize, params: &EdgeParams, strip_px: usize) -> Scratch {
+        let samples = params.hue_samples_per_edge.max(1);
+        Scratch {
+            rows: Rows::new(max_width),
+            gx: resident(vec![0; max_pixels]),
+            gy: resident(vec![0; max_pixels]),
+            mag: resident(vec![0; max_pixels]),
+            map: resident(vec![0; max_pixels]),
+            size: (0, 0),
+            fwd: resident(Vec::with_capacity(MAX_CHAIN)),
+            bwd: resident(Vec::with_capacity(MAX_CHAIN)),
+            pos: resident(Vec::with_capacity(2 * MAX_CHAIN)),
+            grad: resident(Vec::with_capacity(2 * MAX_CHAIN)),
+            emag: resident(Vec::with_capacity(2 * MAX_CHAIN)),
+            ray: resident(Vec::with_capacity(2 * MAX_CHAIN)),
+            prefix: resident(Vec::with_capacity(2 * MAX_CHAIN + 1)),
+            stack: resident(Vec::with_capacity(2 * MAX_CHAIN)),
+            pieces: resident(Vec::with_capacity(2 * MAX_CHAIN)),
+            samples: std::array::from_fn(|_| resident(Vec::with_capacity(samples))),
+            strip: resident(Vec::with_capacity(2 * strip_px * samples)),
+            strip_hues: resident(Vec::with_capacity(2 * strip_px * samples)),
+        }
+    }
+
+    /// What a workspace holds while no thread has lent it a set (allocates nothing).
+    fn empty() -> Scratch {
+        Scratch {
+            rows: Rows::new(0),
+            gx: Vec::new(),
+            gy: Vec::new(),
+            mag: Vec::new(),
+            map: Vec::new(),
+            size: (0, 0),
+            fwd: Vec::new(),
+            bwd: Vec::new(),
+            pos: Vec::new(),
+            grad: Vec::new(),
+            emag: Vec::new(),
+            ray: Vec::new(),
+            prefix: Vec::new(),
+            stack: Vec::new(),
+            pieces: Vec::new(),
+            samples: std::array::from_fn(|_| Vec::new()),
+            strip: Vec::new(),
+            strip_hues: Vec::new(),
+        }
+    }
+
+    /// Clears the maps when the image size changes (a rig of sensors of several sizes), so
+    /// that a border is zero whatever image used the maps before.
+    fn prepare(&mut self, w: usize, h: usize) {
+        assert!(
+            w * h <= self.map.len() && self.rows.fits(w),
+            "edge scratch of {} pixels for a {w}×{h} image",
+            self.map.len()
+        );
+        if self.size != (w, h) {
+            self.gx.fill(0);
+            self.gy.fill(0);
+            self.mag.fill(0);
+            self.map.fill(0);
+            self.size = (w, h);
+        }
     }
 }
 

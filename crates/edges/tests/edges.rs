@@ -680,3 +680,78 @@ fn the_trackers_edges_are_the_line_detectors_less_the_tested_pieces() {
         }
     }
 }
+
+/// A rig whose sensors differ in size: one thread runs them all on one set of scratch buffers
+/// (sized for the largest, cleared when the size changes), and every sensor's edges are those
+/// a detector of its own gives on fresh buffers.
+#[test]
+fn sensors_of_several_sizes_share_a_threads_buffers() {
+    let _g = serial();
+    let sensor = |id: usize, (w, h): (u32, u32), yaw_deg: f64| {
+        let (s, c) = (yaw_deg.to_radians() / 2.0).sin_cos();
+        format!(
+            "[[sensors]]\nid = {id}\nresolution = [{w}, {h}]\nmodel = \"pinhole\"\n\
+intrinsics = [{f}, {f}, {cx}, {cy}]\nrotation_wxyz = [{c}, 0.0, {s}, 0.0]\ntranslation_m = [0.0, 0.0, 0.0]\n\n",
+            f = 0.6 * w as f64,
+            cx = (w as f64 - 1.0) / 2.0,
+            cy = (h as f64 - 1.0) / 2.0,
+        )
+    };
+    let text = format!(
+        "name = \"sizes\"\n\n{}{}{}",
+        sensor(0, (320, 240), 0.0),
+        sensor(1, (200, 150), 120.0),
+        sensor(2, (320, 240), 240.0)
+    );
+    let rig = Rig::from_toml_str(&text, "(test rig)").expect("rig");
+    // Bands of colour between great circles all round the rig: busy images, edges up to every
+    // border.
+    let normals: Vec<Vector3<f64>> = (0..7)
+        .map(|k| {
+            let a = k as f64 * 0.9;
+            Vector3::new(a.cos(), 0.35 * (k as f64 - 3.0), a.sin()).normalize()
+        })
+        .collect();
+    let colour = |r: &Vector3<f64>| {
+        let code = normals
+            .iter()
+            .enumerate()
+            .fold(0u32, |c, (k, n)| c | (u32::from(n.dot(r) > 0.0) << k));
+        [
+            (37 * code % 200 + 30) as f64,
+            (91 * code % 200 + 30) as f64,
+            (53 * code % 200 + 30) as f64,
+        ]
+    };
+    let mut frame = FrameSet::for_rig(&rig);
+    for k in 0..3 {
+        // The boundaries in sensor k's frame: the sensor's rotation from the rig's.
+        let q = rig.sensors[k].t_rig_sensor.rotation;
+        let local: Vec<Vector3<f64>> = normals.iter().map(|n| q.inverse() * n).collect();
+        let img = render(&rig, k, &local, |r| colour(&(q * r)));
+        *frame.sensor_mut(k) = img;
+    }
+    let params = EdgeParams {
+        threads: 1,
+        ..EdgeParams::default()
+    };
+    let config = EdgeConfig::default();
+    let mut shared = EdgeDetector::with_params(&rig, &config, params);
+    // Twice: the second frame starts on buffers the last (large) sensor left behind.
+    for pass in 0..2 {
+        shared.detect(&frame);
+        for k in 0..3 {
+            let mut alone = EdgeDetector::with_params(&rig, &config, params);
+            let want = alone.detect_sensor(frame.sensor(k)).to_vec();
+            let got = shared.sensor_edges(k);
+            assert!(!want.is_empty(), "sensor {k}: no edges to compare");
+            assert_eq!(got.len(), want.len(), "pass {pass}, sensor {k}: edge count");
+            for (g, w) in got.iter().zip(&want) {
+                assert_eq!(
+                    g.plane.normal, w.plane.normal,
+                    "pass {pass}, sensor {k}: an edge differs"
+                );
+            }
+        }
+    }
+}

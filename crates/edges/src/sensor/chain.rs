@@ -31,8 +31,8 @@ impl Workspace {
     /// colour gradient's sign can flip where the dominant channel changes).
     #[inline]
     fn compatible(&self, i: usize, j: usize) -> bool {
-        let (ax, ay) = (self.gx[i] as i64, self.gy[i] as i64);
-        let (bx, by) = (self.gx[j] as i64, self.gy[j] as i64);
+        let (ax, ay) = (self.buf.gx[i] as i64, self.buf.gy[i] as i64);
+        let (bx, by) = (self.buf.gx[j] as i64, self.buf.gy[j] as i64);
         let dot = ax * bx + ay * by;
         5 * dot * dot > 2 * (ax * ax + ay * ay) * (bx * bx + by * by)
     }
@@ -64,9 +64,9 @@ impl Workspace {
     #[inline(never)]
     pub(super) fn link(&mut self, rgb: &[u8]) {
         let (w, h) = (self.w, self.h);
-        let mut map = std::mem::take(&mut self.map);
-        let mut fwd = std::mem::take(&mut self.fwd);
-        let mut bwd = std::mem::take(&mut self.bwd);
+        let mut map = std::mem::take(&mut self.buf.map);
+        let mut fwd = std::mem::take(&mut self.buf.fwd);
+        let mut bwd = std::mem::take(&mut self.buf.bwd);
         // Row-major over the interior (the map's border is always 0): the first edgel at or
         // after `next`, found a word at a time (most of the map is empty), and within a word by
         // its lowest set byte rather than a cell at a time.
@@ -95,7 +95,7 @@ impl Workspace {
                     continue;
                 }
                 map[i] = 0;
-                let dir = tangent_octant(self.gx[i], self.gy[i]);
+                let dir = tangent_octant(self.buf.gx[i], self.buf.gy[i]);
                 fwd.clear();
                 bwd.clear();
                 Self::trace(&mut map, self, i, dir, &mut fwd, MAX_CHAIN - 1);
@@ -115,9 +115,9 @@ impl Workspace {
                 self.fit_chain(rgb);
             }
         }
-        self.map = map;
-        self.fwd = fwd;
-        self.bwd = bwd;
+        self.buf.map = map;
+        self.buf.fwd = fwd;
+        self.buf.bwd = bwd;
     }
 
     /// Sub-pixel positions (parabola across the gradient), gradients and rays of a chain's edgels.
@@ -129,29 +129,29 @@ impl Workspace {
     /// whole chain ahead, the lines arrive while the positions are still being computed.
     #[inline(never)]
     fn load_chain(&mut self, idx: impl Iterator<Item = u32>) {
-        self.pos.clear();
-        self.grad.clear();
-        self.emag.clear();
-        self.ray.clear();
-        self.prefix.clear();
-        self.prefix.push([0.0; 7]);
+        self.buf.pos.clear();
+        self.buf.grad.clear();
+        self.buf.emag.clear();
+        self.buf.ray.clear();
+        self.buf.prefix.clear();
+        self.buf.prefix.push([0.0; 7]);
         let (w, h) = (self.w, self.h);
         let ln = &**LN_MAG;
         let ln_of = |m: i16| ln[m.max(0) as usize];
         for i in idx {
             let i = i as usize;
-            let (gx, gy) = (self.gx[i], self.gy[i]);
+            let (gx, gy) = (self.buf.gx[i], self.buf.gy[i]);
             let bin = bin(gx, gy);
             let (du, dv) = bin_step(bin);
             let off = dv * w as isize + du;
-            let m0 = self.mag[i] as f32;
+            let m0 = self.buf.mag[i] as f32;
             // Gaussian sub-pixel peak: the parabola through the logarithms of the magnitudes
             // (exact for a Gaussian profile; less biased than a parabola on the magnitudes for
             // the narrow profiles of the 3-px-wide derivative).
             let (la, l0, lb) = (
-                ln_of(self.mag[(i as isize - off) as usize]),
-                ln_of(self.mag[i]),
-                ln_of(self.mag[(i as isize + off) as usize]),
+                ln_of(self.buf.mag[(i as isize - off) as usize]),
+                ln_of(self.buf.mag[i]),
+                ln_of(self.buf.mag[(i as isize + off) as usize]),
             );
             let denom = la - 2.0 * l0 + lb;
             let s = if denom < 0.0 {
@@ -162,32 +162,32 @@ impl Workspace {
             let x = (i % w) as f32 + s * du as f32;
             let y = (i / w) as f32 + s * dv as f32;
             prefetch_rays(&self.rays, table_corner(x, y, w, h), w);
-            self.pos.push([x, y]);
-            self.grad.push([gx as f32, gy as f32]);
-            self.emag.push(m0);
+            self.buf.pos.push([x, y]);
+            self.buf.grad.push([gx as f32, gy as f32]);
+            self.buf.emag.push(m0);
         }
         // Edgels without a ray (outside the lens's image) are dropped, the rest keep their order.
         let mut kept = 0;
-        for k in 0..self.pos.len() {
-            let [x, y] = self.pos[k];
+        for k in 0..self.buf.pos.len() {
+            let [x, y] = self.buf.pos[k];
             let Some(r) = self.ray_at(x, y) else { continue };
-            self.pos[kept] = self.pos[k];
-            self.grad[kept] = self.grad[k];
-            self.emag[kept] = self.emag[k];
+            self.buf.pos[kept] = self.buf.pos[k];
+            self.buf.grad[kept] = self.buf.grad[k];
+            self.buf.emag[kept] = self.buf.emag[k];
             kept += 1;
-            self.ray.push(r);
+            self.buf.ray.push(r);
         }
-        self.pos.truncate(kept);
-        self.grad.truncate(kept);
-        self.emag.truncate(kept);
+        self.buf.pos.truncate(kept);
+        self.buf.grad.truncate(kept);
+        self.buf.emag.truncate(kept);
         // The running sums apart from the rays: each ray (a square root and divisions) is then
         // independent of the one before, and the processor overlaps them, where one loop made
         // every ray wait behind the previous edgel's sums.
         let mut p = [0.0; 7];
-        for (r, &m0) in self.ray.iter().zip(&self.emag) {
+        for (r, &m0) in self.buf.ray.iter().zip(&self.buf.emag) {
             let o = weighted_outer(r, edgel_weight(m0));
             p = std::array::from_fn(|k| p[k] + o[k]);
-            self.prefix.push(p);
+            self.buf.prefix.push(p);
         }
     }
 

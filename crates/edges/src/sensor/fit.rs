@@ -17,7 +17,7 @@ use nalgebra::Vector3;
 
 impl Workspace {
     fn moments(&self, a: usize, b: usize) -> Moments {
-        let (p, q) = (&self.prefix[a], &self.prefix[b + 1]);
+        let (p, q) = (&self.buf.prefix[a], &self.buf.prefix[b + 1]);
         std::array::from_fn(|k| q[k] - p[k])
     }
 
@@ -25,7 +25,7 @@ impl Workspace {
     fn max_dev(&self, n: &Vector3<f64>, a: usize, b: usize) -> (f64, usize) {
         let mut best = (0.0, a);
         for k in a..=b {
-            let d = n.dot(&self.ray[k]).abs();
+            let d = n.dot(&self.buf.ray[k]).abs();
             if d > best.0 {
                 best = (d, k);
             }
@@ -35,37 +35,37 @@ impl Workspace {
 
     #[inline(never)]
     pub(super) fn fit_chain(&mut self, rgb: &[u8]) {
-        let n = self.ray.len();
+        let n = self.buf.ray.len();
         let min_n = self.params.min_chain_edgels;
         if n < min_n {
             return;
         }
         let tol = self.params.split_tolerance_rad.sin();
         // Split (Douglas–Peucker on the sphere: deviation from the end rays' great circle).
-        self.pieces.clear();
-        self.stack.clear();
-        self.stack.push((0, n as u32 - 1));
-        while let Some((a, b)) = self.stack.pop() {
+        self.buf.pieces.clear();
+        self.buf.stack.clear();
+        self.buf.stack.push((0, n as u32 - 1));
+        while let Some((a, b)) = self.buf.stack.pop() {
             let (a, b) = (a as usize, b as usize);
             if b + 1 - a < min_n {
                 continue;
             }
-            let c = self.ray[a].cross(&self.ray[b]);
+            let c = self.buf.ray[a].cross(&self.buf.ray[b]);
             let cn = c.norm();
             if cn < 1e-9 {
                 continue;
             }
             let (dev, k) = self.max_dev(&(c / cn), a, b);
             if dev > tol && k > a && k < b {
-                self.stack.push((k as u32, b as u32));
-                self.stack.push((a as u32, k as u32));
+                self.buf.stack.push((k as u32, b as u32));
+                self.buf.stack.push((a as u32, k as u32));
             } else {
-                self.pieces.push((a as u32, b as u32));
+                self.buf.pieces.push((a as u32, b as u32));
             }
         }
         // Merge neighbouring pieces whose union is still one plane.
         let mut out = 0;
-        let pieces = std::mem::take(&mut self.pieces);
+        let pieces = std::mem::take(&mut self.buf.pieces);
         let mut pieces = pieces;
         for k in 0..pieces.len() {
             let (a, b) = pieces[k];
@@ -88,17 +88,17 @@ impl Workspace {
         // The chord test misses two lines that meet at a shallow angle or run side by side a
         // pixel or two apart (a wall corner continued by a box's edge): with the two-line test
         // on, each piece is also cut where two planes fit it much better than one.
-        self.stack.clear();
-        self.stack.extend(pieces.iter().rev().copied());
-        while let Some((a, b)) = self.stack.pop() {
+        self.buf.stack.clear();
+        self.buf.stack.extend(pieces.iter().rev().copied());
+        while let Some((a, b)) = self.buf.stack.pop() {
             if let Some(k) = self.two_lines(a as usize, b as usize) {
-                self.stack.push((k as u32 + 1, b));
-                self.stack.push((a, k as u32));
+                self.buf.stack.push((k as u32 + 1, b));
+                self.buf.stack.push((a, k as u32));
             } else {
                 self.add_piece(a as usize, b as usize, rgb);
             }
         }
-        self.pieces = pieces;
+        self.buf.pieces = pieces;
     }
 
     /// Where edgels a..=b are two lines rather than one (see [`two_lines_apart`]): the last
@@ -158,7 +158,7 @@ impl Workspace {
             let cut = (OUTLIER_SIGMAS * rms).max(floor);
             let mut kept = all;
             let mut k_count = total;
-            for (r, &g) in self.ray[a..=b].iter().zip(&self.emag[a..=b]) {
+            for (r, &g) in self.buf.ray[a..=b].iter().zip(&self.buf.emag[a..=b]) {
                 if n.dot(r).abs() > cut {
                     let o = weighted_outer(r, edgel_weight(g));
                     for (x, y) in kept.iter_mut().zip(o) {
@@ -182,7 +182,7 @@ impl Workspace {
         let Some((m, fitted, mut nrm)) = self.robust_fit(a, b) else {
             return;
         };
-        let (ra, rb) = (self.ray[a], self.ray[b]);
+        let (ra, rb) = (self.buf.ray[a], self.buf.ray[b]);
         if nrm.dot(&ra.cross(&rb)) < 0.0 {
             nrm = -nrm;
         }
@@ -195,7 +195,7 @@ impl Workspace {
             return;
         }
         // Hue strips and polarity; left of the walk from edgel a to edgel b.
-        let (pa, pb) = (self.pos[a], self.pos[b]);
+        let (pa, pb) = (self.buf.pos[a], self.buf.pos[b]);
         let left = [pb[1] - pa[1], -(pb[0] - pa[0])];
         let mut lacc = HueAcc::default();
         let mut racc = HueAcc::default();
@@ -213,13 +213,13 @@ impl Workspace {
         // the order one pass per pixel had: sample by sample, left and right in turn, out from
         // the edge. Computed one pixel after the other, the strips were a fifth of the
         // detector's CPU on `lab`.
-        let [sx, sy, sdx, sdy] = &mut self.samples;
+        let [sx, sy, sdx, sdy] = &mut self.buf.samples;
         for v in [&mut *sx, &mut *sy, &mut *sdx, &mut *sdy] {
             v.clear();
         }
         for k in a..=b {
-            strength += self.emag[k];
-            let g = self.grad[k];
+            strength += self.buf.emag[k];
+            let g = self.buf.grad[k];
             let side = g[0] * left[0] + g[1] * left[1];
             bright_left += if side > 0.0 { 1 } else { -1 };
             if (k - a) % step != 0 {
@@ -231,14 +231,14 @@ impl Workspace {
             }
             let s = if side >= 0.0 { 1.0 } else { -1.0 } / gn;
             // (dx, dy): unit, pointing to the left side.
-            let p = self.pos[k];
+            let p = self.buf.pos[k];
             sx.push(p[0]);
             sy.push(p[1]);
             sdx.push(g[0] * s);
             sdy.push(g[1] * s);
         }
         let ns = sx.len();
-        let mut strip = std::mem::take(&mut self.strip);
+        let mut strip = std::mem::take(&mut self.buf.strip);
         strip.clear();
         strip.resize(2 * self.strip_px * ns, OUTSIDE);
         for (t, sides) in strip.chunks_exact_mut(2 * ns.max(1)).enumerate() {
@@ -253,7 +253,7 @@ impl Workspace {
                 prefetch(rgb, i as usize);
             }
         }
-        let mut hues = std::mem::take(&mut self.strip_hues);
+        let mut hues = std::mem::take(&mut self.buf.strip_hues);
         hues.clear();
         hues.extend(strip.iter().map(|&i| {
             let i = i as usize;
@@ -269,8 +269,8 @@ impl Workspace {
                 self.hue.add(&mut racc, hues[(2 * t + 1) * ns + k]);
             }
         }
-        self.strip_hues = hues;
-        self.strip = strip;
+        self.buf.strip_hues = hues;
+        self.buf.strip = strip;
         let cand = Candidate {
             m,
             count: fitted,

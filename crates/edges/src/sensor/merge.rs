@@ -174,10 +174,10 @@ impl Workspace {
                     continue;
                 }
                 let i = v as usize * self.w + u as usize;
-                if i32::from(self.mag[i]) < threshold {
+                if i32::from(self.buf.mag[i]) < threshold {
                     continue;
                 }
-                let (gx, gy) = (f64::from(self.gx[i]), f64::from(self.gy[i]));
+                let (gx, gy) = (f64::from(self.buf.gx[i]), f64::from(self.buf.gy[i]));
                 let g = (gx * gx + gy * gy).sqrt();
                 if g > 0.0 && (gx * along.x + gy * along.y).abs() <= GAP_ACROSS_COS * g {
                     return true;

@@ -154,7 +154,7 @@ impl Workspace {
             }
             let m = batch_end - k0;
             for (g, &i) in g[..m].iter_mut().zip(&idx[..m]) {
-                *g = [self.gx[i], self.gy[i]];
+                *g = [self.buf.gx[i], self.buf.gy[i]];
             }
             // Aligned samples of each polarity (0: gradient along the left-hand normal).
             let mut mask = [0u32; 2];
@@ -202,7 +202,7 @@ impl Workspace {
                         let (x, y) = (p.x + 0.5, p.y + 0.5);
                         if dn > 0.0 && x >= 0.0 && y >= 0.0 && x < w && y < h {
                             let i = y as usize * self.w + x as usize;
-                            let (gx, gy) = (f64::from(self.gx[i]), f64::from(self.gy[i]));
+                            let (gx, gy) = (f64::from(self.buf.gx[i]), f64::from(self.buf.gy[i]));
                             let g2 = gx * gx + gy * gy;
                             let across = (gx * -d.y + gy * d.x) / dn;
                             if g2 >= rho2 && across * across >= cos2 * g2 && usize::from(across < 0.0) == s {
@@ -241,7 +241,7 @@ mod tests {
     use super::*;
     use crate::hue::HueTable;
     use crate::params::EdgeParams;
-    use crate::sensor::ray_table;
+    use crate::sensor::{ray_table, Scratch};
     use nalgebra::Point2;
     use omnitrack_core::frame::SensorImage;
     use rand::rngs::SmallRng;
@@ -278,6 +278,7 @@ intrinsics = [150.0, 150.0, 159.5, 119.5]\n{}rotation_wxyz = [1.0, 0.0, 0.0, 0.0
     fn a_contrario_keeps_a_line_and_refuses_noise() {
         for model in ["pinhole", "kb4"] {
             let mut ws = workspace(model);
+            let mut scratch = Scratch::new(320, 320 * 240, &EdgeParams::default(), 5);
             // The stretch tested: the great circle through the rays of two pixels, well inside.
             let r1 = ws.lens.unproject(&Point2::new(60.0, 70.0)).expect("ray").into_inner();
             let r2 = ws.lens.unproject(&Point2::new(250.0, 160.0)).expect("ray").into_inner();
@@ -291,9 +292,9 @@ intrinsics = [150.0, 150.0, 159.5, 119.5]\n{}rotation_wxyz = [1.0, 0.0, 0.0, 0.0
                 px.fill(if n.dot(&r) > 0.0 { 180 } else { 60 });
             }
             img.set_valid(0);
-            ws.run(&img);
+            ws.run(&img, &mut scratch);
             assert!(ws.params.piece_nfa);
-            let kept = ws.meaningful_part(&n, &r1, 0.0, span);
+            let kept = ws.with_scratch(&mut scratch, |ws| ws.meaningful_part(&n, &r1, 0.0, span));
             match kept {
                 Some(Stretch::Whole) => {}
                 Some(Stretch::Part(a, b)) => assert!(a < 0.02 * span && b > 0.98 * span, "{model}: {a}..{b} of {span}"),
@@ -302,7 +303,8 @@ intrinsics = [150.0, 150.0, 159.5, 119.5]\n{}rotation_wxyz = [1.0, 0.0, 0.0, 0.0
             // Short pieces of it too: 20 px is above LSD's minimum of 16 aligned pixels here.
             let short = span * 20.0 / 212.0;
             assert!(
-                ws.meaningful_part(&n, &r1, 0.3, 0.3 + short).is_some(),
+                ws.with_scratch(&mut scratch, |ws| ws.meaningful_part(&n, &r1, 0.3, 0.3 + short))
+                    .is_some(),
                 "{model}: a 20 px piece refused"
             );
             // Pure noise: uniform grey levels, independent per pixel and channel.
@@ -312,10 +314,10 @@ intrinsics = [150.0, 150.0, 159.5, 119.5]\n{}rotation_wxyz = [1.0, 0.0, 0.0, 0.0
                     *v = rng.random();
                 }
                 img.set_valid(0);
-                ws.run(&img);
+                ws.run(&img, &mut scratch);
                 for (a, b) in [(0.0, span), (0.2, 0.2 + short), (0.5, 0.5 + 2.0 * short)] {
                     assert_eq!(
-                        ws.meaningful_part(&n, &r1, a, b),
+                        ws.with_scratch(&mut scratch, |ws| ws.meaningful_part(&n, &r1, a, b)),
                         None,
                         "{model} trial {trial}: noise kept at {a}..{b}"
                     );
@@ -333,9 +335,10 @@ intrinsics = [150.0, 150.0, 159.5, 119.5]\n{}rotation_wxyz = [1.0, 0.0, 0.0, 0.0
             px.fill((k % 320 / 2 + 20) as u8);
         }
         img.set_valid(0);
-        ws.run(&img);
+        let mut scratch = Scratch::new(320, 320 * 240, &EdgeParams::default(), 5);
+        ws.run(&img, &mut scratch);
         let i = 100 * 320 + 150;
         // Half a grey level a pixel.
-        assert_eq!((ws.gx[i], ws.gy[i]), ((GRADIENT_PER_GREY / 2.0) as i16, 0));
+        assert_eq!((scratch.gx[i], scratch.gy[i]), ((GRADIENT_PER_GREY / 2.0) as i16, 0));
     }
 }
