@@ -50,7 +50,7 @@ mod index;
 
 use super::device::{crop_into, Window};
 use super::{sleep_until_or_stop, FrameSource, SourceError, SourceStats, WarningKind, WarningLimiter};
-use image_file::{read_file, Encoded, Problem};
+use image_file::{read_file, read_file_or_ppm, Encoded, Problem};
 pub use index::FRAMES_HEADER;
 use index::{FrameIndex, Row};
 use omnitrack_core::frame::{FrameSet, ImageFault, SensorImage};
@@ -311,7 +311,9 @@ fn load_image(
 ) -> Result<(), (ImageFault, Problem)> {
     // An image file is never much larger than its raw pixels: past this it is not the sensor's.
     let most = 4 * u64::from(img.width()) * u64::from(img.height()) + (1 << 20);
-    read_file(path, root, file_buf, most)?;
+    if read_file_or_ppm(path, root, file_buf, most, img)? {
+        return Ok(());
+    }
     let encoded = Encoded::open(file_buf)?;
     let found = encoded.dimensions();
     let expected = (img.width(), img.height());

@@ -824,6 +824,36 @@ fn qoi_and_ppm_images_replay_to_the_same_pixels_as_png() {
     assert_eq!(source.stats().images_delivered(), 8);
 }
 
+/// A PPM of the sensor's size is read straight into the image; one whose header runs past the
+/// bytes first read (a long comment), one with bytes after its pixels and one smaller than a
+/// block give the same pixels.
+#[test]
+fn ppm_headers_of_any_length_and_trailing_bytes_replay_the_same_pixels() {
+    let dir = recording(&SMALL, 3);
+    for frame in 0..3 {
+        convert(dir.path(), frame, 0, "ppm");
+    }
+    let rewrite = |frame: u64, edit: &dyn Fn(&[u8]) -> Vec<u8>| {
+        let path = dir.path().join(format!("sensor0/{frame:06}.ppm"));
+        let bytes = std::fs::read(&path).unwrap();
+        std::fs::write(&path, edit(&bytes)).unwrap();
+    };
+    // A 10 kB comment before the width.
+    rewrite(0, &|b| [b"P6\n#".as_slice(), &[b'x'; 10_000], b"\n", &b[3..]].concat());
+    // Junk after the pixels.
+    rewrite(1, &|b| [b, b"trailing bytes".as_slice()].concat());
+    let (mut source, mut frame) = open(&dir);
+    let mut frames = 0;
+    while source.next_frame(&mut frame).unwrap() {
+        assert_eq!(frame.valid_count(), 2, "frame {}", frame.sequence);
+        for sensor in 0..2 {
+            assert_pixels(&frame, sensor);
+        }
+        frames += 1;
+    }
+    assert_eq!(frames, 3);
+}
+
 /// A damaged QOI or PPM, or a file of no known format, makes that sensor's image corrupt for
 /// that frame (counted, one warning line), and the replay goes on.
 #[test]
