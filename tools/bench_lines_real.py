@@ -1,12 +1,24 @@
 #!/usr/bin/env python3
-"""Line quality on real photographs (YorkUrbanDB): omnitrack's edge extractor beside OpenCV's
-LSD, FastLineDetector and EDLines, scored against the hand-marked segments by one rule.
+"""Line quality on real photographs (YorkUrbanDB, or the Oxford VGG `model_house`): omnitrack's
+edge extractor beside OpenCV's LSD, FastLineDetector and EDLines, scored against the
+hand-marked segments by one rule, into benches/results/DATE-MACHINE/lines-DATASET.md.
 
     python3 tools/bench_lines_real.py DB [--work DIR] [--passes N] [--omnitrack-dir DIR]
                                          [--omnitrack-args "ARGS"] [--min-gt-px L] [--min-det-px L]
-                                         [--offset PX]
+                                         [--offset PX] [--no-results 1]
 
-DB is the YorkUrbanDB folder (the original York Urban Line Segment Database of Denis, Elder and
+DB is either of two layouts, told apart by what it holds.
+
+Oxford: the VGG multi-view `model_house` folder (DB/images/house.NNN.pgm, 768x576 grey, and
+DB/2D/house.NNN.lines: one segment a line, "x0 y0 x1 y1 ...", in pixels with (0,0) at the centre
+of the top-left pixel, so --offset defaults to 0 there; DB/3D/house.000.P gives the camera,
+whose K the script takes by an RQ decomposition). The public repository
+petrhruby97/efficient_absolute carries it as oxford_data/model_house/; keep it outside this
+repository. Issue 51's rule on it: a line counts as found when one detection covers half of it
+(the table's "GT half-covered by one"), and its recall should be at least LSD's.
+
+YorkUrbanDB:
+the original York Urban Line Segment Database of Denis, Elder and
 Estrada, ECCV 2008): DB/cameraParameters.mat and, for each of the 102 images, DB/NAME/NAME.jpg
 (640x480) with DB/NAME/NAMELinesAndVP.mat (`lines`: 2k x 2 end points x, y, in MATLAB's 1-based
 pixel coordinates). The public repository johndpope/BMVC-Dubska carries that folder whole
@@ -61,6 +73,7 @@ Time: p50 and p99 over all (image, pass) detections, and p50 over FastLineDetect
 import glob
 import json
 import os
+import re
 import subprocess
 import sys
 import time
@@ -96,7 +109,7 @@ def pct(sorted_ms, q):
 def parse_args(argv):
     opts = {"work": os.path.join(ROOT, "target", "bench-lines-real"), "passes": 5, "omnitrack-dir": None,
             "omnitrack-args": "",
-            "min-gt-px": 30.0, "min-det-px": 20.0, "offset": -1.0}
+            "min-gt-px": 30.0, "min-det-px": 20.0, "offset": None, "no-results": 0.0}
     rest = []
     i = 0
     while i < len(argv):
@@ -121,7 +134,49 @@ def parse_args(argv):
 
 
 def load_db(db, offset):
-    """[(name, jpg path, gt array k x 4 in OpenCV pixels)], camera (fx, fy, cx, cy)."""
+    """[(name, image path, gt array k x 4 in OpenCV pixels)], camera (fx, fy, cx, cy), the data
+    set's name, the offset applied."""
+    if glob.glob(os.path.join(db, "images", "*.pgm")) and glob.glob(os.path.join(db, "2D", "*.lines")):
+        offset = 0.0 if offset is None else offset
+        items, cam = load_oxford(db, offset)
+        return items, cam, "Oxford VGG " + os.path.basename(os.path.normpath(db)), offset
+    offset = -1.0 if offset is None else offset
+    items, cam = load_york(db, offset)
+    return items, cam, "YorkUrbanDB", offset
+
+
+def load_oxford(db, offset):
+    import numpy as np
+    import scipy.linalg
+
+    items = []
+    for img in sorted(glob.glob(os.path.join(db, "images", "*.pgm"))):
+        name = os.path.basename(img)[: -len(".pgm")]
+        path = os.path.join(db, "2D", name + ".lines")
+        if not os.path.exists(path):
+            continue
+        rows = []
+        with open(path) as fh:
+            for line in fh:
+                parts = line.split()
+                if len(parts) >= 4:
+                    rows.append([float(v) for v in parts[:4]])
+        items.append((name, img, np.asarray(rows, dtype=np.float64).reshape(-1, 4) + offset))
+    if not items:
+        sys.exit(f"bench_lines_real: {db}: no images/NAME.pgm with 2D/NAME.lines")
+    p_files = sorted(glob.glob(os.path.join(db, "3D", "*.P")))
+    if not p_files:
+        sys.exit(f"bench_lines_real: {db}/3D: no camera matrix (NAME.P)")
+    with open(p_files[0]) as fh:
+        p = np.array([float(v) for v in re.split(r"\s+", fh.read().strip())], dtype=np.float64).reshape(3, 4)
+    k, _ = scipy.linalg.rq(p[:, :3])
+    # RQ leaves the signs to choose: a positive diagonal, and K[2,2] = 1.
+    k = k @ np.diag(np.sign(np.diag(k)))
+    k = k / k[2, 2]
+    return items, (abs(float(k[0, 0])), abs(float(k[1, 1])), float(k[0, 2]) + offset, float(k[1, 2]) + offset)
+
+
+def load_york(db, offset):
     import numpy as np
     import scipy.io as sio
 
@@ -295,7 +350,7 @@ def main():
     import cv2
 
     db, opts = parse_args(sys.argv[1:])
-    items, cam = load_db(db, opts["offset"])
+    items, cam, dataset, offset = load_db(db, opts["offset"])
     work = os.path.abspath(opts["work"])
     img_dir = os.path.join(work, "images")
     os.makedirs(img_dir, exist_ok=True)
@@ -308,6 +363,7 @@ def main():
                 sys.exit(f"bench_lines_real: {jpg}: cannot read")
             cv2.imwrite(png, img)
         pngs.append((name, png))
+    size = cv2.imread(pngs[0][1], cv2.IMREAD_GRAYSCALE).shape
     gts = {name: gt for name, _, gt in items}
     names = [n for n, _ in pngs]
 
@@ -329,15 +385,22 @@ def main():
     min_gt, min_det = opts["min-gt-px"], opts["min-det-px"]
     n_gt = sum(int((((g[:, 2] - g[:, 0]) ** 2 + (g[:, 3] - g[:, 1]) ** 2) >= min_gt**2).sum()) for g in gts.values())
     fld_p50 = pct(results["OpenCV FastLineDetector"][1], 0.5)
-    print(f"# Lines on real photos: YorkUrbanDB, {len(items)} images 640x480, {n_gt} hand-marked segments >= "
-          f"{min_gt:g} px; detections >= {min_det:g} px; {opts['passes']} timed passes")
-    print(f"# camera fx=fy={cam[0]:.2f} cx={cam[2]:.2f} cy={cam[3]:.2f} (OpenCV pixels, GT offset {opts['offset']:+g})")
+    out = []
+
+    def emit(line=""):
+        print(line)
+        sys.stdout.flush()
+        out.append(line)
+
+    emit(f"# Lines on real photos: {dataset}, {len(items)} images {size[1]}x{size[0]}, {n_gt} hand-marked segments >= "
+         f"{min_gt:g} px; detections >= {min_det:g} px; {opts['passes']} timed passes")
+    emit(f"# camera fx={cam[0]:.2f} fy={cam[1]:.2f} cx={cam[2]:.2f} cy={cam[3]:.2f} (OpenCV pixels, GT offset {offset:+g})")
     for line in om_line.splitlines()[:2]:
-        print(f"# {line}")
-    print()
-    print("| detector (tolerance 2 px, 3 deg) | recall (length) | GT half-covered by one | precision (length) "
+        emit(f"# {line}")
+    emit()
+    emit("| detector (tolerance 2 px, 3 deg) | recall (length) | GT half-covered by one | precision (length) "
           "| detections/image | p50 ms | p99 ms | p50 / FLD p50 |")
-    print("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
+    emit("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
     summary = {}
     for label, (segs, times) in results.items():
         r, half, p = score(segs, gts, min_gt, min_det, 2.0, 3.0)
@@ -345,22 +408,31 @@ def main():
             int((((s[:, 2] - s[:, 0]) ** 2 + (s[:, 3] - s[:, 1]) ** 2) >= min_det**2).sum()) for s in segs.values()
         ) / len(segs)
         p50 = pct(times, 0.5)
-        print(f"| {label} | {100 * r:.1f} % | {100 * half:.1f} % | {100 * p:.1f} % | {per_img:.0f} | {p50:.2f} "
-              f"| {pct(times, 0.99):.2f} | {p50 / fld_p50:.2f} |")
+        emit(f"| {label} | {100 * r:.1f} % | {100 * half:.1f} % | {100 * p:.1f} % | {per_img:.0f} | {p50:.2f} "
+             f"| {pct(times, 0.99):.2f} | {p50 / fld_p50:.2f} |")
         summary[label] = {"recall": r, "half": half, "precision": p, "p50_ms": p50}
-        sys.stdout.flush()
-    print()
-    print("| detector | " + " | ".join(f"{t} ({d:g} px, {a:g} deg) recall / precision" for t, d, a in TOLERANCES[1:])
+    emit()
+    emit("| detector | " + " | ".join(f"{t} ({d:g} px, {a:g} deg) recall / precision" for t, d, a in TOLERANCES[1:])
           + " |")
-    print("| --- |" + " ---: |" * (len(TOLERANCES) - 1))
+    emit("| --- |" + " ---: |" * (len(TOLERANCES) - 1))
     for label, (segs, _) in results.items():
         cells = []
         for _, d, a in TOLERANCES[1:]:
             r, _, p = score(segs, gts, min_gt, min_det, d, a)
             cells.append(f"{100 * r:.1f} / {100 * p:.1f} %")
-        print(f"| {label} | " + " | ".join(cells) + " |")
-    print()
-    print(json.dumps({k: {kk: round(vv, 4) for kk, vv in v.items()} for k, v in summary.items()}))
+        emit(f"| {label} | " + " | ".join(cells) + " |")
+    emit()
+    emit(json.dumps({k: {kk: round(vv, 4) for kk, vv in v.items()} for k, v in summary.items()}))
+    if not opts["no-results"]:
+        sys.path.insert(0, HERE)
+        import bench_pnl
+
+        slug = re.sub(r"[^a-z0-9]+", "-", dataset.lower()).strip("-")
+        extra = f' --omnitrack-args "{opts["omnitrack-args"]}"' if opts["omnitrack-args"] else ""
+        path = bench_pnl.write_results(
+            f"lines-{slug}", f"Lines on real photos: {dataset}, omnitrack against OpenCV's detectors",
+            f"python3 tools/bench_lines_real.py DB --passes {opts['passes']}{extra}", "\n".join(out))
+        print(f"bench_lines_real: wrote {path.relative_to(bench_pnl.REPO)}", file=sys.stderr)
 
 
 if __name__ == "__main__":
