@@ -157,8 +157,8 @@ impl Workspace {
     }
 
     /// Detects the edges of one image into `self.edges` (cleared first), on the calling
-    /// thread's `scratch` (made for at least this sensor's size). An invalid image, or one of the wrong size,
-    /// yields no edges.
+    /// thread's `scratch` (made for at least this sensor's size). An invalid image, or one of
+    /// the wrong size, yields no edges.
     pub fn run(&mut self, img: &SensorImage, scratch: &mut Scratch) {
         scratch.prepare(self.w, self.h);
         self.with_scratch(scratch, |ws| ws.run_lent(img));
