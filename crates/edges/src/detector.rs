@@ -152,12 +152,7 @@ impl EdgeDetector {
         }
         .clamp(1, n.max(1));
         let max_width = rig.sensors.iter().map(|s| s.width as usize).max().unwrap_or(0);
-        let max_pixels = rig
-            .sensors
-            .iter()
-            .map(|s| s.width as usize * s.height as usize)
-            .max()
-            .unwrap_or(0);
+        let max_pixels = rig.max_pixels();
         let shared = Arc::new(Shared {
             workspaces,
             scratch: (0..threads)

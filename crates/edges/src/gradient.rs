@@ -295,11 +295,11 @@ fn sobel_rows(ch: [[&[i16]; 5]; 3], gx: &mut [i16], gy: &mut [i16], mag: &mut [i
 /// Gradient bin: 1 horizontal gradient, 2 vertical, 3 diagonal with gx·gy > 0, 4 the other.
 #[inline(always)]
 pub(crate) fn bin(gx: i16, gy: i16) -> u8 {
-    let (ax, ay) = (gx.unsigned_abs() as u32, gy.unsigned_abs() as u32);
-    // tan 22.5° ≈ 0.4142 ≈ 53/128.
-    if ay * 128 <= ax * 53 {
+    let (ax, ay) = (gx.unsigned_abs(), gy.unsigned_abs());
+    // tan 22.5° ≈ 0.4142 ≈ 53/128 ([`tan_below`]).
+    if ay <= tan_below(ax) {
         1
-    } else if ax * 128 <= ay * 53 {
+    } else if ax <= tan_below(ay) {
         2
     } else if (gx > 0) == (gy > 0) {
         3

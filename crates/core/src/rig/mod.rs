@@ -238,6 +238,16 @@ impl Rig {
         })
     }
 
+    /// Pixels of the rig's largest sensor image (0 without sensors): what a buffer that any of
+    /// its images may pass through is sized for.
+    pub fn max_pixels(&self) -> usize {
+        self.sensors
+            .iter()
+            .map(|s| s.width as usize * s.height as usize)
+            .max()
+            .unwrap_or(0)
+    }
+
     /// The rig as TOML in the format of docs/interfaces.md ("Rig file"), with every number written
     /// so that it reads back bit-for-bit.
     pub fn to_toml_string(&self) -> String {

@@ -125,12 +125,7 @@ impl ReplaySource {
         };
         let model_path = Some(dir.join("model.obj")).filter(|p| p.is_file());
 
-        let max_pixels = rig
-            .sensors
-            .iter()
-            .map(|s| s.width as usize * s.height as usize)
-            .max()
-            .unwrap_or(0);
+        let max_pixels = rig.max_pixels();
         // An RGB PNG rarely exceeds its raw size plus a little; bigger files grow the buffer once.
         let file_buf = Vec::with_capacity(max_pixels * 3 + (64 << 10));
         let rgba_buf = vec![0u8; max_pixels * 4].into_boxed_slice();
