@@ -102,7 +102,8 @@ pub struct InitialisationConfig {
     pub samples_per_cell: u32,
     pub dihedral_tolerance_deg: f64,
     pub max_dihedral_range_deg: f64,
-    /// The whole-model search's work budget (reference milliseconds, as `time_budget_ms`).
+    /// The whole-model search's work budget (reference milliseconds, as `time_budget_ms`: the
+    /// reference machine's two cores side by side).
     pub whole_model_time_budget_ms: f64,
     /// A search whose budget runs out before it has looked at every cell of its volume decides
     /// nothing; the next goes on from the nearest cell it left, the best candidates so far
@@ -312,7 +313,7 @@ impl Default for InitialisationConfig {
             samples_per_cell: 100,
             dihedral_tolerance_deg: 1.0,
             max_dihedral_range_deg: 10.0,
-            whole_model_time_budget_ms: 10000.0,
+            whole_model_time_budget_ms: 5000.0,
             sweep_volume: false,
             grid_blank: GridBlank::Volumes,
             clear_winner_ratio: 0.8,

@@ -70,11 +70,11 @@ impl Shared {
 /// Crossbeam sets up a thread-local context (and std a thread-local destructor list) the first
 /// time a thread really blocks on a channel, and the list of waiting threads of a channel the
 /// first time one waits on it, both of which allocate. Frames usually arrive while the threads
-/// are still spinning, so that first block could fall on any later frame: force it here, at
-/// start-up, with a waiter registered on the empty `rx` and taken off at once (`try_select`
-/// registers without waiting, where a timed receive registers only if its spinning ends before
-/// the deadline).
-fn warm_up_blocking<T>(rx: &Receiver<T>) {
+/// are still spinning, so that first block could fall on any later frame: force it at start-up,
+/// on the thread that will wait, with a waiter registered on the empty `rx` and taken off at
+/// once (`try_select` registers without waiting, where a timed receive registers only if its
+/// spinning ends before the deadline). The search's threads use it too.
+pub fn warm_up_blocking<T>(rx: &Receiver<T>) {
     let mut waiting = crossbeam::channel::Select::new();
     waiting.recv(rx);
     if let Ok(op) = waiting.try_select() {

@@ -74,7 +74,7 @@ mod sensor;
 
 pub use cpu::thread_cpu_time;
 pub use csv::{edges_csv, edges_csv_for_image, EdgesCsvError, EDGES_CSV_HEADER};
-pub use detector::EdgeDetector;
+pub use detector::{warm_up_blocking, EdgeDetector};
 pub use edge::{Edge, MAX_GAPS};
 pub use hue::{hue_of, HueSignature};
 pub use params::{EdgeParams, Smoothing};

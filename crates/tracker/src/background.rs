@@ -173,11 +173,7 @@ pub fn search_link<'m>() -> (SearchLink<'m>, SearchWorker<'m>) {
     // (`try_select` registers without waiting), leaves the list its room. The sending sides never
     // wait: one job is in flight at a time, and each channel holds one.
     for rx in [&jobs_rx, &done_rx] {
-        let mut waiting = crossbeam::channel::Select::new();
-        waiting.recv(rx);
-        if let Ok(op) = waiting.try_select() {
-            let _ = op.recv(rx);
-        }
+        omnitrack_edges::warm_up_blocking(rx);
     }
     (
         SearchLink {

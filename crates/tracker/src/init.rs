@@ -131,18 +131,22 @@
 //!   `initialisation.sweep_volume`, off by default: deciding only once a sweep had covered the
 //!   volume added a wrong commit on the ZInD tour (docs/decisions.md).
 //!
-//! **The whole model** (start-up without a hint, over a thousand cells in `lab`) deals its cells
-//! to [`LANES`] lanes, each with its own per-cell buffers, its share of the work budget and a
-//! generator seeded per cell; up to one thread per core runs the lanes. The grid's scan, three
-//! quarters of such a search, is dealt out the same way (module `grid_scan`): its plan cells,
-//! nearest first, in turn to the lanes, each with its own buffers, keep-best lists and an equal
-//! share of the scan's budget, the lists merged in lane order. What each lane searches is
-//! fixed by the dealing alone, so the answer does not depend on the number of cores
-//! ([`Initialiser::set_threads`]) or on how the threads were scheduled.
+//! **Lanes on every core.** A search deals the cells of its volume to lanes: the whole model
+//! (start-up without a hint, over a thousand cells in `lab`) to [`LANES`], a bounded volume (a
+//! hint, a re-initialisation, a relocalisation) to [`VOLUME_LANES`], each lane with its own
+//! per-cell buffers, its share of the work budget and, in several lanes, a generator seeded per
+//! cell. The search's thread and helper threads started with the initialiser (module `lanes`)
+//! run the lanes. The
+//! grid's scan, three quarters of a search, is dealt out the same way (module `grid_scan`): its
+//! plan cells, nearest first, in turn to the lanes, each with its own buffers, keep-best lists
+//! and an equal share of the scan's budget, the lists merged in lane order. What each lane
+//! searches is fixed by the dealing alone, so the answer does not depend on the number of cores
+//! ([`Initialiser::set_threads`]) or on how the threads were scheduled. Lanes side by side are
+//! charged the reference machine's time for them ([`REFERENCE_CORES`]): the budget is that
+//! machine's wall time, whatever the lanes.
 //!
-//! Fixed memory: all tables are sized in [`Initialiser::new`]. A bounded volume (a hint, a
-//! re-initialisation, a relocalisation) is searched on the calling thread and allocates nothing;
-//! only the whole-model search starts threads.
+//! Fixed memory: all tables are sized and the helper threads started in [`Initialiser::new`]; a
+//! search allocates nothing.
 
 use super::edge_index::EdgeIndex;
 use super::floor::Floors;
@@ -152,6 +156,7 @@ use super::vote::{TranslationVote, PEAKS};
 use crate::visibility::at_pose::{PoseVisibility, SeenSegment};
 use crate::visibility::VisibilityTable;
 use grid_scan::{GridLane, MeritScratch};
+use lanes::LanePool;
 use nalgebra::{Point3, UnitQuaternion, Vector3};
 use near_edges::NearEdges;
 use omnitrack_core::geometry::{Correspondence, Pose};
@@ -162,11 +167,12 @@ use omnitrack_edges::Edge;
 use omnitrack_solver::SolverOptions;
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 mod grid_scan;
+mod lanes;
 mod near_edges;
 mod progress;
 mod run;
@@ -243,6 +249,39 @@ pub const BACKSTOP_FACTOR: u32 = if cfg!(debug_assertions) { 40 } else { 4 };
 /// Lanes of the whole-model search (and most threads it uses).
 pub const LANES: usize = 4;
 
+/// Lanes of a bounded volume's search (a hint, a re-initialisation, a relocalisation): one, on
+/// the search's thread. Two (the reference machine's cores) looked at every cell of FZK-Haus's
+/// 3 m volumes within the budget, but changed which candidates relocalisations and hinted
+/// searches return, and two tests of maintenance on the `lab` walk then caught poses 30–36 cm
+/// off that main gives on other tracker seeds (docs/decisions.md, 2026-12-01): held back until
+/// maintenance is steadier.
+pub const VOLUME_LANES: usize = 1;
+
+/// Cores of the reference machine the work units are measured on (module [`work`]). Lanes run
+/// side by side on that many, so a stretch of lanes is charged its lanes' work over
+/// `min(lanes, REFERENCE_CORES)`: its time there. The budgets are that machine's time, so a
+/// search's result is due when the reference machine would have it; a machine with fewer cores
+/// finishes later, and the tracker waits for it (lossless) or takes it up when done (live).
+pub const REFERENCE_CORES: usize = 2;
+
+/// One thread per core, at most [`LANES`]. (Asked once: the standard library reads the
+/// process's CPU quota from files to answer, which allocates.)
+fn default_threads() -> usize {
+    std::thread::available_parallelism()
+        .map_or(1, |n| n.get())
+        .clamp(1, LANES)
+}
+
+/// What `work` done in `lanes` lanes side by side costs in the reference machine's time.
+fn charge_of_lanes(work: u64, lanes: usize) -> u64 {
+    work / lanes.clamp(1, REFERENCE_CORES) as u64
+}
+
+/// Each of `lanes` lanes' share of `left` work units of the reference machine's time.
+fn lane_share(left: u64, lanes: usize) -> u64 {
+    left.saturating_mul(lanes.clamp(1, REFERENCE_CORES) as u64) / lanes.max(1) as u64
+}
+
 /// One worker's per-cell buffers (Figure 4's ℒ, dihedral ranges, score table A, the k best
 /// edges and the sampling weights) and the best samples it found.
 struct CellScratch {
@@ -255,6 +294,8 @@ struct CellScratch {
     weights: Vec<f64>,
     corr: Vec<Correspondence>,
     pool: Pool,
+    /// What the lane did in the last search (its part of the report).
+    done: InitReport,
 }
 
 impl CellScratch {
@@ -270,6 +311,7 @@ impl CellScratch {
             weights: resident(vec![0.0; n]),
             corr: Vec::with_capacity(3),
             pool: Pool::new(),
+            done: InitReport::default(),
         }
     }
 }
@@ -324,13 +366,16 @@ pub struct Initialiser<'m> {
     vote_index: EdgeIndex,
     /// The scratch of [`Self::coarse_merit`] on the calling thread (the climbs).
     merit: MeritScratch,
-    /// The grid scan's lanes (module `grid_scan`): one for a bounded volume, [`LANES`] for the
+    /// The grid scan's lanes (module `grid_scan`): [`VOLUME_LANES`] for a bounded volume, [`LANES`] for the
     /// whole model.
     grid_lanes: Vec<GridLane>,
     /// Whether this search's grid ranks by the blank share too (`opts.grid_blank` for its volume).
     grid_blank: bool,
-    /// At most this many threads run the whole model's lanes (`None`: one per core).
-    threads: Option<usize>,
+    /// The threads that run the lanes beside the calling one (module `lanes`; one per core
+    /// unless [`Initialiser::set_threads`] says otherwise), and the CPU time they have spent on
+    /// them.
+    helpers: LanePool,
+    helpers_cpu_ns: Arc<AtomicU64>,
     /// Rotation hypotheses from vanishing directions (module `vanishing`).
     vanishing: VanishingDirections,
     /// The floors: the rig stands in a band above the one beneath it.
@@ -402,6 +447,7 @@ impl<'m> Initialiser<'m> {
             .unwrap_or(0)
             .max(model.segments.len());
         let floors = Floors::new(model);
+        let helpers_cpu_ns = Arc::new(AtomicU64::new(0));
         Initialiser {
             model,
             table,
@@ -430,7 +476,8 @@ impl<'m> Initialiser<'m> {
             merit: MeritScratch::new(max_set),
             grid_lanes: (0..LANES).map(|_| GridLane::new(model)).collect(),
             grid_blank: false,
-            threads: None,
+            helpers: LanePool::new(default_threads(), &helpers_cpu_ns),
+            helpers_cpu_ns,
             vanishing: VanishingDirections::new(model, max_edges),
             floors,
             grid_best: std::array::from_fn(|_| GridBest::new()),
@@ -527,18 +574,20 @@ impl<'m> Initialiser<'m> {
         }
     }
 
-    /// At most `threads` threads run the lanes of a whole-model search (`None`: one per core);
-    /// at most [`LANES`] are used. The answer does not depend on it: what each lane searches is
-    /// fixed by the dealing of the cells alone.
+    /// At most `threads` threads run a search's lanes (`None`: one per core); at most [`LANES`]
+    /// are used. The answer does not depend on it: what each lane searches is fixed by the
+    /// dealing of the cells alone. Starts or stops helper threads: a set-up call.
     pub fn set_threads(&mut self, threads: Option<usize>) {
-        self.threads = threads;
+        let wanted = threads.map_or_else(default_threads, |t| t.clamp(1, LANES));
+        if self.helpers.threads() != wanted {
+            self.helpers = LanePool::new(wanted, &self.helpers_cpu_ns);
+        }
     }
 
-    /// The threads a whole-model search runs its lanes on.
-    fn threads(&self) -> usize {
-        self.threads
-            .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
-            .clamp(1, LANES)
+    /// CPU time the helper threads have spent on this initialiser's searches since it was
+    /// made (shared: read it from any thread; the search's own thread's time is its own).
+    pub fn helpers_cpu(&self) -> Arc<AtomicU64> {
+        Arc::clone(&self.helpers_cpu_ns)
     }
 
     /// How far this initialiser's run under way has got (shared: watch it from any thread).

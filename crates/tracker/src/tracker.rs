@@ -211,6 +211,8 @@ pub struct Tracker<'m> {
     cancel: Arc<AtomicBool>,
     /// The searcher's progress ([`Tracker::search_progress`]).
     progress: Arc<crate::init::SearchProgress>,
+    /// The CPU time of the searches' helper threads ([`Tracker::search_helpers_cpu`]).
+    search_helpers_cpu: Arc<std::sync::atomic::AtomicU64>,
     /// The owner's flags that stop a search too ([`Tracker::stop_searches_on`]).
     stops: Vec<Arc<AtomicBool>>,
 }
@@ -238,11 +240,14 @@ impl<'m> Tracker<'m> {
         let max_edges = rig.sensors.len() * cfg.edges.max_edges_per_sensor as usize;
         let m = &cfg.maintenance;
         let opts = InitOptions::from_config(cfg);
-        let init = Initialiser::new(rig, model, table, opts.clone(), solver.clone(), max_edges);
+        let mut init = Initialiser::new(rig, model, table, opts.clone(), solver.clone(), max_edges);
+        // The frame path's initialiser polishes and scores; it never runs a search's lanes.
+        init.set_threads(Some(1));
         let cancel = Arc::new(AtomicBool::new(false));
         let mut searcher = Initialiser::new(rig, model, table, opts, solver.clone(), max_edges);
         searcher.add_cancel(&cancel);
         let progress = Arc::clone(searcher.progress());
+        let search_helpers_cpu = searcher.helpers_cpu();
         let job = Box::new(SearchJob::new(searcher, max_edges));
         let narrow = init.view_share() < NARROW_VIEW_SHARE;
         let max_set = (0..table.node_count() as u32)
@@ -319,6 +324,7 @@ impl<'m> Tracker<'m> {
             defer: false,
             cancel,
             progress,
+            search_helpers_cpu,
             stops: Vec::new(),
         }
     }
@@ -328,6 +334,12 @@ impl<'m> Tracker<'m> {
     /// frame path's can watch a search of seconds and say so (`omnitrack run`'s progress lines).
     pub fn search_progress(&self) -> &Arc<crate::init::SearchProgress> {
         &self.progress
+    }
+
+    /// CPU time the searches' helper threads have spent since start-up (a search's lanes run on
+    /// the thread that runs the search and on these; module `init`).
+    pub fn search_helpers_cpu(&self) -> std::time::Duration {
+        std::time::Duration::from_nanos(self.search_helpers_cpu.load(std::sync::atomic::Ordering::Relaxed))
     }
 
     /// Runs the searches on a worker from now on (module `background`): `link` sends jobs to a

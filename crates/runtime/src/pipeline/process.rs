@@ -107,6 +107,8 @@ pub(super) struct CpuClocks {
     pub(super) frame: Histogram,
     /// The edge workers' CPU time on frames (the process thread's share apart).
     pub(super) edge_workers: Duration,
+    /// The searches' helper threads' CPU time over the run (the search thread's apart).
+    pub(super) search_helpers: Duration,
 }
 
 /// The process thread: edges, tracker, publishers.
@@ -201,7 +203,10 @@ impl Processor<'_, '_, '_> {
         ProcessOutcome {
             reason,
             clocks: std::mem::take(&mut self.clocks),
-            cpu: std::mem::take(&mut self.cpu),
+            cpu: CpuClocks {
+                search_helpers: self.tracker.search_helpers_cpu(),
+                ..std::mem::take(&mut self.cpu)
+            },
             tracker: *self.tracker.stats(),
             frames_processed: self.processed,
             first_frame: self.first_frame,
@@ -513,6 +518,7 @@ pub(super) fn run_process(
     });
     outcome.publisher_error = publisher_error;
     shared.add_cpu(ThreadRole::EdgeWorkers, outcome.cpu.edge_workers);
+    shared.add_cpu(ThreadRole::Search, outcome.cpu.search_helpers);
     shared.add_thread_cpu(ThreadRole::Process);
     outcome
 }

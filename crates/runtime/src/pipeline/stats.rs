@@ -214,6 +214,7 @@ pub struct CpuSummary {
     pub capture_total: Duration,
     pub process_total: Duration,
     pub edge_workers_total: Duration,
+    /// The search thread's and its helper threads' (a search's lanes run on both).
     pub search_total: Duration,
     pub sink_total: Duration,
 }

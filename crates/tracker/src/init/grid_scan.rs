@@ -9,23 +9,26 @@
 //! work charged, and the [`GridSweep`]: cells scanned and where the next search of a sweep
 //! resumes.
 //!
-//! **Lanes.** A bounded volume is scanned on the calling thread in one lane. The whole model
-//! (three quarters of a search without a hint, over a thousand cells) is dealt out as the
-//! triplets' cells are: cell k (nearest first) to lane k mod [`LANES`], each lane with its own
-//! buffers ([`GridLane`]) and an equal share of the scan's budget, up to one thread per core
-//! running the lanes. Each lane's scores and keep-best lists depend only on the cells dealt to
-//! it, and the lists are merged in lane order, so the answer depends neither on the number of
-//! cores nor on how the threads were scheduled. The lanes stop at different distances: the
-//! sweep resumes from the nearest cell some lane left unscanned, so cells are looked at twice
-//! rather than skipped.
+//! **Lanes.** The plan cells are dealt out as the triplets' cells are: cell k (nearest first)
+//! to lane k mod the lanes' count ([`VOLUME_LANES`] for a bounded volume, [`LANES`] for the whole
+//! model, three quarters of a search without a hint), each lane with its own buffers
+//! ([`GridLane`]) and an equal share of the scan's budget in the reference machine's time
+//! (module `lanes`: the lanes run side by side on the search's thread and its helpers). Each
+//! lane's scores and keep-best lists depend only on the cells dealt to it, and the lists are
+//! merged in lane order, so the answer depends neither on the number of cores nor on how the
+//! threads were scheduled. The lanes stop at different distances: the sweep resumes from the
+//! nearest cell some lane left unscanned, so cells are looked at twice rather than skipped.
 //!
-//! Fixed memory: each lane's buffers are sized in `Initialiser::new`; a scan allocates nothing
-//! but the threads of the whole model's.
+//! Fixed memory: each lane's buffers are sized in `Initialiser::new`, the helper threads started
+//! there; a scan allocates nothing.
 
 use super::scoring::length_share;
 #[cfg(debug_assertions)]
 use super::scoring::support_of;
-use super::{work, GridBest, Initialiser, SearchVolume, FULL_COVER, GRID_SEGMENTS, LANES, VOTE_EDGES};
+use super::{
+    charge_of_lanes, lane_share, work, GridBest, Initialiser, SearchVolume, FULL_COVER, GRID_SEGMENTS, LANES,
+    VOLUME_LANES, VOTE_EDGES,
+};
 use crate::edge_index::{EdgeIndex, Reach};
 #[cfg(debug_assertions)]
 use crate::matching::best_edge_and_cover;
@@ -154,7 +157,7 @@ pub(super) struct GridSweep {
 impl Initialiser<'_> {
     /// Scores the lattice's positions of the plan cells from `first` on (nearest first) within
     /// `scan_limit` work units in all (what the run has spent included), into
-    /// `self.grid_best`: in one lane for a bounded volume, in [`LANES`] for the whole model.
+    /// `self.grid_best`: in [`VOLUME_LANES`] lanes for a bounded volume, in [`LANES`] for the whole model.
     pub(super) fn scan_grid(
         &mut self,
         grid: &GridLattice,
@@ -162,8 +165,12 @@ impl Initialiser<'_> {
         first: usize,
         scan_limit: u64,
     ) -> GridSweep {
-        let lanes = if volume.diameter_m.is_none() { LANES } else { 1 };
-        let lane_limit = scan_limit.saturating_sub(self.work) / lanes as u64;
+        let lanes = if volume.diameter_m.is_none() {
+            LANES
+        } else {
+            VOLUME_LANES
+        };
+        let lane_limit = lane_share(scan_limit.saturating_sub(self.work), lanes);
         let mut all = std::mem::take(&mut self.grid_lanes);
         let used = &mut all[..lanes];
         for lane in used.iter_mut() {
@@ -179,14 +186,10 @@ impl Initialiser<'_> {
             lane.backstop = false;
         }
         let me = &*self;
-        let scan = |k: usize, lane: &mut GridLane| me.scan_lane(lane, grid, volume, first + k, lanes, lane_limit);
-        if lanes > 1 {
-            me.on_threads(used, scan);
-        } else {
-            scan(0, &mut used[0]);
-        }
-        // In lane order, so that the lists do not depend on the threads. One lane's list is
-        // taken as it is: the hinted search's answer is the single-threaded scan's.
+        me.on_threads(used, |k, lane| {
+            me.scan_lane(lane, grid, volume, first + k, lanes, lane_limit)
+        });
+        // In lane order, so that the lists do not depend on the threads.
         let mut sweep = GridSweep {
             in_volume: self.plan_cells.len(),
             skipped: first,
@@ -196,6 +199,7 @@ impl Initialiser<'_> {
             positions: 0,
         };
         let mut resume = None::<usize>;
+        let mut lanes_work = 0;
         self.grid_best = used[0].best.clone();
         for (k, lane) in used.iter().enumerate() {
             if k > 0 {
@@ -210,11 +214,12 @@ impl Initialiser<'_> {
                 (Some(a), Some(b)) => Some(a.min(b)),
                 (a, b) => a.or(b),
             };
-            self.work = self.work.saturating_add(lane.work);
-            sweep.work += lane.work;
+            lanes_work += lane.work;
             sweep.positions += lane.positions;
             self.backstop_hit |= lane.backstop;
         }
+        sweep.work = charge_of_lanes(lanes_work, lanes);
+        self.work = self.work.saturating_add(sweep.work);
         sweep.next_m = resume.map(|ci| self.plan_cells[ci].0);
         self.grid_lanes = all;
         sweep
@@ -238,7 +243,7 @@ impl Initialiser<'_> {
             let centre = self.plan_cells[ci].1;
             for ix in 0..grid.steps {
                 for iy in 0..grid.steps {
-                    if self.lane_spent(lane, limit) {
+                    if self.lane_spent(lane, limit, stride) {
                         lane.resume = Some(ci);
                         return;
                     }
@@ -249,10 +254,11 @@ impl Initialiser<'_> {
         }
     }
 
-    /// Whether `lane` has spent `limit`, or the wall clock's backstop has fallen or the search
-    /// was cancelled: checked in every lane, so that none runs on after the others stop.
-    fn lane_spent(&self, lane: &mut GridLane, limit: u64) -> bool {
-        self.progress.add_work(lane.work - lane.said);
+    /// Whether `lane` (of `lanes`) has spent `limit`, or the wall clock's backstop has fallen
+    /// or the search was cancelled: checked in every lane, so that none runs on after the
+    /// others stop.
+    fn lane_spent(&self, lane: &mut GridLane, limit: u64, lanes: usize) -> bool {
+        self.progress.add_work(charge_of_lanes(lane.work - lane.said, lanes));
         lane.said = lane.work;
         if lane.work >= limit {
             return true;

@@ -134,9 +134,9 @@ impl SearchProgress {
     /// Sets `flag` (once) as soon as a run of this searcher has spent `units` of work: a stop
     /// at a known point of a search (a stop flag the searcher was given, set from the search's
     /// own thread, is seen at its next check), where a flag set from another thread lands
-    /// wherever the search happens to be. What a search cut short at a given point does is then
-    /// the same on every run and under any load, as long as the run has one lane (a bounded
-    /// volume); the whole model's lanes add their work in the threads' order. For tests.
+    /// wherever the search happens to be. Where a search cut short at a given point stops is
+    /// then the same on every run and under any load to within a step of each lane: the lanes
+    /// add their work in the threads' order. For tests.
     pub fn raise_at_work(&self, flag: Arc<AtomicBool>, units: u64) {
         *self.raise.lock().unwrap_or_else(|e| e.into_inner()) = Some(flag);
         self.raise_at.store(units, Ordering::Release);

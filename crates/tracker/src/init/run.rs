@@ -99,19 +99,22 @@ impl Initialiser<'_> {
         let reserve = 2 * POLISHED as u64 * work::POLISH;
         let sampling_limit = limit.saturating_sub(reserve);
         if self.top.len() >= 3 && !self.spent(sampling_limit) {
-            // A bounded volume is searched on this thread, nearest cell first, from `rng`. The
-            // whole model (start-up without a hint: over a thousand cells) is dealt out to
-            // `LANES` lanes in turn, each with an equal share of the work left; each cell then
-            // draws from its own seeded generator, so the result depends neither on the
-            // threads nor on their timing.
+            // The volume's cells are dealt out to lanes in turn (the whole model's, over a
+            // thousand cells without a hint, to `LANES`; a bounded volume's to `VOLUME_LANES`),
+            // each lane with its share of the work left. One lane draws from `rng`; in several,
+            // each cell draws from its own generator seeded from `rng` and the cell: the result
+            // depends neither on the threads nor on their timing.
             let mut scratch = std::mem::take(&mut self.scratch);
-            let lanes = if volume.diameter_m.is_none() { scratch.len() } else { 1 };
-            let lane_limit = (sampling_limit - self.work) / lanes as u64;
+            let lanes = if volume.diameter_m.is_none() {
+                LANES
+            } else {
+                VOLUME_LANES
+            };
+            let lane_limit = lane_share(sampling_limit - self.work, lanes);
             let backstop = self.backstop;
+            let base: u64 = if lanes > 1 { rng.random() } else { 0 };
             let me = &*self;
-            let search = |w: &mut CellScratch, first: usize, rng: Option<&mut SmallRng>, base: u64| {
-                let mut own = None;
-                let rng = rng.unwrap_or_else(|| own.insert(SmallRng::seed_from_u64(base)));
+            let search = |first: usize, w: &mut CellScratch, mut rng: Option<&mut SmallRng>| {
                 let mut done = InitReport::default();
                 w.pool.clear();
                 for ci in (first..me.cells.len()).step_by(lanes) {
@@ -125,9 +128,13 @@ impl Initialiser<'_> {
                         break;
                     }
                     let node = me.cells[ci].1;
-                    if lanes > 1 {
-                        *rng = SmallRng::seed_from_u64(base ^ u64::from(node).wrapping_mul(0x9E37_79B9_7F4A_7C15));
-                    }
+                    let mut own = None;
+                    let rng = match rng.as_deref_mut() {
+                        Some(r) => r,
+                        None => own.insert(SmallRng::seed_from_u64(
+                            base ^ u64::from(node).wrapping_mul(0x9E37_79B9_7F4A_7C15),
+                        )),
+                    };
                     done.cells_searched += 1;
                     let matches = me.score_cell(w, node);
                     done.triplet_matches += matches;
@@ -136,31 +143,29 @@ impl Initialiser<'_> {
                     done.tilted += tilted;
                     let charge = work::CELL + matches / 50 * work::CELL_PER_50_MATCHES + drawn * work::CELL_PER_SAMPLE;
                     done.work += charge;
-                    me.progress.add_work(charge);
+                    me.progress.add_work(charge_of_lanes(charge, lanes));
                 }
-                done
+                w.done = done;
             };
-            let mut add = |part: InitReport| {
+            if lanes > 1 {
+                self.on_threads(&mut scratch[..lanes], |k, w| search(k, w, None));
+            } else {
+                search(0, &mut scratch[0], Some(rng));
+            }
+            // In lane order, so that the sums and the pool do not depend on the threads.
+            let mut lanes_work = 0;
+            for w in &scratch[..lanes] {
+                let part = &w.done;
                 report.cells_searched += part.cells_searched;
                 report.triplet_matches += part.triplet_matches;
                 report.samples += part.samples;
                 report.tilted += part.tilted;
                 report.timed_out |= part.timed_out;
                 report.backstop |= part.backstop;
-                report.work += part.work;
-            };
-            if lanes > 1 {
-                // Threads only here, at start-up: a bounded search allocates nothing.
-                let base: u64 = rng.random();
-                let parts = self.on_threads(&mut scratch, |k, w| search(w, k, None, base));
-                // In lane order, so that the sums and the pool do not depend on the threads.
-                for part in parts {
-                    add(part);
-                }
-            } else {
-                add(search(&mut scratch[0], 0, Some(rng), 0));
+                lanes_work += part.work;
             }
-            for w in &scratch {
+            report.work += charge_of_lanes(lanes_work, lanes);
+            for w in &scratch[..lanes] {
                 for &entry in &w.pool {
                     keep_best(&mut self.pool, entry);
                 }
@@ -203,36 +208,11 @@ impl Initialiser<'_> {
         (&self.candidates, report)
     }
 
-    /// Runs `job` on each of `lanes` (lane k as `job(k, lane)`) on up to [`Self::threads`]
-    /// scoped threads, thread t taking lanes t, t + threads, …; returns their results in lane
-    /// order, so that nothing downstream depends on the threads.
-    pub(super) fn on_threads<S: Send, R: Send + Default>(
-        &self,
-        lanes: &mut [S],
-        job: impl Fn(usize, &mut S) -> R + Sync,
-    ) -> Vec<R> {
-        let n = lanes.len();
-        let threads = self.threads().min(n).max(1);
-        let mut by_thread: Vec<Vec<(usize, &mut S)>> = (0..threads).map(|_| Vec::new()).collect();
-        for (k, lane) in lanes.iter_mut().enumerate() {
-            by_thread[k % threads].push((k, lane));
-        }
-        let mut parts: Vec<R> = std::iter::repeat_with(R::default).take(n).collect();
-        let job = &job;
-        std::thread::scope(|scope| {
-            let handles: Vec<_> = by_thread
-                .into_iter()
-                .map(|mine| {
-                    scope.spawn(move || mine.into_iter().map(|(k, lane)| (k, job(k, lane))).collect::<Vec<_>>())
-                })
-                .collect();
-            for h in handles {
-                for (k, part) in h.join().unwrap_or_default() {
-                    parts[k] = part;
-                }
-            }
-        });
-        parts
+    /// Runs `job(k, &mut lanes[k])` for each lane on this thread and the helpers (module
+    /// `lanes`), each taking the next lane not yet taken; what a lane computes stays in it, so
+    /// that nothing downstream depends on the threads.
+    pub(super) fn on_threads<S: Send>(&self, lanes: &mut [S], job: impl Fn(usize, &mut S) + Sync) {
+        self.helpers.run(lanes, job);
     }
 
     /// Adds a polished candidate, or replaces the one in its place (the same pose within
