@@ -136,14 +136,13 @@
 //! hint, a re-initialisation, a relocalisation) to [`VOLUME_LANES`], each lane with its own
 //! per-cell buffers, its share of the work budget and, in several lanes, a generator seeded per
 //! cell. The search's thread and helper threads started with the initialiser (module `lanes`)
-//! run the lanes. The
-//! grid's scan, three quarters of a search, is dealt out the same way (module `grid_scan`): its
-//! plan cells, nearest first, in turn to the lanes, each with its own buffers, keep-best lists
-//! and an equal share of the scan's budget, the lists merged in lane order. What each lane
-//! searches is fixed by the dealing alone, so the answer does not depend on the number of cores
-//! ([`Initialiser::set_threads`]) or on how the threads were scheduled. Lanes side by side are
-//! charged the reference machine's time for them ([`REFERENCE_CORES`]): the budget is that
-//! machine's wall time, whatever the lanes.
+//! run the lanes. The grid's scan, three quarters of a search, is dealt out the same way
+//! (module `grid_scan`): its plan cells, nearest first, in turn to the lanes, each with its own
+//! buffers, keep-best lists and an equal share of the scan's budget, the lists merged in lane
+//! order. What each lane searches is fixed by the dealing alone, so the answer does not depend
+//! on the number of cores ([`Initialiser::set_threads`]) or on how the threads were scheduled.
+//! Lanes side by side are charged the reference machine's time for them ([`REFERENCE_CORES`]):
+//! the budget is that machine's wall time, whatever the lanes.
 //!
 //! Fixed memory: all tables are sized and the helper threads started in [`Initialiser::new`]; a
 //! search allocates nothing.
@@ -253,8 +252,8 @@ pub const LANES: usize = 4;
 /// the search's thread. Two (the reference machine's cores) looked at every cell of FZK-Haus's
 /// 3 m volumes within the budget, but changed which candidates relocalisations and hinted
 /// searches return, and two tests of maintenance on the `lab` walk then caught poses 30–36 cm
-/// off that main gives on other tracker seeds (docs/decisions.md, 2026-12-01): held back until
-/// maintenance is steadier.
+/// off, as one lane gives on other tracker seeds (docs/decisions.md, 2026-12-01): held back
+/// until maintenance is steadier.
 pub const VOLUME_LANES: usize = 1;
 
 /// Cores of the reference machine the work units are measured on (module [`work`]). Lanes run
@@ -366,8 +365,8 @@ pub struct Initialiser<'m> {
     vote_index: EdgeIndex,
     /// The scratch of [`Self::coarse_merit`] on the calling thread (the climbs).
     merit: MeritScratch,
-    /// The grid scan's lanes (module `grid_scan`): [`VOLUME_LANES`] for a bounded volume, [`LANES`] for the
-    /// whole model.
+    /// The grid scan's lanes (module `grid_scan`): [`VOLUME_LANES`] for a bounded volume,
+    /// [`LANES`] for the whole model.
     grid_lanes: Vec<GridLane>,
     /// Whether this search's grid ranks by the blank share too (`opts.grid_blank` for its volume).
     grid_blank: bool,

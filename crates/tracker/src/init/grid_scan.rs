@@ -157,7 +157,8 @@ pub(super) struct GridSweep {
 impl Initialiser<'_> {
     /// Scores the lattice's positions of the plan cells from `first` on (nearest first) within
     /// `scan_limit` work units in all (what the run has spent included), into
-    /// `self.grid_best`: in [`VOLUME_LANES`] lanes for a bounded volume, in [`LANES`] for the whole model.
+    /// `self.grid_best`: in [`VOLUME_LANES`] lanes for a bounded volume, in [`LANES`] for the
+    /// whole model.
     pub(super) fn scan_grid(
         &mut self,
         grid: &GridLattice,
