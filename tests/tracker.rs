@@ -97,8 +97,19 @@ fn run_hinted(
     source: &mut dyn FrameSource,
     sink: &mut dyn FnMut(&FrameRecord, &Tracker) -> Result<(), omnitrack::runtime::SinkError>,
 ) -> TrackerStats {
+    run_hinted_seeded(f, source, RunOptions::default().seed, sink)
+}
+
+/// [`run_hinted`] with the tracker's sampling drawn from `seed`.
+fn run_hinted_seeded(
+    f: &LabRecording,
+    source: &mut dyn FrameSource,
+    seed: u64,
+    sink: &mut dyn FnMut(&FrameRecord, &Tracker) -> Result<(), omnitrack::runtime::SinkError>,
+) -> TrackerStats {
     let opts = RunOptions {
         hint: Some(hint(f)),
+        seed,
         ..RunOptions::default()
     };
     track(source, &f.model, &f.table, &config(), &opts, &mut |r, t| {
@@ -944,35 +955,46 @@ impl FrameSource for Grey {
 
 /// A monochrome camera is a camera too: with every hue NaN (no colour to sign an edge by), the
 /// lab initialises from the 3 m volume within 10 cm and 1° and tracks every frame within the
-/// targets, as in colour.
+/// targets, as in colour, whatever the tracker's random draws: five seeds, no frame 30 cm off.
+/// (Without hues, a head turn the motion model missed let a solve slide 20–30 cm along the
+/// room's repeated lines on three seeds of ten, and on one the pose then drifted 9.5 m:
+/// docs/decisions.md, 2026-12-01.)
 #[test]
 fn a_grey_recording_tracks_as_the_colour_one() {
     let f = fixture();
-    let mut source = Grey {
-        inner: ReplaySource::open(&f.rec, Pacing::AsFastAsPossible).unwrap(),
-    };
-    let mut errs = Vec::new();
-    let stats = run_hinted(f, &mut source, &mut |r, _| {
-        if let Some(p) = &r.result.pose {
-            errs.push(errors(f, r.timestamp_ns, p));
-        }
-        Ok(())
-    });
-    assert_eq!(stats.losses, 0, "{stats:?}");
-    assert!(
-        errs.len() >= FRAMES - start_frames(),
-        "{} frames with a pose",
-        errs.len()
-    );
-    let (dp, dr) = errs[0];
-    assert!(dp < 0.10 && dr < 1.0, "first pose {:.1} cm, {dr:.2}°", dp * 100.0);
-    let rmse = (errs.iter().map(|e| e.0 * e.0).sum::<f64>() / errs.len() as f64).sqrt();
-    let cm: Vec<i64> = errs.iter().map(|e| (e.0 * 100.0).round() as i64).collect();
-    assert!(
-        rmse < 0.05,
-        "RMSE {:.1} cm; per frame (cm): {cm:?}; {stats:?}",
-        rmse * 100.0
-    );
+    for seed in 1..=5 {
+        let mut source = Grey {
+            inner: ReplaySource::open(&f.rec, Pacing::AsFastAsPossible).unwrap(),
+        };
+        let mut errs = Vec::new();
+        let stats = run_hinted_seeded(f, &mut source, seed, &mut |r, _| {
+            if let Some(p) = &r.result.pose {
+                errs.push(errors(f, r.timestamp_ns, p));
+            }
+            Ok(())
+        });
+        assert_eq!(stats.losses, 0, "seed {seed}: {stats:?}");
+        assert!(
+            errs.len() >= FRAMES - start_frames(),
+            "seed {seed}: {} frames with a pose",
+            errs.len()
+        );
+        let (dp, dr) = errs[0];
+        assert!(
+            dp < 0.10 && dr < 1.0,
+            "seed {seed}: first pose {:.1} cm, {dr:.2}°",
+            dp * 100.0
+        );
+        let rmse = (errs.iter().map(|e| e.0 * e.0).sum::<f64>() / errs.len() as f64).sqrt();
+        let worst = errs.iter().map(|e| e.0).fold(0.0, f64::max);
+        let cm: Vec<i64> = errs.iter().map(|e| (e.0 * 100.0).round() as i64).collect();
+        assert!(
+            rmse < 0.05 && worst < 0.30,
+            "seed {seed}: RMSE {:.1} cm, worst {:.1} cm; per frame (cm): {cm:?}; {stats:?}",
+            rmse * 100.0,
+            worst * 100.0
+        );
+    }
 }
 
 /// Real rooms hold more than their model: with three times the furniture, shelves and posters,

@@ -16,7 +16,16 @@ use omnitrack_edges::Edge;
 use omnitrack_solver::refine::cauchy::MAD_TO_SIGMA;
 use omnitrack_solver::{minimise_xi, minimise_xi_upright, SimplexOptions};
 
+/// The gates a polish gathers its matches with, in inlier angles, widest first: a start further
+/// off than the widest in rotation rarely reaches the pose.
+const POLISH_GATES: [f64; 3] = [4.0, 2.0, 1.0];
+
 impl Initialiser<'_> {
+    /// The widest gate of [`Self::polish`] (rad): about how far off in rotation a start may be.
+    pub fn polish_reach_rad(&self) -> f64 {
+        POLISH_GATES[0] * self.opts.inlier_alpha_rad
+    }
+
     /// The fit of `self.corr` from `start`, then twice: correspondences whose α exceeds
     /// max(inlier angle, 2.5 robust σ from the median α) are dropped and the rest refitted. A
     /// greedy gather at a wide gate holds wrong matches, and one of them is enough to pull a plain
@@ -72,10 +81,24 @@ impl Initialiser<'_> {
         c
     }
 
-    fn polish_steps(&mut self, start: &Pose, edges: &[Edge]) -> Option<Candidate> {
+    /// [`Self::polish`]'s gathers and trimmed fits from `start` without the ξ simplex, and the
+    /// truncated ξ of the pose they reach: what a pose near `start` scores, for a caller that
+    /// only compares scores and refits the winner itself (maintenance's second opinion). The
+    /// simplex is most of a polish's time (1.3–2 ms of 2.5 on `lab`).
+    pub fn refit_score(&mut self, start: &Pose, edges: &[Edge]) -> Option<(Pose, f64)> {
+        let pose = self.gathered_fit(start, edges);
+        self.spend(super::work::POLISH);
+        let pose = pose.filter(|p| self.height_ok(p))?;
+        Some((pose, self.final_score(&pose, edges).0))
+    }
+
+    /// The gathers at shrinking gates from `start`, each refitted; `self.corr` then holds the
+    /// last gather at the inlier angle.
+    fn gathered_fit(&mut self, start: &Pose, edges: &[Edge]) -> Option<Pose> {
         let inlier = self.opts.inlier_alpha_rad;
         let mut pose = *start;
-        for gate_rad in [4.0 * inlier, 2.0 * inlier, inlier] {
+        for widening in POLISH_GATES {
+            let gate_rad = widening * inlier;
             let count = self.gather(&pose, edges, gate_rad);
             if count < 4 {
                 return None;
@@ -83,9 +106,12 @@ impl Initialiser<'_> {
             pose = self.trimmed_fit(&pose)?;
         }
         let count = self.gather(&pose, edges, inlier);
-        if count < 4 {
-            return None;
-        }
+        (count >= 4).then_some(pose)
+    }
+
+    fn polish_steps(&mut self, start: &Pose, edges: &[Edge]) -> Option<Candidate> {
+        let inlier = self.opts.inlier_alpha_rad;
+        let mut pose = self.gathered_fit(start, edges)?;
         if self.opts.simplex_refinement {
             let opts = SimplexOptions {
                 max_iterations: 600,

@@ -38,7 +38,6 @@ use super::relocalise::turned;
 use super::Tail;
 use super::Tracker;
 use crate::correspondence::{CorrespondenceState, HeldEdge};
-use crate::init::Candidate;
 use crate::matching::{best_edge_among, Gate, Predicted};
 use crate::motion_filter::{distance2, Fused, GATE_CHI2_6};
 use crate::report::{FrameResult, TrackerEvent, TrackerState};
@@ -355,31 +354,43 @@ impl Tracker<'_> {
         }
         // A solve that moved well away from the prediction may have taken a repeated
         // structure's neighbour (a door jamb's two corners a wall's thickness apart, matched
-        // across): S̄ agrees with itself there, but VIS(T) as a whole does not. The prediction,
-        // polished, competes by the search's measure over all of VIS(T), and so does the solve's
-        // rotation at the predicted position when the solve turned: in a turn the prediction
-        // lags, and the solve often has the turn right but has slid along the structure.
+        // across): S̄ agrees with itself there, but VIS(T) as a whole does not. Poses near the
+        // prediction, polished, compete by the search's measure over all of VIS(T): the
+        // prediction; the solve's rotation at the predicted position (in a turn the prediction
+        // lags, and the solve often has the turn nearer right but has slid along the
+        // structure); and the prediction turned about the vertical by the polish's reach either
+        // way (a head turn the motion model missed by more than that reach leaves the
+        // prediction outside the polish's basin, and without hues to sign the edges the solve
+        // slid 20–30 cm on such turns: docs/decisions.md, 2026-12-01, the grey `lab`).
         // `support_solved` holds the held correspondences' edges at `solved` until another pose
         // replaces it.
         let mut solved_support_known = solved.is_some();
         if let Some(p) = solved {
             let moved = (p.translation.vector - predicted.translation.vector).norm();
-            let turned = p.rotation.angle_to(&predicted.rotation);
-            if moved > SECOND_OPINION_M || turned > SECOND_OPINION_RAD {
+            let turn = p.rotation.angle_to(&predicted.rotation);
+            if moved > SECOND_OPINION_M || turn > SECOND_OPINION_RAD {
                 let reseated = Pose::from_parts(predicted.translation, p.rotation);
-                let starts = [Some(predicted), (turned > SECOND_OPINION_RAD).then_some(reseated)];
+                let reach = self.init.polish_reach_rad();
+                let starts = [
+                    predicted,
+                    reseated,
+                    turned(&predicted, reach),
+                    turned(&predicted, -reach),
+                ];
+                // Each start refitted without the search's simplex: the solve competing is not
+                // simplex-polished either, and the winner gets maintenance's final fit below.
                 let bar = self.cfg.initialisation.clear_winner_ratio * self.init.score(&p, edges);
-                let mut best: Option<Candidate> = None;
-                for start in starts.iter().flatten() {
-                    if let Some(c) = self.init.polish(start, edges) {
-                        if c.score < bar && best.is_none_or(|b| c.score < b.score) {
-                            best = Some(c);
+                let mut best: Option<(Pose, f64)> = None;
+                for start in &starts {
+                    if let Some((pose, score)) = self.init.refit_score(start, edges) {
+                        if score < bar && best.is_none_or(|b| score < b.1) {
+                            best = Some((pose, score));
                         }
                     }
                 }
-                if let Some(c) = best {
+                if let Some((pose, _)) = best {
                     self.stats.second_opinions += 1;
-                    solved = Some(c.pose);
+                    solved = Some(pose);
                     solved_support_known = false;
                     prior = predicted;
                 }
