@@ -957,7 +957,7 @@ impl FrameSource for Grey {
 /// lab initialises from the 3 m volume within 10 cm and 1° and tracks every frame within the
 /// targets, as in colour, whatever the tracker's random draws: five seeds, no frame 30 cm off.
 /// (Without hues, a head turn the motion model missed let a solve slide 20–30 cm along the
-/// room's repeated lines on three seeds of ten, and on one the pose then drifted 9.5 m:
+/// room's repeated lines on six seeds of ten, and on one the pose then drifted 9.5 m:
 /// docs/decisions.md, 2026-12-01.)
 #[test]
 fn a_grey_recording_tracks_as_the_colour_one() {

@@ -355,12 +355,12 @@ impl Tracker<'_> {
         // A solve that moved well away from the prediction may have taken a repeated
         // structure's neighbour (a door jamb's two corners a wall's thickness apart, matched
         // across): S̄ agrees with itself there, but VIS(T) as a whole does not. Poses near the
-        // prediction, polished, compete by the search's measure over all of VIS(T): the
+        // prediction, refitted, compete by the search's measure over all of VIS(T): the
         // prediction; the solve's rotation at the predicted position (in a turn the prediction
         // lags, and the solve often has the turn nearer right but has slid along the
-        // structure); and the prediction turned about the vertical by the polish's reach either
+        // structure); and the prediction turned about the vertical by the refit's reach either
         // way (a head turn the motion model missed by more than that reach leaves the
-        // prediction outside the polish's basin, and without hues to sign the edges the solve
+        // prediction outside the refit's basin, and without hues to sign the edges the solve
         // slid 20–30 cm on such turns: docs/decisions.md, 2026-12-01, the grey `lab`).
         // `support_solved` holds the held correspondences' edges at `solved` until another pose
         // replaces it.
