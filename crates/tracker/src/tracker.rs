@@ -83,6 +83,9 @@ struct Confirming {
 #[derive(Debug, Clone, Copy)]
 struct Relocalisation {
     predicted: Pose,
+    /// Where maintenance last held the pose (the last good frame's position), if it did and
+    /// the rig is wide (module `relocalise`).
+    held: Option<nalgebra::Vector3<f64>>,
     /// The last good rotation and the turn the rig can have made since.
     turned_from: UnitQuaternion<f64>,
     turn_limit: f64,

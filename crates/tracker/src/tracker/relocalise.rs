@@ -180,6 +180,7 @@ impl Tracker<'_> {
             floor: min_explained,
             relocalisation: Some(Relocalisation {
                 predicted: *predicted,
+                held: self.last_good.filter(|_| !self.narrow).map(|p| p.translation.vector),
                 turned_from,
                 turn_limit,
                 floor: min_explained,
@@ -215,12 +216,23 @@ impl Tracker<'_> {
         candidates[3..].copy_from_slice(job.polished());
         let m = &self.cfg.maintenance;
         let predicted = &reloc.predicted;
+        // Within reach of the prediction, or (a wide rig) of where maintenance last held the
+        // pose: a rig that stopped or turned back is behind the constant-velocity prediction,
+        // not ahead of it (a walk reversed between two 5 Hz frames put the truth 1.09 m from
+        // the prediction and 0.84 m from the last held pose, and a slid pose near the
+        // prediction was taken). Not a narrow rig: its one view's look-alikes near the last
+        // pose got in (one 50° pinhole's `corridor`: 5.3 → 11.1 % of frames 30 cm off;
+        // docs/decisions.md, 2026-12-01).
         let reach = 0.5 * reloc.diameter_m + m.max_jump_m;
+        let within_reach = |p: &Pose| {
+            let at = p.translation.vector;
+            (at - predicted.translation.vector).norm() <= reach || reloc.held.is_some_and(|h| (at - h).norm() <= reach)
+        };
         let jump_rad = m.max_jump_deg.to_radians();
         let standings = candidates.map(|c| {
             c.map(|c| {
                 let plausible = c.inliers >= m.min_inliers as usize
-                    && (c.pose.translation.vector - predicted.translation.vector).norm() <= reach
+                    && within_reach(&c.pose)
                     && c.pose.rotation.angle_to(&reloc.turned_from) <= reloc.turn_limit;
                 let standing = Standing {
                     plausible,
