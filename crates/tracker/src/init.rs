@@ -250,10 +250,10 @@ pub const LANES: usize = 4;
 
 /// Lanes of a bounded volume's search (a hint, a re-initialisation, a relocalisation): one, on
 /// the search's thread. Two (the reference machine's cores) looked at every cell of FZK-Haus's
-/// 3 m volumes within the budget, but changed which candidates relocalisations and hinted
-/// searches return, and two tests of maintenance on the `lab` walk then caught poses 30–36 cm
-/// off, as one lane gives on other tracker seeds (docs/decisions.md, 2026-12-01): held back
-/// until maintenance is steadier.
+/// 3 m volumes within the budget, but a re-initialisation after a loss, looking at every cell
+/// of a volume the walking rig had left, then committed a look-alike 1.04 m off that one lane
+/// never reaches (docs/decisions.md, 2026-12-01): held back until such a search cannot commit
+/// the best look-alike of a volume that may not hold the rig.
 pub const VOLUME_LANES: usize = 1;
 
 /// Cores of the reference machine the work units are measured on (module [`work`]). Lanes run

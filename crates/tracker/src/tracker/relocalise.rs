@@ -37,8 +37,9 @@ use rand::{Rng, SeedableRng};
 use std::time::Duration;
 
 /// Where a relocalisation candidate stands: `plausible` (enough inliers, within reach of the
-/// prediction and of the turns the rig can have made), `acceptable` (plausible and explaining
-/// enough of VIS(T)), `jumps` (turned further than `max_jump_deg` from the prediction).
+/// prediction or, on a wide rig, of the last held pose, and of the turns the rig can have
+/// made), `acceptable` (plausible and explaining enough of VIS(T)), `jumps` (turned further
+/// than `max_jump_deg` from the prediction).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 struct Standing {
     plausible: bool,
