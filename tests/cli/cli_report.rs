@@ -249,6 +249,7 @@ fn run_and_listen_json_have_every_documented_field() {
             "reinitialisations",
             "relocalisations",
             "relocalisations_withdrawn",
+            "reinitialisations_withdrawn",
             "first_search_s",
             "search_time_s"
         ])
@@ -259,6 +260,7 @@ fn run_and_listen_json_have_every_documented_field() {
         "losses",
         "reinitialisations",
         "relocalisations_withdrawn",
+        "reinitialisations_withdrawn",
     ] {
         assert_eq!(u(&tracker[k]), 0, "{k}");
     }

@@ -82,6 +82,9 @@ pub struct TrackerStats {
     /// Of those, the relocalised poses the next frame's maintenance did not hold (module
     /// `relocalise`, "On probation"): withdrawn unpublished, and the lock counted lost.
     pub relocalisations_withdrawn: u64,
+    /// Re-initialisations after a loss that the next frame's maintenance did not hold (module
+    /// `tracker::search`, "On trial"): withdrawn unpublished, and the lock counted lost again.
+    pub reinitialisations_withdrawn: u64,
     /// Wall time of the first search and of all searches.
     pub first_search: Option<Duration>,
     pub search_time: Duration,

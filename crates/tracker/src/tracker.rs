@@ -120,6 +120,19 @@ struct Probation {
     /// The last pose maintenance held before the first of them, and its time: where the rig
     /// is searched for when they are withdrawn.
     held: Option<(Pose, u64)>,
+    /// The link is a re-initialisation after a loss, on trial (module `search`, "On trial"):
+    /// what its withdrawal restores.
+    trial: Option<Trial>,
+}
+
+/// What a re-initialisation on trial replaced, restored when the next frame does not hold it
+/// (module `search`, "On trial").
+#[derive(Debug, Clone, Copy)]
+struct Trial {
+    /// The running mean of the share of VIS(T) explained before the commit lowered it.
+    explained_ref: f64,
+    /// The volume level of the search that committed it: the next search goes one beyond.
+    volume_level: u32,
 }
 
 /// The tracker for one rig, model and visibility table.

@@ -112,9 +112,8 @@ impl Tracker<'_> {
                 None => break,
             }
         }
-        // Relocalised poses no later frame held are not published.
-        self.stats.relocalisations_withdrawn += self.probation.links.len() as u64;
-        self.probation.links.clear();
+        // Relocalised poses (or a re-initialisation) no later frame held are not published.
+        self.withdraw_probation();
         let before = self.backlog.dropped;
         while self.backlog.pop_into(&mut self.scratch).is_some() {
             self.backlog.dropped += 1;

@@ -500,11 +500,12 @@ impl Tracker<'_> {
         // the search's own measure, without the hue gate).
         // Relocalised poses on probation are published when this frame holds the pose; when
         // as many relocalised frames as lose the lock went unheld, they are withdrawn and the
-        // lock is lost (module `relocalise`).
+        // lock is lost (module `relocalise`). A re-initialisation on trial is withdrawn by the
+        // first frame that does not hold it (module `search`, "On trial").
         if !self.probation.links.is_empty() {
             if good {
                 self.release_probation();
-            } else if self.probation.links.len() >= self.probation_limit() {
+            } else if self.probation.trial.is_some() || self.probation.links.len() >= self.probation_limit() {
                 let mut r = self.lose_lock();
                 r.solve_time = solve_started.elapsed().saturating_sub(match_time);
                 r.match_time = match_time;

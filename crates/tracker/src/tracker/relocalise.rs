@@ -293,22 +293,34 @@ impl Tracker<'_> {
         (self.cfg.maintenance.lost_after_frames as usize).clamp(1, super::PROBATION_LINKS)
     }
 
-    /// A frame held the pose: the relocalised frames before it are published (late).
+    /// A frame held the pose: the relocalised frames (or the re-initialisation on trial) before
+    /// it are published (late).
     pub(super) fn release_probation(&mut self) {
         for k in 0..self.probation.links.len() {
             let (t, r) = self.probation.links[k];
             self.note_late(t, r);
         }
         self.probation.links.clear();
+        self.probation.trial = None;
     }
 
-    /// The relocalised frames no frame held are withdrawn unpublished; the searches that follow
-    /// start from the last pose maintenance held before them.
+    /// The relocalised frames no frame held (or the re-initialisation on trial) are withdrawn
+    /// unpublished; the searches that follow start from the last pose maintenance held before
+    /// them, and after a withdrawn re-initialisation over the doubled volume (module `search`,
+    /// "On trial").
     pub(super) fn withdraw_probation(&mut self) {
         if self.probation.links.is_empty() {
             return;
         }
-        self.stats.relocalisations_withdrawn += self.probation.links.len() as u64;
+        match self.probation.trial.take() {
+            Some(trial) => {
+                self.stats.reinitialisations_withdrawn += self.probation.links.len() as u64;
+                self.explained_ref = trial.explained_ref;
+                self.volume_level = trial.volume_level + 1;
+                self.widen = false;
+            }
+            None => self.stats.relocalisations_withdrawn += self.probation.links.len() as u64,
+        }
         self.probation.links.clear();
         if let Some((pose, t)) = self.probation.held.take() {
             self.last_good = Some(pose);

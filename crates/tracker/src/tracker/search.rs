@@ -14,11 +14,23 @@
 //! every cell of its volume may accept by the share explained over *resolved lines*
 //! (`Initialiser::explained_resolved`).
 //!
+//! **On trial.** After a loss the rig walked on unseen, and the volume about the last held pose
+//! may not hold it any more; its best look-alike can then pass every test, since the rival that
+//! would refuse it (the truth) lies outside (the walk back after blind frames: a look-alike 1.04 m
+//! off, explaining 0.65 of what it predicts, where the truth outside explains 0.88). So a
+//! re-initialisation after a loss is published only once the next frame's maintenance holds the
+//! pose, as a relocalised pose is (module `relocalise`, "On probation"); the first frame that
+//! does not hold it withdraws it unpublished, the lock is lost again, and the next search covers
+//! the doubled volume about the last pose held before the loss, where the truth and the
+//! look-alike compete. (In the walk back the next frame did not hold the look-alike: the rig's
+//! motion moved the image's lines where the look-alike's do not go. A look-alike a still rig
+//! sees would hold; the trial does not replace the search's own evidence.)
+//!
 //! In: a frame's [`Edge`]s while not tracking, a finished search's candidates. Out: a committed
 //! pose (tracking starts at it) or none yet; never one from a search a stop cut short
 //! ([`Tracker::stop_searches_on`]).
 
-use super::{Confirming, PendingSearch, Tracker};
+use super::{Confirming, PendingSearch, Tracker, Trial};
 use crate::background::{SearchJob, STARTS};
 use crate::init::{self, Candidate, SearchVolume};
 use crate::report::{FrameResult, SearchKind, TrackerEvent, TrackerState, Weighed};
@@ -554,13 +566,48 @@ impl<'m> Tracker<'m> {
             }
             let candidates = self.confirm_count;
             self.confirm_count = 0;
+            let trial = (self.state == TrackerState::Lost).then(|| {
+                (
+                    self.last_good.map(|p| (p, self.last_good_time)),
+                    Trial {
+                        explained_ref: self.explained_ref,
+                        volume_level: self.volume_level,
+                    },
+                )
+            });
+            let searched = result.event;
             result = self.commit(&winner.pose, edges, timestamp_ns);
             result.event = Some(TrackerEvent::Committed {
                 candidates,
                 changed_mind,
             });
+            if let Some((held, trial)) = trial {
+                result = self.on_trial(held, trial, result, searched, timestamp_ns);
+            }
         }
         result
+    }
+
+    /// A re-initialisation after a loss goes on trial (module doc, "On trial"): its frame's
+    /// answer `committed` waits for the next frame's maintenance to hold the pose, and this
+    /// frame shows only its search's report (`searched`). `held` is the last pose maintenance
+    /// held before the loss.
+    fn on_trial(
+        &mut self,
+        held: Option<(Pose, u64)>,
+        trial: Trial,
+        committed: FrameResult,
+        searched: Option<TrackerEvent>,
+        timestamp_ns: u64,
+    ) -> FrameResult {
+        self.probation.links.clear();
+        self.probation.held = held;
+        self.probation.trial = Some(trial);
+        // One link: a probation is empty while the lock is lost.
+        let _ = self.probation.links.push((timestamp_ns, committed));
+        let mut shown = FrameResult::empty(TrackerState::Tracking);
+        shown.event = searched;
+        shown
     }
 
     /// The live candidate with the best mean merit, and its index (0: the search's own best).
