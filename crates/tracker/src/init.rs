@@ -248,13 +248,13 @@ pub const BACKSTOP_FACTOR: u32 = if cfg!(debug_assertions) { 40 } else { 4 };
 /// Lanes of the whole-model search (and most threads it uses).
 pub const LANES: usize = 4;
 
-/// Lanes of a bounded volume's search (a hint, a re-initialisation, a relocalisation): one, on
-/// the search's thread. Two (the reference machine's cores) looked at every cell of FZK-Haus's
-/// 3 m volumes within the budget, but a re-initialisation after a loss, looking at every cell
-/// of a volume the walking rig had left, then committed a look-alike 1.04 m off that one lane
-/// never reaches (docs/decisions.md, 2026-12-01): held back until such a search cannot commit
-/// the best look-alike of a volume that may not hold the rig.
-pub const VOLUME_LANES: usize = 1;
+/// Lanes of a bounded volume's search (a hint, a re-initialisation, a relocalisation): two, the
+/// reference machine's cores, so that the search's thread and one helper look at every cell of
+/// a 3 m volume of FZK-Haus within the budget (one lane looked at 44 % of them). Held back
+/// until a re-initialisation after a loss went on trial (module `tracker::search`): looking at
+/// every cell of a volume the walking rig had left, two lanes committed its look-alike 1.04 m
+/// off (docs/decisions.md, 2026-12-01).
+pub const VOLUME_LANES: usize = 2;
 
 /// Cores of the reference machine the work units are measured on (module [`work`]). Lanes run
 /// side by side on that many, so a stretch of lanes is charged its lanes' work over

@@ -2,7 +2,7 @@
 //! the search's own thread and on helpers started with the [`Initialiser`](super::Initialiser),
 //! which wait for work between searches. Threads started per search (as the whole model's were,
 //! scoped) would allocate on the search thread, which allocates nothing after start-up; with
-//! these, a bounded volume could run lanes too ([`VOLUME_LANES`](super::VOLUME_LANES)).
+//! these, a bounded volume runs lanes too ([`VOLUME_LANES`](super::VOLUME_LANES)).
 //!
 //! In: a slice of lanes (each a lane's own buffers) and a job run once per lane. Out: the lanes
 //! as the job left them. Lane k is handed to whichever thread takes k first off a shared
