@@ -407,6 +407,71 @@ fn the_turn_measured_from_the_image_allocates_nothing_and_follows_a_turn_back() 
     assert!(worst < 0.10, "worst {:.1} cm", worst * 100.0);
 }
 
+/// What a schedule of recorded frames (None: a frame that shows nothing) publishes, played
+/// through a tracker hinted as `hint`: each schedule frame's pose, late answers included (after
+/// the end too), the relocalised answers published late, and the tracker's totals.
+struct Played {
+    published: std::collections::HashMap<u64, omnitrack::Pose>,
+    relocalised_late: usize,
+    stats: TrackerStats,
+    period_ns: u64,
+}
+
+fn play(f: &LabRecording, schedule: &[Option<usize>]) -> Played {
+    let (_, rig, cfg, _, _) = replay(f);
+    let recorded: Vec<_> = detected_frames(f, FRAMES).into_iter().map(|(_, e)| e).collect();
+    let period_ns = f.truth[1].timestamp_ns - f.truth[0].timestamp_ns;
+    let mut tracker = Tracker::new(&rig, &f.model, &f.table, &cfg, Some(hint(f)), 1);
+    let mut published = std::collections::HashMap::new();
+    let mut relocalised_late = 0;
+    let blind = Vec::new();
+    let mut note_late = |tracker: &Tracker, published: &mut std::collections::HashMap<_, _>| {
+        for (t, late) in tracker.late() {
+            relocalised_late += usize::from(matches!(late.event, Some(TrackerEvent::Relocalised)));
+            if let Some(p) = late.pose {
+                published.insert(*t, p);
+            }
+        }
+    };
+    for (k, i) in schedule.iter().enumerate() {
+        let ts = k as u64 * period_ns;
+        let r = tracker.process(i.map_or(&blind, |i| &recorded[i]), ts);
+        if let Some(p) = r.pose {
+            published.insert(ts, p);
+        }
+        note_late(&tracker, &mut published);
+    }
+    tracker.finish();
+    note_late(&tracker, &mut published);
+    Played {
+        published,
+        relocalised_late,
+        stats: *tracker.stats(),
+        period_ns,
+    }
+}
+
+impl Played {
+    fn has_pose(&self, k: usize) -> bool {
+        self.published.contains_key(&(k as u64 * self.period_ns))
+    }
+
+    /// Every pose published for a schedule frame that shows the building lies within 15 cm and
+    /// 1° of the truth.
+    fn assert_none_wrong(&self, f: &LabRecording, schedule: &[Option<usize>]) {
+        for (k, i) in schedule.iter().enumerate() {
+            let (Some(i), Some(p)) = (i, self.published.get(&(k as u64 * self.period_ns))) else {
+                continue;
+            };
+            let (dp, dr) = errors(f, f.truth[*i].timestamp_ns, p);
+            assert!(
+                dp < 0.15 && dr < 1.0,
+                "frame {k} (recording frame {i}): {dp:.3} m {dr:.2}°"
+            );
+        }
+    }
+}
+
 /// A relocalised pose is published only once a later frame's maintenance holds it (module
 /// `tracker::relocalise`, "On probation"). The rig walks, turns back skipping two frames (the
 /// motion prior fails: a relocalisation), and the next frames show nothing: the relocalised pose
@@ -415,10 +480,7 @@ fn the_turn_measured_from_the_image_allocates_nothing_and_follows_a_turn_back() 
 #[test]
 fn a_relocalised_pose_no_later_frame_holds_is_withdrawn_unpublished() {
     let f = fixture();
-    let (_, rig, cfg, _, _) = replay(f);
-    let recorded: Vec<_> = detected_frames(f, FRAMES).into_iter().map(|(_, e)| e).collect();
-    let period_ns = f.truth[1].timestamp_ns - f.truth[0].timestamp_ns;
-    let last = recorded.len() - 1;
+    let last = FRAMES - 1;
     // The walk; back from its end two frames skipped; four frames that show nothing; back on.
     let schedule: Vec<Option<usize>> = (0..=last)
         .map(Some)
@@ -426,49 +488,23 @@ fn a_relocalised_pose_no_later_frame_holds_is_withdrawn_unpublished() {
         .chain([None; 4])
         .chain((20..=last - 8).rev().map(Some))
         .collect();
-    let mut tracker = Tracker::new(&rig, &f.model, &f.table, &cfg, Some(hint(f)), 1);
-    let mut published = std::collections::HashMap::new();
-    let mut relocalised_late = 0;
-    let blind = Vec::new();
-    for (k, i) in schedule.iter().enumerate() {
-        let ts = k as u64 * period_ns;
-        let r = tracker.process(i.map_or(&blind, |i| &recorded[i]), ts);
-        if let Some(p) = r.pose {
-            published.insert(ts, p);
-        }
-        for (t, late) in tracker.late() {
-            relocalised_late += usize::from(matches!(late.event, Some(TrackerEvent::Relocalised)));
-            if let Some(p) = late.pose {
-                published.insert(*t, p);
-            }
-        }
-    }
-    tracker.finish();
-    let stats = tracker.stats();
+    let played = play(f, &schedule);
+    let stats = played.stats;
     assert!(stats.relocalisations >= 1, "{stats:?}");
     assert!(stats.relocalisations_withdrawn >= 1, "{stats:?}");
-    assert_eq!(relocalised_late, 0, "a relocalised answer was published: {stats:?}");
+    assert_eq!(
+        played.relocalised_late, 0,
+        "a relocalised answer was published: {stats:?}"
+    );
     assert!(stats.losses >= 1, "{stats:?}");
     // Nothing was published for the turn's frame or the blind ones.
     for k in last + 1..=last + 5 {
-        let ts = k as u64 * period_ns;
-        assert!(!published.contains_key(&ts), "frame {k} of the schedule has a pose");
+        assert!(!played.has_pose(k), "frame {k} of the schedule has a pose");
     }
     // Found again on the walk back, and nothing published anywhere is wrong.
-    let after = (last + 6..schedule.len())
-        .filter(|&k| published.contains_key(&(k as u64 * period_ns)))
-        .count();
+    let after = (last + 6..schedule.len()).filter(|&k| played.has_pose(k)).count();
     assert!(after >= 20, "{after} frames posed on the walk back: {stats:?}");
-    for (k, i) in schedule.iter().enumerate() {
-        let (Some(i), Some(p)) = (i, published.get(&(k as u64 * period_ns))) else {
-            continue;
-        };
-        let (dp, dr) = errors(f, f.truth[*i].timestamp_ns, p);
-        assert!(
-            dp < 0.15 && dr < 1.0,
-            "frame {k} (recording frame {i}): {dp:.3} m {dr:.2}°"
-        );
-    }
+    played.assert_none_wrong(f, &schedule);
 }
 
 /// A re-initialisation after a loss is published only once the next frame's maintenance holds
@@ -479,66 +515,29 @@ fn a_relocalised_pose_no_later_frame_holds_is_withdrawn_unpublished() {
 #[test]
 fn a_reinitialisation_no_later_frame_holds_is_withdrawn_unpublished() {
     let f = fixture();
-    let (_, rig, cfg, _, _) = replay(f);
-    let recorded: Vec<_> = detected_frames(f, FRAMES).into_iter().map(|(_, e)| e).collect();
-    let period_ns = f.truth[1].timestamp_ns - f.truth[0].timestamp_ns;
     let seen = 45;
     let schedule: Vec<Option<usize>> = (0..=40)
         .map(Some)
         .chain([None; 4])
         .chain([Some(seen)])
         .chain([None; 8])
-        .chain((seen + 1..recorded.len()).map(Some))
+        .chain((seen + 1..FRAMES).map(Some))
         .collect();
-    let mut tracker = Tracker::new(&rig, &f.model, &f.table, &cfg, Some(hint(f)), 1);
-    let mut published = std::collections::HashMap::new();
-    let blind = Vec::new();
-    for (k, i) in schedule.iter().enumerate() {
-        let ts = k as u64 * period_ns;
-        let r = tracker.process(i.map_or(&blind, |i| &recorded[i]), ts);
-        if let Some(p) = r.pose {
-            published.insert(ts, p);
-        }
-        for (t, late) in tracker.late() {
-            if let Some(p) = late.pose {
-                published.insert(*t, p);
-            }
-        }
-    }
-    tracker.finish();
-    for (t, late) in tracker.late() {
-        if let Some(p) = late.pose {
-            published.insert(*t, p);
-        }
-    }
-    let stats = tracker.stats();
+    let played = play(f, &schedule);
+    let stats = played.stats;
     assert!(stats.losses >= 2, "{stats:?}");
     assert!(stats.reinitialisations_withdrawn >= 1, "{stats:?}");
     // Nothing was published for the seen frame between the blind ones.
     let at = schedule.iter().position(|i| *i == Some(seen)).unwrap();
     for k in 41..at + 9 {
-        assert!(
-            !published.contains_key(&(k as u64 * period_ns)),
-            "frame {k} of the schedule has a pose: {stats:?}"
-        );
+        assert!(!played.has_pose(k), "frame {k} of the schedule has a pose: {stats:?}");
     }
-    let after = (at + 9..schedule.len())
-        .filter(|&k| published.contains_key(&(k as u64 * period_ns)))
-        .count();
+    let after = (at + 9..schedule.len()).filter(|&k| played.has_pose(k)).count();
     assert!(
         after >= 20,
         "{after} frames posed after the rig is seen again: {stats:?}"
     );
-    for (k, i) in schedule.iter().enumerate() {
-        let (Some(i), Some(p)) = (i, published.get(&(k as u64 * period_ns))) else {
-            continue;
-        };
-        let (dp, dr) = errors(f, f.truth[*i].timestamp_ns, p);
-        assert!(
-            dp < 0.15 && dr < 1.0,
-            "frame {k} (recording frame {i}): {dp:.3} m {dr:.2}°"
-        );
-    }
+    played.assert_none_wrong(f, &schedule);
 }
 
 /// A search frame that shows too little (here: only one of the six sensors' edges) commits
