@@ -349,7 +349,9 @@ pub(crate) fn detailed(a: &Args, rig: &Rig, label: &str, options: &RecordingOpti
 
 /// The search of one start taken apart (`--verbose`, for starts not placed within 10 cm): the
 /// truth as the search's scores see it, and the search's candidates with their distances from
-/// it and their scores.
+/// it and their scores, each also with its share explained over resolved lines and its chance
+/// support (the support of the pose turned ±3° and ±6° about the vertical: what its segments
+/// explain by chance; docs/decisions.md, 2026-12-02).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn diagnose(
     rig: &Rig,
@@ -388,18 +390,33 @@ pub(crate) fn diagnose(
             p.rotation.angle_to(&truth.rotation).to_degrees(),
         )
     };
+    // The support of the pose turned about the vertical by a few degrees (beyond the inlier
+    // gate): what its segments explain by chance.
+    let chance = |init: &mut Initialiser, p: &Pose| -> f64 {
+        let mut sum = 0.0;
+        for d in [-6.0f64, -3.0, 3.0, 6.0] {
+            let turned = Pose::from_parts(
+                p.translation,
+                nalgebra::UnitQuaternion::from_axis_angle(&nalgebra::Vector3::z_axis(), d.to_radians()) * p.rotation,
+            );
+            sum += init.edge_support(&turned, edges);
+        }
+        sum / 4.0
+    };
     let mut line = String::from("    truth:");
     match init.polish(truth, edges) {
         Some(c) => {
             let (dp, dr) = err(&c.pose);
             let _ = write!(
                 line,
-                " polished {dp:.3} m {dr:.2}°, merit {:.3} (explained {:.2} support {:.2} blank {:.2}, {} inliers)",
+                " polished {dp:.3} m {dr:.2}°, merit {:.3} (explained {:.2} support {:.2} blank {:.2}, {} inliers; resolved {:.2}, chance support {:.3})",
                 c.merit(),
                 c.explained,
                 c.support,
                 c.blank,
-                c.inliers
+                c.inliers,
+                init.explained_resolved(&c.pose, edges),
+                chance(&mut init, &c.pose)
             );
         }
         None => line.push_str(" polished: none"),
@@ -441,12 +458,14 @@ pub(crate) fn diagnose(
         let (dp, dr) = err(&c.pose);
         let _ = write!(
             line,
-            "\n      {dp:6.2} m {dr:6.1}°: merit {:.3} (explained {:.2} support {:.2} blank {:.2}, {} inliers), grid {:.3}",
+            "\n      {dp:6.2} m {dr:6.1}°: merit {:.3} (explained {:.2} support {:.2} blank {:.2}, {} inliers; resolved {:.2}, chance support {:.3}), grid {:.3}",
             c.merit(),
             c.explained,
             c.support,
             c.blank,
             c.inliers,
+            init.explained_resolved(&c.pose, edges),
+            chance(&mut init, &c.pose),
             init.grid_merit(&c.pose).unwrap_or(f64::NAN)
         );
     }
