@@ -13,6 +13,11 @@
 //! `--appearance` of the bench) and replayed still, a frame interval apart, as a rig standing
 //! there would see it: the measure is the search, not the maintenance of a moving view.
 //!
+//! **Walks** (`--walk M`): each start is instead the first pose of a walk of M metres at
+//! [`WALK_SPEED_M_S`], straight on where the model leaves the way free, the head turning by up to
+//! [`WALK_TURN_DEG`]; its frames are rendered and replayed in turn, then the last stands still.
+//! A pose is judged against where the rig was at its frame's time.
+//!
 //! **Hints** as `zind_bench` makes them: a ball of radius 1.5 m or 3 m whose centre is 0.72 m
 //! from the truth in a seeded direction, and the whole model. A trial gives up after
 //! [`WINDOW_S`] seconds of frames without a pose (`--window`; `--rows` picks the volumes); a commit is judged [`AFTER`] frames later.
@@ -25,6 +30,7 @@ use omnitrack::desk::recording::{write_recording, RecordingOptions};
 use omnitrack::edges::EdgeDetector;
 use omnitrack::frame::FrameSet;
 use omnitrack::geometry::Pose;
+use omnitrack::model::bvh::{Ray, TriangleBvh};
 use omnitrack::runtime::load_or_build_table;
 use omnitrack::tracker::{SearchVolume, Tracker};
 use omnitrack::trajectory::Stamped;
@@ -44,6 +50,44 @@ const HINT_OFFSET_M: f64 = 0.72;
 /// A start is moved this far from its node at most (m), and tilted this far at most (°).
 const JITTER_M: f64 = 0.35;
 const TILT_DEG: f64 = 5.0;
+
+/// A `--walk` start walks this fast (m/s), its head turning by up to this much over the walk
+/// (°, either way), and keeps this far from the model's surfaces ahead (m).
+const WALK_SPEED_M_S: f64 = 0.5;
+const WALK_TURN_DEG: f64 = 20.0;
+const WALK_CLEARANCE_M: f64 = 0.4;
+
+/// The poses of a walk of `metres` from `start` at [`WALK_SPEED_M_S`], a frame every
+/// `interval_ns`: straight on along the first of eight headings (from a drawn one) whose way is
+/// free of the model's surfaces at the rig's height and 0.5 m below it, the head turning
+/// steadily by up to [`WALK_TURN_DEG`]. A start with no free way stands still (one pose).
+fn walk(start: &Pose, metres: f64, interval_ns: u64, bvh: &TriangleBvh, draw: &mut Draw) -> Vec<Pose> {
+    let p = start.translation.vector;
+    let first = draw.next() * std::f64::consts::TAU;
+    let turn = (2.0 * draw.next() - 1.0) * WALK_TURN_DEG.to_radians();
+    let free = |h: f64| {
+        let d = [h.cos() as f32, h.sin() as f32, 0.0];
+        [0.0, -0.5].iter().all(|dz| {
+            let o = [p.x as f32, p.y as f32, (p.z + dz) as f32];
+            !bvh.occluded(&Ray::new(o, d), 0.0, (metres + WALK_CLEARANCE_M) as f32)
+        })
+    };
+    let Some(h) = (0..8)
+        .map(|j| first + j as f64 * std::f64::consts::FRAC_PI_4)
+        .find(|&h| free(h))
+    else {
+        return vec![*start];
+    };
+    let steps = (metres / (WALK_SPEED_M_S * interval_ns as f64 * 1e-9)).round().max(1.0) as usize;
+    (0..=steps)
+        .map(|i| {
+            let f = i as f64 / steps as f64;
+            let at = p + Vector3::new(h.cos(), h.sin(), 0.0) * (metres * f);
+            let r = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), turn * f) * start.rotation;
+            Pose::from_parts(Translation3::from(at), r)
+        })
+        .collect()
+}
 
 /// xorshift64*: the bench's own seeded draws.
 struct Draw(u64);
@@ -130,20 +174,53 @@ pub(crate) fn detailed(a: &Args, rig: &Rig, label: &str, options: &RecordingOpti
             pose: Pose::from_parts(Translation3::from(p.coords), r),
         });
     }
-    // One recording holds every start, a frame each (no motion blur: the frames are not a walk).
+    // With `--walk`, each start is the first pose of a walk (drawn apart, so that the starts
+    // are the still mode's).
+    let walks: Vec<Vec<Pose>> = if a.walk_m > 0.0 {
+        let mut draw = Draw(0x2545_F491_4F6C_DD1D ^ a.seed.wrapping_mul(0x9E37_79B9_7F4A_7C15));
+        let (t, payload): (Vec<_>, Vec<_>) = omnitrack::model::bvh::model_triangles(&model).into_iter().unzip();
+        let bvh = TriangleBvh::build(&t, &payload);
+        truth
+            .iter()
+            .map(|t| walk(&t.pose, a.walk_m, interval_ns, &bvh, &mut draw))
+            .collect()
+    } else {
+        truth.iter().map(|t| vec![t.pose]).collect()
+    };
+    // One recording holds every start, a frame each, or its walk's frames (no motion blur: a
+    // slow walk, and the still frames are not a walk).
     let mut opts = options.clone();
     opts.appearance.motion_blur = 0.0;
+    let walk_label = if a.walk_m > 0.0 {
+        format!("-walk{}m", a.walk_m)
+    } else {
+        String::new()
+    };
+    let result_label = if a.stand {
+        format!("{walk_label}-stand")
+    } else {
+        walk_label.clone()
+    };
     let key = format!(
-        "{name}-{:016x}-starts{}-seed{}-{label}",
+        "{name}-{:016x}-starts{}-seed{}{walk_label}-{label}",
         omnitrack::visibility::model_hash(&model),
         a.starts,
         a.seed
     );
+    let frames: Vec<Stamped> = walks
+        .iter()
+        .flatten()
+        .enumerate()
+        .map(|(k, &pose)| Stamped {
+            timestamp_ns: k as u64 * interval_ns,
+            pose,
+        })
+        .collect();
     let dir = cache_root().join(key);
     if !dir.join("complete").exists() {
         let _ = std::fs::remove_dir_all(&dir);
         let text = std::fs::read_to_string(model_path).unwrap();
-        write_recording(&dir, rig, &text, &truth, &opts, |d, t| {
+        write_recording(&dir, rig, &text, &frames, &opts, |d, t| {
             eprint!("\rrendering {name}: {d}/{t}")
         })
         .unwrap();
@@ -170,14 +247,25 @@ pub(crate) fn detailed(a: &Args, rig: &Rig, label: &str, options: &RecordingOpti
     let window = (a.window_s * 1e9 / interval_ns as f64).round().max(1.0) as usize;
     let mut rows: Vec<Row> = volumes.iter().map(|_| Row::default()).collect();
     let mut blind = 0;
-    for (k, t) in truth.iter().enumerate() {
-        if !source.next_frame(&mut frame).unwrap() {
+    for (k, (t, path)) in truth.iter().zip(&walks).enumerate() {
+        // The start's frames: their edges, and where the rig was (the last frame stands still).
+        let mut seen = Vec::with_capacity(path.len());
+        let mut detect_ms = 0.0;
+        for _ in path {
+            if !source.next_frame(&mut frame).unwrap() {
+                break;
+            }
+            let detect_started = Instant::now();
+            seen.push(detector.detect(&frame).to_vec());
+            detect_ms = detect_started.elapsed().as_secs_f64() * 1e3;
+        }
+        if seen.len() < path.len() {
             break;
         }
-        let detect_started = Instant::now();
-        let edges = detector.detect(&frame).to_vec();
-        let detect_ms = detect_started.elapsed().as_secs_f64() * 1e3;
-        let truth_pose = t.pose;
+        // With `--stand`, the walk's first frame stands still.
+        let last_frame = if a.stand { 0 } else { path.len() - 1 };
+        let at = |f: usize| (&seen[f.min(last_frame)], path[f.min(last_frame)]);
+        let (edges, truth_pose) = (seen[0].clone(), t.pose);
         for (v, &(row_name, radius)) in volumes.iter().enumerate() {
             let angle = draw.next() * std::f64::consts::TAU;
             if !wanted(radius) || a.only.as_ref().is_some_and(|o| !o.contains(&k)) {
@@ -200,40 +288,52 @@ pub(crate) fn detailed(a: &Args, rig: &Rig, label: &str, options: &RecordingOpti
             row.counted += 1;
             let started = Instant::now();
             let (mut first, mut committed_at, mut last, mut wrong) = (None, None, None, false);
-            let off = |p: &Pose| {
+            // How far a pose is from where the rig was at its frame's time.
+            let t0 = t.timestamp_ns;
+            let off_at = |p: &Pose, ts: u64| {
+                let truth = at(((ts.saturating_sub(t0)) / interval_ns) as usize).1;
                 (
-                    (p.translation.vector - truth_pose.translation.vector).norm(),
-                    p.rotation.angle_to(&truth_pose.rotation).to_degrees(),
+                    (p.translation.vector - truth.translation.vector).norm(),
+                    p.rotation.angle_to(&truth.rotation).to_degrees(),
                 )
             };
+            let mut last_ts = t0;
             for f in 0..window + AFTER {
                 if committed_at.is_none() && f >= window {
                     break;
                 }
-                let ts = t.timestamp_ns + f as u64 * interval_ns;
-                let r = tracker.process(&edges, ts);
-                let mut poses: Vec<Pose> = tracker.late().iter().filter_map(|(_, l)| l.pose).collect();
-                poses.extend(r.pose);
-                for p in poses {
-                    let (dp, dr) = off(&p);
+                let ts = t0 + f as u64 * interval_ns;
+                let r = tracker.process(at(f).0, ts);
+                let mut poses: Vec<(u64, Pose)> = tracker
+                    .late()
+                    .iter()
+                    .filter_map(|(lt, l)| l.pose.map(|p| (*lt, p)))
+                    .collect();
+                poses.extend(r.pose.map(|p| (ts, p)));
+                for (pt, p) in poses {
+                    let (dp, dr) = off_at(&p, pt);
                     wrong |= dp > 1.0 || dr > 10.0;
                     if first.is_none() {
                         first = Some(started.elapsed().as_secs_f64() * 1e3 + detect_ms);
                         committed_at = Some(f);
                     }
                     last = Some(p);
+                    last_ts = pt;
                 }
                 if committed_at.is_some_and(|c| f >= c + AFTER) {
                     break;
                 }
             }
             tracker.finish();
-            for (_, l) in tracker.late() {
+            for (lt, l) in tracker.late() {
                 if let Some(p) = l.pose {
-                    wrong |= off(&p).0 > 1.0 || off(&p).1 > 10.0;
+                    let (dp, dr) = off_at(&p, *lt);
+                    wrong |= dp > 1.0 || dr > 10.0;
                     last = Some(p);
+                    last_ts = *lt;
                 }
             }
+            let off = |p: &Pose| off_at(p, last_ts);
             let stats = tracker.stats();
             let cells = (stats.plan_cells_scanned as usize, stats.plan_cells_in_volume as usize);
             row.cells.push(cells);
@@ -272,10 +372,19 @@ pub(crate) fn detailed(a: &Args, rig: &Rig, label: &str, options: &RecordingOpti
     }
     let appearance = a.appearance.as_deref().unwrap_or("default");
     let title = format!(
-        "{name} ({} segments, {long} used), rig {}, {} starts ({blind} more that see fewer than 3 model segments not counted), appearance {appearance}",
+        "{name} ({} segments, {long} used), rig {}, {} starts ({blind} more that see fewer than 3 model segments not counted){}, appearance {appearance}",
         model.segments.len(),
         rig.name,
         rows.iter().map(|r| r.counted).max().unwrap_or(0),
+        if a.walk_m > 0.0 {
+            if a.stand {
+                format!(", each the first frame of a {} m walk, standing still", a.walk_m)
+            } else {
+                format!(", each walking {} m at {WALK_SPEED_M_S} m/s before it stands still", a.walk_m)
+            }
+        } else {
+            String::new()
+        },
     );
     let mut table = String::from(
         "| search | within 10 cm / 2° | within 30 cm / 5° | wrong commits | no pose | cells looked at (all searches) | first pose p50 / max (ms) |\n| --- | --- | --- | --- | --- | --- | --- |",
@@ -332,12 +441,18 @@ pub(crate) fn detailed(a: &Args, rig: &Rig, label: &str, options: &RecordingOpti
     if let Some(r) = &a.rows {
         command.push_str(&format!(" --rows {r}"));
     }
+    if a.walk_m > 0.0 {
+        command.push_str(&format!(" --walk {}", a.walk_m));
+    }
+    if a.stand {
+        command.push_str(" --stand");
+    }
     if let Some(c) = &a.config {
         command.push_str(&format!(" --config {}", c.display()));
     }
     match omnitrack::desk::results::write(
         root,
-        &format!("detailed-{name}-{}-{appearance}", rig.name),
+        &format!("detailed-{name}-{}-{appearance}{result_label}", rig.name),
         &title,
         &command,
         &note,

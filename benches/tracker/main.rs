@@ -59,6 +59,10 @@
 //! and searched from a 1.5 m hint, a 3 m hint and no hint; the rows count poses within 10 cm,
 //! wrong commits, starts without a pose, the grid cells the searches looked at and the time to
 //! the first pose. For an IFC building, convert it first (`omnitrack-desk model from-ifc`).
+//! `--walk M` makes each start a walk of M metres (0.5 m/s, the head turning) before it stands
+//! still, as a rig carried into view would be, rather than a still frame; `--stand` replays
+//! each walk's first frame still instead (the walk's own images: the renders' noise follows the
+//! frame).
 //!
 //! Recordings are cached in `target/omnitrack-cache/` (or `$OMNITRACK_CACHE`).
 
@@ -124,6 +128,10 @@ struct Args {
     window_s: f64,
     rows: Option<String>,
     only: Option<Vec<usize>>,
+    /// `--model` mode: metres each start walks before it stands still (0: a still start); with
+    /// `--stand`, the walk's first frame is replayed still (the same images as the walk's start).
+    walk_m: f64,
+    stand: bool,
 }
 
 fn args() -> Args {
@@ -153,6 +161,8 @@ fn args() -> Args {
         window_s: 30.0,
         rows: None,
         only: None,
+        walk_m: 0.0,
+        stand: false,
     };
     let mut it = std::env::args().skip(1);
     while let Some(x) = it.next() {
@@ -202,6 +212,8 @@ fn args() -> Args {
             "--seconds" => a.seconds = it.next().and_then(|s| s.parse().ok()).expect("--seconds S"),
             "--starts" => a.starts = it.next().and_then(|s| s.parse().ok()).expect("--starts N"),
             "--hold" => a.hold = it.next().and_then(|s| s.parse().ok()).expect("--hold N"),
+            "--stand" => a.stand = true,
+            "--walk" => a.walk_m = it.next().and_then(|s| s.parse().ok()).expect("--walk METRES"),
             "--window" => a.window_s = it.next().and_then(|s| s.parse().ok()).expect("--window SECONDS"),
             "--only" => {
                 let spec = it.next().expect("--only K,K,...");
