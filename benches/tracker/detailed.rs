@@ -441,6 +441,11 @@ pub(crate) fn detailed(a: &Args, rig: &Rig, label: &str, options: &RecordingOpti
     if let Some(r) = &a.rows {
         command.push_str(&format!(" --rows {r}"));
     }
+    // A file of some starts only says so: its rows are not the whole set's.
+    if let Some(only) = &a.only {
+        let list: Vec<String> = only.iter().map(|k| k.to_string()).collect();
+        command.push_str(&format!(" --only {}", list.join(",")));
+    }
     if a.walk_m > 0.0 {
         command.push_str(&format!(" --walk {}", a.walk_m));
     }
