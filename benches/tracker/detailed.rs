@@ -115,6 +115,10 @@ struct Row {
 
 /// The `--model` mode (module doc).
 pub(crate) fn detailed(a: &Args, rig: &Rig, label: &str, options: &RecordingOptions, model_path: &Path) {
+    if a.stand && a.walk_m <= 0.0 {
+        eprintln!("--stand replays the first frames of walks: give --walk METRES (more than 0) too");
+        std::process::exit(2);
+    }
     let model = Model::load(model_path).unwrap_or_else(|e| {
         eprintln!("--model {}: {}", model_path.display(), e.message);
         std::process::exit(2);
@@ -249,6 +253,8 @@ pub(crate) fn detailed(a: &Args, rig: &Rig, label: &str, options: &RecordingOpti
     let mut blind = 0;
     for (k, (t, path)) in truth.iter().zip(&walks).enumerate() {
         // The start's frames: their edges, and where the rig was (the last frame stands still).
+        // The first frame's detection counts towards the time to the first pose (the first
+        // search runs on it).
         let mut seen = Vec::with_capacity(path.len());
         let mut detect_ms = 0.0;
         for _ in path {
@@ -257,7 +263,9 @@ pub(crate) fn detailed(a: &Args, rig: &Rig, label: &str, options: &RecordingOpti
             }
             let detect_started = Instant::now();
             seen.push(detector.detect(&frame).to_vec());
-            detect_ms = detect_started.elapsed().as_secs_f64() * 1e3;
+            if seen.len() == 1 {
+                detect_ms = detect_started.elapsed().as_secs_f64() * 1e3;
+            }
         }
         if seen.len() < path.len() {
             break;
@@ -265,7 +273,7 @@ pub(crate) fn detailed(a: &Args, rig: &Rig, label: &str, options: &RecordingOpti
         // With `--stand`, the walk's first frame stands still.
         let last_frame = if a.stand { 0 } else { path.len() - 1 };
         let at = |f: usize| (&seen[f.min(last_frame)], path[f.min(last_frame)]);
-        let (edges, truth_pose) = (seen[0].clone(), t.pose);
+        let (edges, truth_pose) = (&seen[0], t.pose);
         for (v, &(row_name, radius)) in volumes.iter().enumerate() {
             let angle = draw.next() * std::f64::consts::TAU;
             if !wanted(radius) || a.only.as_ref().is_some_and(|o| !o.contains(&k)) {
@@ -364,7 +372,7 @@ pub(crate) fn detailed(a: &Args, rig: &Rig, label: &str, options: &RecordingOpti
                 if off_truth {
                     eprintln!(
                         "{}",
-                        diagnose(rig, &model, &table, &cfg, &edges, hint, &truth_pose, 1 + k as u64)
+                        diagnose(rig, &model, &table, &cfg, edges, hint, &truth_pose, 1 + k as u64)
                     );
                 }
             }
