@@ -620,6 +620,7 @@ fn detect_reports_the_cpu_time_of_every_thread() {
         };
         let mut det = EdgeDetector::with_params(&rig, &EdgeConfig::default(), params);
         assert_eq!(det.last_cpu(), std::time::Duration::ZERO);
+        let (mut charged, mut spent) = (std::time::Duration::ZERO, std::time::Duration::ZERO);
         for fs in frames.iter().cycle().take(6) {
             let before = omnitrack_edges::thread_cpu_time();
             det.detect(fs);
@@ -639,11 +640,18 @@ fn detect_reports_the_cpu_time_of_every_thread() {
                 cpu.as_nanos() as u64 >= phases,
                 "{threads} threads: detect charged {cpu:?}, its sensors' phases took {phases} ns"
             );
-            assert!(
-                cpu >= caller.saturating_sub(std::time::Duration::from_micros(50)),
-                "{threads} threads: {cpu:?} < {caller:?}"
-            );
+            charged += cpu;
+            spent += caller;
         }
+        // The caller's clock also runs outside `detect`'s own readings (the call, two clock
+        // reads), and an interrupt handled there is charged to it: one such frame was 0.1 ms
+        // over (CI, 2026-12-02). Over six frames the charge must cover all but 5 % of what the
+        // caller spent; a `last_cpu` that left out the caller's share (all of it with one thread)
+        // falls far below.
+        assert!(
+            charged >= spent.mul_f64(0.95),
+            "{threads} threads: detect charged {charged:?} over six frames, the caller spent {spent:?}"
+        );
     }
 }
 
