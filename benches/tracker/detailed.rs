@@ -16,7 +16,9 @@
 //! **Walks** (`--walk M`): each start is instead the first pose of a walk of M metres at
 //! [`WALK_SPEED_M_S`], straight on where the model leaves the way free, the head turning by up to
 //! [`WALK_TURN_DEG`]; its frames are rendered and replayed in turn, then the last stands still.
-//! A pose is judged against where the rig was at its frame's time.
+//! A pose is judged against where the rig was at its frame's time. With `--verbose`, a wrong
+//! walk's first pose and the truth are each polished on every frame of the walk from there on,
+//! one line a frame: whether the frames after a commit would have told them apart.
 //!
 //! **Hints** as `zind_bench` makes them: a ball of radius 1.5 m or 3 m whose centre is 0.72 m
 //! from the truth in a seeded direction, and the whole model. A trial gives up after
@@ -296,6 +298,7 @@ pub(crate) fn detailed(a: &Args, rig: &Rig, label: &str, options: &RecordingOpti
             row.counted += 1;
             let started = Instant::now();
             let (mut first, mut committed_at, mut last, mut wrong) = (None, None, None, false);
+            let mut first_pose: Option<(u64, Pose)> = None;
             // How far a pose is from where the rig was at its frame's time.
             let t0 = t.timestamp_ns;
             let off_at = |p: &Pose, ts: u64| {
@@ -322,6 +325,7 @@ pub(crate) fn detailed(a: &Args, rig: &Rig, label: &str, options: &RecordingOpti
                     let (dp, dr) = off_at(&p, pt);
                     wrong |= dp > 1.0 || dr > 10.0;
                     if first.is_none() {
+                        first_pose = Some((pt, p));
                         first = Some(started.elapsed().as_secs_f64() * 1e3 + detect_ms);
                         committed_at = Some(f);
                     }
@@ -374,6 +378,42 @@ pub(crate) fn detailed(a: &Args, rig: &Rig, label: &str, options: &RecordingOpti
                         "{}",
                         diagnose(rig, &model, &table, &cfg, edges, hint, &truth_pose, 1 + k as u64)
                     );
+                }
+                if let (true, Some((ft, fp))) = (a.walk_m > 0.0 && wrong, first_pose) {
+                    // A wrong walk's first pose against the truth, frame by frame: each polished
+                    // on every frame of the walk from the first pose's on (the first pose from
+                    // where it was polished on the frame before; the truth from the truth).
+                    let f0 = ((ft - t0) / interval_ns) as usize;
+                    let mut init = omnitrack::tracker::Initialiser::new(
+                        rig,
+                        &model,
+                        &table,
+                        omnitrack::tracker::InitOptions::from_config(&cfg),
+                        cfg.solver_options(),
+                        rig.sensors.len() * cfg.edges.max_edges_per_sensor as usize,
+                    );
+                    let mut cp = fp;
+                    for f in f0..path.len() {
+                        let (e, tp) = at(f);
+                        let tc = init.polish(&tp, e);
+                        let cc = init.polish(&cp, e);
+                        if let Some(c) = cc {
+                            cp = c.pose;
+                        }
+                        let fmt = |c: Option<omnitrack::tracker::Candidate>| {
+                            c.map_or("none".to_string(), |c| {
+                                format!(
+                                    "merit {:.3} (explained {:.2} support {:.2} blank {:.2}, {} inliers)",
+                                    c.merit(),
+                                    c.explained,
+                                    c.support,
+                                    c.blank,
+                                    c.inliers
+                                )
+                            })
+                        };
+                        eprintln!("    walk frame {f}: truth {}; first pose {}", fmt(tc), fmt(cc));
+                    }
                 }
             }
         }

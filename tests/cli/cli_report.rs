@@ -250,6 +250,7 @@ fn run_and_listen_json_have_every_documented_field() {
             "relocalisations",
             "relocalisations_withdrawn",
             "reinitialisations_withdrawn",
+            "commits_withdrawn",
             "first_search_s",
             "search_time_s"
         ])

@@ -85,6 +85,14 @@ pub struct TrackerStats {
     /// Re-initialisations after a loss that the next frame's maintenance did not hold (module
     /// `tracker::search`, "On trial"): withdrawn unpublished, and the lock counted lost again.
     pub reinitialisations_withdrawn: u64,
+    /// First commits whose trial frames did not hold them or failed the search's acceptance
+    /// test at the pose held (module `tracker::search`, "Frames agreeing"): none of their frames
+    /// was published, and the tracker initialised again.
+    pub commits_withdrawn: u64,
+    /// Maintenance fits outside the motion filter's gate refused as bad frames because the rig
+    /// would have moved faster than `motion.max_speed_m_s` to reach them (module
+    /// `tracker::maintenance`).
+    pub too_fast: u64,
     /// Wall time of the first search and of all searches.
     pub first_search: Option<Duration>,
     pub search_time: Duration,

@@ -133,6 +133,13 @@ struct Trial {
     explained_ref: f64,
     /// The volume level of the search that committed it: the next search goes one beyond.
     volume_level: u32,
+    /// Maintenance frames that must still hold the pose, each passing the search's acceptance
+    /// test at it too (module `search`, "Frames agreeing").
+    frames_left: u32,
+    /// The tracker's first commit (from Initialising): withdrawn, it initialises again.
+    first: bool,
+    /// Accepted by the share explained over resolved lines: the trial frames accept it so too.
+    resolved: bool,
 }
 
 /// The tracker for one rig, model and visibility table.

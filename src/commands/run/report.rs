@@ -74,6 +74,7 @@ struct Searches {
     relocalisations: u64,
     relocalisations_withdrawn: u64,
     reinitialisations_withdrawn: u64,
+    commits_withdrawn: u64,
     first_search_s: Option<f64>,
     search_time_s: f64,
 }
@@ -197,6 +198,7 @@ impl<'a> RunReport<'a> {
                 relocalisations: stats.relocalisations,
                 relocalisations_withdrawn: stats.relocalisations_withdrawn,
                 reinitialisations_withdrawn: stats.reinitialisations_withdrawn,
+                commits_withdrawn: stats.commits_withdrawn,
                 first_search_s: stats.first_search.map(|d| d.as_secs_f64()),
                 search_time_s: stats.search_time.as_secs_f64(),
             },

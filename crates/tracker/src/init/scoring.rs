@@ -110,7 +110,6 @@ impl Initialiser<'_> {
     }
 
     fn polish_steps(&mut self, start: &Pose, edges: &[Edge]) -> Option<Candidate> {
-        let inlier = self.opts.inlier_alpha_rad;
         let mut pose = self.gathered_fit(start, edges)?;
         if self.opts.simplex_refinement {
             let opts = SimplexOptions {
@@ -125,19 +124,26 @@ impl Initialiser<'_> {
                 pose = p;
             }
         }
-        let (score, inliers, _, explained) = self.final_score(&pose, edges);
-        let support = self.edge_support(&pose, edges);
-        let blank = self.blank_share(&pose, edges);
-        let count = self.gather(&pose, edges, inlier);
-        Some(Candidate {
+        Some(self.scored(&pose, edges))
+    }
+
+    /// The [`Candidate`] a pose is as it stands, unpolished: what the acceptance test reads of
+    /// a pose maintenance holds (a commit on trial, module `tracker::search`).
+    pub fn scored(&mut self, pose: &Pose, edges: &[Edge]) -> Candidate {
+        let inlier = self.opts.inlier_alpha_rad;
+        let (score, inliers, _, explained) = self.final_score(pose, edges);
+        let support = self.edge_support(pose, edges);
+        let blank = self.blank_share(pose, edges);
+        let count = self.gather(pose, edges, inlier);
+        Candidate {
             blank,
-            pose,
+            pose: *pose,
             score,
             inliers,
-            xi_rad2: xi(&self.corr[..count], &pose),
+            xi_rad2: xi(&self.corr[..count], pose),
             explained,
             support,
-        })
+        }
     }
 
     /// `self.corr` ← for each segment in sight from the pose and long enough, its best edge within

@@ -473,6 +473,22 @@ impl Tracker<'_> {
                 && p.rotation.angle_to(&prior.rotation) <= max_jump_rad
         };
         let mut good = pose.is_some_and(|p| self.set.len() >= mcfg.min_inliers as usize && within_jump(&p));
+        // A fit outside the motion filter's gate is taken as a stop or a turn the motion model
+        // did not expect (the filter restarts there, moving as it moved since the last frame),
+        // but only where the rig could have walked to it: one further from the last good pose
+        // than `motion.max_speed_m_s` reaches in the time since is a slide onto parallel
+        // structure, and a bad frame. (FZK-Haus, walking: a fit 0.30 m from the last pose in a
+        // 0.1 s frame, 0.35 m off the prediction, restarted the filter at 3 m/s, and the pose
+        // slid 1.9 m in 13 frames along the walls: docs/decisions.md.)
+        if let (true, Some(p), Some((_, predicted_cov))) = (good, pose.as_ref(), &forecast) {
+            if self.faster_than_a_walk(p, timestamp_ns) {
+                let cov = self.measured_covariance(p);
+                if distance2(&predicted, predicted_cov, p, &cov).is_some_and(|d2| d2 > GATE_CHI2_6) {
+                    good = false;
+                    self.stats.too_fast += 1;
+                }
+            }
+        }
         // Fewer lines than `min_inliers` fix the pose in some directions and hardly in others;
         // with the motion filter such a frame is fused where its lines are informative
         // (their covariance says where), provided it continues the motion (inside the filter's
@@ -502,9 +518,18 @@ impl Tracker<'_> {
         // as many relocalised frames as lose the lock went unheld, they are withdrawn and the
         // lock is lost (module `relocalise`). A re-initialisation on trial is withdrawn by the
         // first frame that does not hold it (module `search`, "On trial").
+        // A commit on trial for more frames holds this one back too.
+        let mut holding_trial = false;
         if !self.probation.links.is_empty() {
-            if good {
-                self.release_probation();
+            let passes = good && pose.is_some_and(|p| self.trial_passes(&p, edges));
+            if passes {
+                match self.probation.trial.as_mut() {
+                    Some(t) if t.frames_left > 1 => {
+                        t.frames_left -= 1;
+                        holding_trial = true;
+                    }
+                    _ => self.release_probation(),
+                }
             } else if self.probation.trial.is_some() || self.probation.links.len() >= self.probation_limit() {
                 let mut r = self.lose_lock();
                 r.solve_time = solve_started.elapsed().saturating_sub(match_time);
@@ -513,7 +538,9 @@ impl Tracker<'_> {
                 return r;
             }
         }
-        let suspect = good && (result.explained as f64) < self.explained_floor(0);
+        // (A frame that held a commit on trial passed the search's acceptance test: stronger
+        // evidence than the running mean's floor.)
+        let suspect = good && !holding_trial && (result.explained as f64) < self.explained_floor(0);
         if !good || suspect {
             // When the prior failed (typically a turn faster than the motion model expects,
             // which moves every plane out of the angular gate), the initialisation's triplet
@@ -544,13 +571,23 @@ impl Tracker<'_> {
         }
         result.solve_time = solve_started.elapsed().saturating_sub(match_time);
         result.match_time = match_time;
-        self.conclude(Tail {
+        let concluded = self.conclude(Tail {
             result,
             pose,
             good,
             predicted,
             timestamp_ns,
-        })
+        });
+        if holding_trial {
+            // Links are at most `confirm_frames`, fewer than their capacity (module `search`).
+            let _ = self.probation.links.push((timestamp_ns, concluded));
+            let mut shown = FrameResult::empty(TrackerState::Tracking);
+            shown.match_time = concluded.match_time;
+            shown.solve_time = concluded.solve_time;
+            shown.samples = concluded.samples;
+            return shown;
+        }
+        concluded
     }
 
     /// Fig. 7's end for a frame whose pose is `good` or not: S_{t+1}, the pose and its
@@ -605,9 +642,32 @@ impl Tracker<'_> {
         result
     }
 
+    /// Whether the rig would have moved from the last good pose to `p` faster than
+    /// `motion.max_speed_m_s` (0: no limit) by `timestamp_ns`.
+    fn faster_than_a_walk(&self, p: &Pose, timestamp_ns: u64) -> bool {
+        let max_speed = self.cfg.motion.max_speed_m_s;
+        let Some(held) = self.last_good.filter(|_| max_speed > 0.0) else {
+            return false;
+        };
+        let dt = timestamp_ns.saturating_sub(self.last_good_time) as f64 * 1e-9;
+        (p.translation.vector - held.translation.vector).norm() > max_speed * dt
+    }
+
     /// The lock is lost: the next frames search, around `last_good`.
     pub(super) fn lose_lock(&mut self) -> FrameResult {
+        let first = self.probation.trial.is_some_and(|t| t.first);
         self.withdraw_probation();
+        if first {
+            // A first commit its trial did not hold was never published: the tracker
+            // initialises again, as if it had not been made (module `search`, "Frames
+            // agreeing").
+            self.state = TrackerState::Initialising;
+            self.last_good = None;
+            self.search_attempts = 0;
+            self.confirm_count = 0;
+            self.tracks.clear();
+            return FrameResult::empty(TrackerState::Initialising);
+        }
         self.state = TrackerState::Lost;
         self.stats.losses += 1;
         self.search_attempts = 0;

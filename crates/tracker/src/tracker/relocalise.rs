@@ -313,6 +313,10 @@ impl Tracker<'_> {
             return;
         }
         match self.probation.trial.take() {
+            Some(trial) if trial.first => {
+                self.stats.commits_withdrawn += 1;
+                self.explained_ref = trial.explained_ref;
+            }
             Some(trial) => {
                 self.stats.reinitialisations_withdrawn += self.probation.links.len() as u64;
                 self.explained_ref = trial.explained_ref;

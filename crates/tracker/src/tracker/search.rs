@@ -14,6 +14,18 @@
 //! every cell of its volume may accept by the share explained over *resolved lines*
 //! (`Initialiser::explained_resolved`).
 //!
+//! **Frames agreeing.** One frame's verdict can flip with the sensor noise: walking through
+//! FZK-Haus, a search committed a quarter-turn twin 2.8 m off on its own frame, where two frames
+//! later it explains 13 % of the frame's edges (the test asks 15 %) and the truth 62 %. So every
+//! commit is on trial until `confirm_frames` frames in all passed the search's acceptance test at
+//! it (its search frame and the confirmation frames it won count): maintenance tracks it on the
+//! next frames, each must hold it and pass the test at the pose it holds, and only then are its
+//! frames published, late. A first commit its trial does not hold is withdrawn unpublished and
+//! the tracker initialises again (`TrackerStats::commits_withdrawn`). Maintenance carries the
+//! pose through the rig's motion with its prediction; polishing each candidate afresh on the
+//! next frames from where it stood does not (a commit that waited for confirmation frames so
+//! committed a pose 33 cm behind the rig in the 5 Hz `lab` test: docs/decisions.md, 2026-12-02).
+//!
 //! **On trial.** After a loss the rig walked on unseen, and the volume about the last held pose
 //! may not hold it any more; its best look-alike can then pass every test, since the rival that
 //! would refuse it (the truth) lies outside (the walk back after blind frames: a look-alike 1.04 m
@@ -22,7 +34,8 @@
 //! pose, as a relocalised pose is (module `relocalise`, "On probation"); the first frame that
 //! does not hold it withdraws it unpublished, the lock is lost again, and the next search covers
 //! the doubled volume about the last pose held before the loss, where the truth and the
-//! look-alike compete. (In the walk back the next frame did not hold the look-alike: the rig's
+//! look-alike compete. (It is on trial for at least that one frame, and for as many as
+//! "Frames agreeing" asks.) (In the walk back the next frame did not hold the look-alike: the rig's
 //! motion moved the image's lines where the look-alike's do not go. A look-alike a still rig
 //! sees would hold; the trial does not replace the search's own evidence.)
 //!
@@ -504,6 +517,17 @@ impl<'m> Tracker<'m> {
         acceptable(&self.cfg, &resolved)
     }
 
+    /// Whether a frame's `measured` pose passes the acceptance test of the commit on trial
+    /// (module doc, "Frames agreeing"); true with no commit on trial (a relocalisation's probation
+    /// asks only that maintenance holds the pose).
+    pub(super) fn trial_passes(&mut self, measured: &Pose, edges: &[Edge]) -> bool {
+        let Some(trial) = self.probation.trial else {
+            return true;
+        };
+        let c = self.init.scored(measured, edges);
+        acceptable(&self.cfg, &c) || (trial.resolved && self.resolved_acceptable(&c, edges))
+    }
+
     /// Whether `best` beats `rival` on the frame's `edges` by the edges exactly one of the two
     /// explains (`initialisation.disputed_share_max`, `disputed_min_fraction`).
     fn wins_dispute(&mut self, best: &Pose, rival: &Pose, edges: &[Edge]) -> bool {
@@ -566,12 +590,26 @@ impl<'m> Tracker<'m> {
             }
             let candidates = self.confirm_count;
             self.confirm_count = 0;
-            let trial = (self.state == TrackerState::Lost).then(|| {
+            // On trial until `confirm_frames` frames passed the acceptance test at it, the
+            // confirmation frames it already passed counted; a re-initialisation after a loss
+            // for at least the next frame (module doc, "On trial").
+            let lost = self.state == TrackerState::Lost;
+            let frames_left = self
+                .cfg
+                .initialisation
+                .confirm_frames
+                .saturating_sub(winner.frames)
+                .max(u32::from(lost))
+                .min(super::PROBATION_LINKS as u32 - 1);
+            let trial = (frames_left > 0).then(|| {
                 (
-                    self.last_good.map(|p| (p, self.last_good_time)),
+                    self.last_good.filter(|_| lost).map(|p| (p, self.last_good_time)),
                     Trial {
                         explained_ref: self.explained_ref,
                         volume_level: self.volume_level,
+                        frames_left,
+                        first: !lost,
+                        resolved: winner.resolved,
                     },
                 )
             });
@@ -588,10 +626,10 @@ impl<'m> Tracker<'m> {
         result
     }
 
-    /// A re-initialisation after a loss goes on trial (module doc, "On trial"): its frame's
-    /// answer `committed` waits for the next frame's maintenance to hold the pose, and this
-    /// frame shows only its search's report (`searched`). `held` is the last pose maintenance
-    /// held before the loss.
+    /// A commit goes on trial (module doc, "On trial"): its frame's answer `committed` waits
+    /// for the next frames' maintenance to hold the pose (`Trial::frames_left`), and this frame
+    /// shows only its search's report (`searched`). `held` is the last pose maintenance held
+    /// before a loss.
     fn on_trial(
         &mut self,
         held: Option<(Pose, u64)>,
