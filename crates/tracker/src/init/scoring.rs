@@ -110,6 +110,7 @@ impl Initialiser<'_> {
     }
 
     fn polish_steps(&mut self, start: &Pose, edges: &[Edge]) -> Option<Candidate> {
+        let inlier = self.opts.inlier_alpha_rad;
         let mut pose = self.gathered_fit(start, edges)?;
         if self.opts.simplex_refinement {
             let opts = SimplexOptions {
@@ -124,26 +125,19 @@ impl Initialiser<'_> {
                 pose = p;
             }
         }
-        Some(self.scored(&pose, edges))
-    }
-
-    /// The [`Candidate`] a pose is as it stands, unpolished: what the acceptance test reads of
-    /// a pose maintenance holds (a commit on trial, module `tracker::search`).
-    pub fn scored(&mut self, pose: &Pose, edges: &[Edge]) -> Candidate {
-        let inlier = self.opts.inlier_alpha_rad;
-        let (score, inliers, _, explained) = self.final_score(pose, edges);
-        let support = self.edge_support(pose, edges);
-        let blank = self.blank_share(pose, edges);
-        let count = self.gather(pose, edges, inlier);
-        Candidate {
+        let (score, inliers, _, explained) = self.final_score(&pose, edges);
+        let support = self.edge_support(&pose, edges);
+        let blank = self.blank_share(&pose, edges);
+        let count = self.gather(&pose, edges, inlier);
+        Some(Candidate {
             blank,
-            pose: *pose,
+            pose,
             score,
             inliers,
-            xi_rad2: xi(&self.corr[..count], pose),
+            xi_rad2: xi(&self.corr[..count], &pose),
             explained,
             support,
-        }
+        })
     }
 
     /// `self.corr` ← for each segment in sight from the pose and long enough, its best edge within
@@ -250,6 +244,14 @@ impl Initialiser<'_> {
             }
         }
         n
+    }
+
+    /// What the search's acceptance test reads of any pose as it stands, unpolished:
+    /// [`Candidate::inliers`], [`Candidate::explained`] and [`Candidate::support`] (a commit on
+    /// trial, module `tracker::search`, judged at the pose maintenance holds).
+    pub fn acceptance_scores(&mut self, pose: &Pose, edges: &[Edge]) -> (usize, f64, f64) {
+        let (_, inliers, _, explained) = self.final_score(pose, edges);
+        (inliers, explained, self.edge_support(pose, edges))
     }
 
     /// [`Candidate::explained`] of any pose.

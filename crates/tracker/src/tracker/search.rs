@@ -59,10 +59,15 @@ use std::time::{Duration, Instant};
 /// other well enough both ways (`accept_explained_fraction` of the segments it predicts,
 /// `accept_support_fraction` of the frame's longest edges).
 fn acceptable(cfg: &TrackerConfig, c: &Candidate) -> bool {
+    passes_acceptance(cfg, c.inliers, c.explained, c.support)
+}
+
+/// [`acceptable`] of a pose's inliers, share explained and support.
+fn passes_acceptance(cfg: &TrackerConfig, inliers: usize, explained: f64, support: f64) -> bool {
     let i = &cfg.initialisation;
-    c.inliers >= cfg.maintenance.min_inliers as usize
-        && c.explained >= i.accept_explained_fraction
-        && c.support >= i.accept_support_fraction
+    inliers >= cfg.maintenance.min_inliers as usize
+        && explained >= i.accept_explained_fraction
+        && support >= i.accept_support_fraction
 }
 
 /// Candidates this close to each other are one basin (m, rad): the margin of a clear winner
@@ -524,8 +529,15 @@ impl<'m> Tracker<'m> {
         let Some(trial) = self.probation.trial else {
             return true;
         };
-        let c = self.init.scored(measured, edges);
-        acceptable(&self.cfg, &c) || (trial.resolved && self.resolved_acceptable(&c, edges))
+        let (inliers, explained, support) = self.init.acceptance_scores(measured, edges);
+        passes_acceptance(&self.cfg, inliers, explained, support)
+            || (trial.resolved
+                && passes_acceptance(
+                    &self.cfg,
+                    inliers,
+                    self.init.explained_resolved(measured, edges),
+                    support,
+                ))
     }
 
     /// Whether `best` beats `rival` on the frame's `edges` by the edges exactly one of the two
