@@ -543,6 +543,33 @@ fn a_fit_the_rig_could_not_have_walked_to_is_a_bad_frame() {
     played.assert_none_wrong(f, &schedule);
 }
 
+/// A rig that walks and then stands still holds where it stopped (module
+/// `tracker::maintenance`, the second opinion): the same image frame after frame must give the
+/// same place, even though the motion model first expects the walk to go on. (Before a curtain
+/// wall's repeated mullions, a solve that slid along them stood whenever the refit near the
+/// prediction did not beat it clearly, and a still rig ended 32–54 cm off.)
+#[test]
+fn a_rig_that_stops_holds_where_it_stopped() {
+    let f = fixture();
+    let stop = 40;
+    let schedule: Vec<Option<usize>> = (0..=stop).chain([stop; 40]).map(Some).collect();
+    let played = play(f, &schedule);
+    let stats = played.stats;
+    let still: Vec<(f64, f64)> = (stop + 1..schedule.len())
+        .filter_map(|k| played.published.get(&(k as u64 * played.period_ns)))
+        .map(|p| errors(f, f.truth[stop].timestamp_ns, p))
+        .collect();
+    assert!(still.len() >= 35, "{} still frames posed: {stats:?}", still.len());
+    let worst = still.iter().fold((0.0f64, 0.0f64), |w, e| (w.0.max(e.0), w.1.max(e.1)));
+    assert!(
+        worst.0 < 0.03 && worst.1 < 0.5,
+        "worst still frame {:.1} cm {:.2}°: {stats:?}",
+        worst.0 * 100.0,
+        worst.1
+    );
+    played.assert_none_wrong(f, &schedule);
+}
+
 /// A re-initialisation after a loss is published only once the next frame's maintenance holds
 /// it (module `tracker::search`, "On trial"). The rig walks, goes blind until the lock is lost,
 /// shows one frame (the re-initialisation's search frame) and goes blind again: the pose the

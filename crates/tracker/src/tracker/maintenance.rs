@@ -379,7 +379,22 @@ impl Tracker<'_> {
                 ];
                 // Each start refitted without the search's simplex: the solve competing is not
                 // simplex-polished either, and the winner gets maintenance's final fit below.
-                let bar = self.cfg.initialisation.clear_winner_ratio * self.init.score(&p, edges);
+                // The solve stands only as a clear winner: where it and a refit near the
+                // prediction are alike by the search's measure, the motion model decides, and
+                // the refit continues the motion. (The other way round, a refit replaced the
+                // solve only when it was the clear winner, and a still rig seeing the same
+                // image frame after frame was solved 7–34 cm along a curtain wall's mullions and
+                // ended 32–54 cm off: docs/decisions.md, 2026-12-02, "the second opinion's
+                // burden".) Not for a narrow rig: one 50° view fixes a refit over VIS(T) only to
+                // decimetres along it, and the refit near a lagging prediction held one pinhole
+                // on fewer frames (the same entry).
+                let ratio = self.cfg.initialisation.clear_winner_ratio;
+                let solve_score = self.init.score(&p, edges);
+                let bar = if self.narrow {
+                    ratio * solve_score
+                } else {
+                    solve_score / ratio
+                };
                 let mut best: Option<(Pose, f64)> = None;
                 for start in &starts {
                     if let Some((pose, score)) = self.init.refit_score(start, edges) {
