@@ -383,7 +383,7 @@ impl Tracker<'_> {
                 // prediction are alike by the search's measure, the motion model decides, and
                 // the refit continues the motion. (The other way round, a refit replaced the
                 // solve only when it was the clear winner, and a still rig seeing the same
-                // image frame after frame was solved 7–34 cm along a curtain wall's mullions and
+                // image frame after frame was solved 7–30 cm along a curtain wall's mullions and
                 // ended 32–54 cm off: docs/decisions.md, 2026-12-02, "the second opinion's
                 // burden".) Not for a narrow rig: one 50° view fixes a refit over VIS(T) only to
                 // decimetres along it, and the refit near a lagging prediction held one pinhole
